@@ -1,0 +1,46 @@
+"""Argument types shared by the subcommands: each gives a clear message on bad input."""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+
+
+def int_auto(text: str) -> int:
+    """An integer in decimal or with a 0x / 0o / 0b prefix (PAN IDs are usually written in hex)."""
+    try:
+        return int(text, 0)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer (decimal or 0x...)") from None
+
+
+def bounded(kind: Callable[[str], float], low: float, high: float) -> Callable[[str], float]:
+    """A number of ``kind`` in [low, high]."""
+
+    def parse(text: str) -> float:
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a {kind.__name__}") from None
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"{value} is outside {low:g}..{high:g}")
+        return value
+
+    return parse
+
+
+def position(text: str) -> tuple[float, float]:
+    """``x,y`` in metres."""
+    try:
+        x, y = (float(part) for part in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a position 'x,y' in metres") from None
+    return (x, y)
+
+
+def seed(text: str) -> int:
+    """A non-negative integer seed."""
+    value = int_auto(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError("seed must be >= 0")
+    return value

@@ -1,0 +1,200 @@
+"""``petswarm``: emulate swarms of human-accompanying robots over an emulated IEEE 802.15.4 air."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import os
+import signal
+import sys
+from typing import Any
+
+from cli.args import bounded, int_auto, position, seed
+
+EPILOG = """examples:
+  petswarm run --robots 5 --duration 5          a hub and 5 robots pinging each other; prints a summary
+  petswarm hub --listen tcp/127.0.0.1:7447      serve the emulated air (Ctrl-C stops it)
+  petswarm robot --id 3 --pos 1.5,0             one robot attached to that hub
+  petswarm stats                                the hub's counters per node and per channel
+  petswarm bench hub                            hub overhead, throughput and delivery lag
+"""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The whole command line."""
+    parser = argparse.ArgumentParser(
+        prog="petswarm", description=__doc__, epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    hub = sub.add_parser("hub", help="run the radio hub (zenoh router + emulated air)")
+    hub.add_argument("--listen", default="tcp/127.0.0.1:7447", help="zenoh endpoint to listen on (default %(default)s)")
+    _add_world(hub)
+    hub.add_argument("--seed", type=seed, default=0, help="seed of every random radio outcome (default %(default)s)")
+    hub.add_argument("--config", help="TOML or JSON file with [mac], [range], [loss], [path_loss], [capture] tables")
+
+    robot = sub.add_parser("robot", help="run one robot process attached to a hub")
+    robot.add_argument("--id", type=bounded(int, 1, 0xFFFD), required=True, help="robot id, also its short address")
+    _add_hub(robot)
+    robot.add_argument("--pan", type=int_auto, default=0x1000, help="PAN ID to start on (default 0x1000)")
+    robot.add_argument("--channel", type=bounded(int, 11, 26), default=11, help="802.15.4 channel 11-26 (default 11)")
+    robot.add_argument("--pos", type=position, default=(0.0, 0.0), help="position x,y in metres (default 0,0)")
+    robot.add_argument(
+        "--ping-interval",
+        type=bounded(float, 0, 3600),
+        default=0.0,
+        help="broadcast a ping every this many seconds (default 0: never)",
+    )
+    robot.add_argument("--seed", type=seed, default=0, help="seed of the robot's own random choices")
+
+    run = sub.add_parser("run", help="run a hub and N robots on this machine and summarise the radio traffic")
+    run.add_argument("--robots", type=bounded(int, 1, 200), default=5, help="number of robot processes (default 5)")
+    run.add_argument("--seed", type=seed, default=None, help="seed (default: random, and reported)")
+    run.add_argument("--duration", type=bounded(float, 0.1, 86400), default=5.0, help="seconds of traffic (default 5)")
+    run.add_argument(
+        "--ping-interval",
+        type=bounded(float, 0.01, 60),
+        default=0.5,
+        help="seconds between each robot's broadcast pings (default 0.5)",
+    )
+    run.add_argument("--world", help="key prefix of the run (default: derived from pid and seed)")
+    run.add_argument("--config", help="hub medium config file (see petswarm hub --help)")
+    run.add_argument("--json", action="store_true", help="print the summary as JSON on stdout")
+
+    stats = sub.add_parser("stats", help="print a running hub's counters")
+    _add_hub(stats)
+    stats.add_argument("--json", action="store_true", help="print the raw counters as JSON")
+
+    bench = sub.add_parser("bench", help="benchmarks: figures on stdout, JSON and plots to --out")
+    bench_sub = bench.add_subparsers(dest="bench", required=True, metavar="BENCH")
+    bhub = bench_sub.add_parser("hub", help="hub round trip vs plain zenoh, frames/s with 50 nodes, delivery lag")
+    bhub.add_argument("--rounds", type=bounded(int, 10, 100000), default=500, help="round trips per path (default 500)")
+    bhub.add_argument(
+        "--nodes", type=bounded(int, 2, 200), default=50, help="attached nodes in the load test (default 50)"
+    )
+    bhub.add_argument(
+        "--load-seconds", type=bounded(float, 1, 600), default=5.0, help="length of the load test (default 5)"
+    )
+    bhub.add_argument("--seed", type=seed, default=1)
+    bhub.add_argument("--out", default="bench-results", help="directory for JSON and plots (default %(default)s)")
+    bhub.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
+    return parser
+
+
+def _add_world(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--world", default="default", help="key prefix shared by a hub and its nodes (default %(default)s)")
+
+
+def _add_hub(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--hub", default="tcp/127.0.0.1:7447", help="the hub's zenoh endpoint (default %(default)s)")
+    _add_world(p)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``petswarm`` console script."""
+    args = build_parser().parse_args(argv)
+    handler = {"hub": _hub, "robot": _robot, "run": _run, "stats": _stats, "bench": _bench}[args.command]
+    try:
+        return handler(args)
+    except KeyboardInterrupt:
+        return 130
+
+
+def _hub(args: argparse.Namespace) -> int:
+    from radio_hub.config import MediumConfig
+    from radio_hub.hub import RadioHub, ready_line
+
+    try:
+        config = MediumConfig.from_file(args.config) if args.config else MediumConfig()
+    except (OSError, ValueError) as err:
+        print(f"petswarm hub: bad --config: {err}", file=sys.stderr)
+        return 2
+    hub = RadioHub(args.listen, args.world, config, args.seed)
+    try:
+        hub.open()
+    except Exception as err:  # zenoh reports a busy port or bad endpoint as a generic error
+        print(f"petswarm hub: cannot listen on {args.listen}: {err}", file=sys.stderr)
+        return 2
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: hub.stop())
+    print(ready_line(hub), flush=True)
+    print(f"hub: serving world {args.world!r} on {args.listen}, seed {args.seed}", file=sys.stderr, flush=True)
+    try:
+        hub.serve()
+    finally:
+        hub.close()
+    return 0
+
+
+def _robot(args: argparse.Namespace) -> int:
+    from petswarm.robot import RobotConfig, run_robot
+
+    config = RobotConfig(
+        robot_id=args.id,
+        endpoint=args.hub,
+        world=args.world,
+        pan_id=args.pan,
+        channel=args.channel,
+        position=args.pos,
+        ping_interval=args.ping_interval,
+        seed=args.seed,
+    )
+    return asyncio.run(run_robot(config))
+
+
+def _run(args: argparse.Namespace) -> int:
+    from cli.run import RunOptions, run
+
+    chosen_seed = args.seed if args.seed is not None else int.from_bytes(os.urandom(4), "big")
+    opts = RunOptions(
+        robots=args.robots,
+        seed=chosen_seed,
+        duration=args.duration,
+        ping_interval=args.ping_interval,
+        world=args.world,
+        config=args.config,
+        as_json=args.json,
+    )
+    return run(opts)
+
+
+def _stats(args: argparse.Namespace) -> int:
+    from radio_hub.interface import HubUnavailable, Keys, open_session, query_hub
+
+    try:
+        session = open_session("client", args.hub)
+        try:
+            stats = query_hub(session, Keys(args.world).stats)
+        finally:
+            session.close()
+    except HubUnavailable as err:
+        print(f"petswarm stats: {err}", file=sys.stderr)
+        return 2
+    if args.json:
+        print(json.dumps(stats, indent=2))
+    else:
+        _print_stats(stats)
+    return 0
+
+
+def _print_stats(stats: dict[str, Any]) -> None:
+    cols = ("sent", "delivered", "collided", "lost", "filtered", "mac_retries", "channel_access_failures", "no_ack")
+    print(f"world {stats['world']}  seed {stats['seed']}  model time {stats['now_us'] / 1e6:.3f} s")
+    print(f"{'node':<14}{'PAN':>7}{'ch':>4}" + "".join(f"{c[:9]:>10}" for c in cols))
+    for name, n in sorted(stats["nodes"].items()):
+        pan = f"{n['pan_id']:#06x}" if n["attached"] else "gone"
+        print(f"{name:<14}{pan:>7}{n.get('channel', ''):>4}" + "".join(f"{n[c]:>10}" for c in cols))
+    for ch, c in sorted(stats["channels"].items()):
+        print(f"{'channel ' + ch:<25}" + "".join(f"{c[k]:>10}" for k in cols))
+    print("hub: " + ", ".join(f"{k} {v}" for k, v in stats["hub"].items()))
+
+
+def _bench(args: argparse.Namespace) -> int:
+    from cli.bench_hub import bench_hub
+
+    return bench_hub(args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

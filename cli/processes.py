@@ -1,0 +1,92 @@
+"""Starting and stopping the OS processes of a run: no process outlives the run that started it."""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import IO
+
+_PR_SET_PDEATHSIG = 1
+
+
+def _die_with_parent() -> None:
+    # Linux: if the supervisor is killed outright (SIGKILL), the kernel sends SIGTERM to its children.
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+
+
+def free_tcp_port() -> int:
+    """A port on 127.0.0.1 nobody listens on right now."""
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+class Supervisor:
+    """Owns child processes running ``petswarm`` subcommands; ``stop_all`` ends every one of them."""
+
+    def __init__(self, log_dir: Path) -> None:
+        self.log_dir = log_dir
+        log_dir.mkdir(parents=True, exist_ok=True)
+        self.children: dict[str, subprocess.Popen[bytes]] = {}
+        self._logs: dict[str, IO[bytes]] = {}
+
+    def spawn(self, name: str, args: list[str]) -> subprocess.Popen[bytes]:
+        """Start ``petswarm <args>`` as a child; its stdout and stderr go to ``<log_dir>/<name>.log``."""
+        log = open(self.log_dir / f"{name}.log", "wb")  # noqa: SIM115 - closed in stop_all
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "cli", *args],
+            stdin=subprocess.DEVNULL,
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            preexec_fn=_die_with_parent,
+            env={**os.environ, "PYTHONUNBUFFERED": "1"},
+        )
+        self.children[name] = proc
+        self._logs[name] = log
+        return proc
+
+    def dead(self) -> dict[str, int]:
+        """Children that have exited, with their exit codes."""
+        return {name: p.returncode for name, p in self.children.items() if p.poll() is not None}
+
+    def log_tail(self, name: str, lines: int = 15) -> str:
+        """The last lines a child wrote."""
+        path = self.log_dir / f"{name}.log"
+        text = path.read_text(errors="replace") if path.exists() else ""
+        return "\n".join(text.splitlines()[-lines:])
+
+    def stop(self, names: list[str], timeout: float = 5.0) -> dict[str, int]:
+        """SIGTERM the named children, SIGKILL any still alive after ``timeout``; returns exit codes."""
+        procs = {n: self.children[n] for n in names if n in self.children}
+        for proc in procs.values():
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGTERM)
+        deadline = time.monotonic() + timeout
+        for proc in procs.values():
+            try:
+                proc.wait(max(deadline - time.monotonic(), 0.05))
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+        for name in procs:
+            log = self._logs.pop(name, None)
+            if log is not None:
+                log.close()
+        return {n: p.returncode for n, p in procs.items()}
+
+    def stop_all(self, timeout: float = 5.0) -> dict[str, int]:
+        """Stop every child: robots first, so the hub sees them leave, then the rest."""
+        order = sorted(self.children, key=lambda n: n == "hub")
+        codes: dict[str, int] = {}
+        robots = [n for n in order if n != "hub"]
+        codes.update(self.stop(robots, timeout))
+        codes.update(self.stop([n for n in order if n == "hub"], timeout))
+        return codes

@@ -1,0 +1,252 @@
+"""``petswarm run``: a hub and N robot processes, exercised, summarised and stopped cleanly."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import zenoh
+
+from cli.processes import Supervisor, free_tcp_port
+from petswarm import control
+from radio_hub.interface import HubUnavailable, Keys, open_session, query_hub
+
+_SPACING_M = 1.5
+_ROW = 5
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """What ``petswarm run`` was asked to do."""
+
+    robots: int
+    seed: int
+    duration: float
+    ping_interval: float
+    world: str | None = None
+    config: str | None = None
+    as_json: bool = False
+    startup_timeout: float = 30.0
+
+
+def robot_position(robot_id: int) -> tuple[float, float]:
+    """Robots stand on a grid 1.5 m apart, five to a row: every robot hears every other by default."""
+    index = robot_id - 1
+    return (index % _ROW * _SPACING_M, index // _ROW * _SPACING_M)
+
+
+def progress(text: str) -> None:
+    """Progress goes to stderr so that ``--json`` output stays clean."""
+    print(f"[run] {text}", file=sys.stderr, flush=True)
+
+
+class RunFailed(RuntimeError):
+    """A process of the run died or never came up."""
+
+
+def run(opts: RunOptions) -> int:
+    """Run the emulation; returns the process exit code."""
+    world = opts.world or f"run-{os.getpid()}-{opts.seed}"
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    keys = Keys(world)
+    log_dir = Path(tempfile.mkdtemp(prefix=f"petswarm-{world}-"))
+    sup = Supervisor(log_dir)
+    previous = signal.signal(signal.SIGTERM, _raise_interrupt)
+    session: zenoh.Session | None = None
+    try:
+        progress(f"world {world}, seed {opts.seed}, hub on {endpoint}, logs in {log_dir}")
+        hub_args = ["hub", "--listen", endpoint, "--world", world, "--seed", str(opts.seed)]
+        sup.spawn("hub", hub_args + (["--config", opts.config] if opts.config else []))
+        session = _wait_for_hub(sup, endpoint, keys, opts.startup_timeout)
+        for rid in range(1, opts.robots + 1):
+            x, y = robot_position(rid)
+            sup.spawn(
+                f"robot-{rid}",
+                [
+                    "robot",
+                    "--id",
+                    str(rid),
+                    "--hub",
+                    endpoint,
+                    "--world",
+                    world,
+                    "--pos",
+                    f"{x},{y}",
+                    "--ping-interval",
+                    str(opts.ping_interval),
+                    "--seed",
+                    str(opts.seed),
+                ],
+            )
+        _wait_for_robots(sup, session, keys, opts.robots, opts.startup_timeout)
+        _exercise(sup, session, keys, opts.duration)
+        summary = _summarise(session, keys, opts, world, endpoint)
+    except RunFailed as err:
+        progress(f"failed: {err}")
+        return 1
+    except KeyboardInterrupt:
+        progress("interrupted; stopping every process")
+        return 130
+    finally:
+        if session is not None:
+            session.close()
+        codes = sup.stop_all()
+        signal.signal(signal.SIGTERM, previous)
+        progress(f"stopped {len(codes)} processes")
+    _print(summary, opts.as_json)
+    return 0 if summary["ok"] else 1
+
+
+def _raise_interrupt(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt
+
+
+def _check_alive(sup: Supervisor) -> None:
+    dead = sup.dead()
+    if dead:
+        name, code = next(iter(dead.items()))
+        raise RunFailed(f"{name} exited with code {code}:\n{sup.log_tail(name)}")
+
+
+def _wait_for_hub(sup: Supervisor, endpoint: str, keys: Keys, timeout: float) -> zenoh.Session:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        _check_alive(sup)
+        try:
+            session = open_session("client", endpoint)
+        except HubUnavailable:
+            time.sleep(0.1)
+            continue
+        try:
+            query_hub(session, keys.stats, timeout=1.0)
+            progress("hub is up")
+            return session
+        except HubUnavailable:
+            session.close()
+    raise RunFailed(f"hub did not come up within {timeout} s:\n{sup.log_tail('hub')}")
+
+
+def _attached(session: zenoh.Session, keys: Keys) -> int:
+    stats = query_hub(session, keys.stats)
+    return sum(1 for n in stats["nodes"].values() if n["attached"])
+
+
+def _wait_for_robots(sup: Supervisor, session: zenoh.Session, keys: Keys, count: int, timeout: float) -> None:
+    deadline = time.monotonic() + timeout
+    seen = -1
+    while time.monotonic() < deadline:
+        _check_alive(sup)
+        attached = _attached(session, keys)
+        if attached != seen:
+            progress(f"{attached}/{count} robots attached")
+            seen = attached
+        if attached >= count:
+            return
+        time.sleep(0.2)
+    raise RunFailed(f"only {seen}/{count} robots attached within {timeout} s")
+
+
+def _exercise(sup: Supervisor, session: zenoh.Session, keys: Keys, duration: float) -> None:
+    start = time.monotonic()
+    next_report = start
+    while (elapsed := time.monotonic() - start) < duration:
+        _check_alive(sup)
+        if time.monotonic() >= next_report:
+            totals = _totals(query_hub(session, keys.stats))
+            progress(
+                f"t={elapsed:5.1f}/{duration:g}s  sent {totals['sent']}  delivered {totals['delivered']}  "
+                f"collided {totals['collided']}  lost {totals['lost']}"
+            )
+            next_report += 1.0
+        time.sleep(min(0.1, max(duration - elapsed, 0)))
+
+
+def _totals(stats: dict[str, Any]) -> dict[str, int]:
+    totals: dict[str, int] = {}
+    for node in stats["nodes"].values():
+        for name, value in node.items():
+            if isinstance(value, int) and not isinstance(value, bool):
+                totals[name] = totals.get(name, 0) + value
+    return totals
+
+
+def _summarise(session: zenoh.Session, keys: Keys, opts: RunOptions, world: str, endpoint: str) -> dict[str, Any]:
+    stats = query_hub(session, keys.stats)
+    nodes: dict[str, Any] = {}
+    problems: list[str] = []
+    for rid in range(1, opts.robots + 1):
+        name = f"robot-{rid}"
+        try:
+            status = control.command(session, keys, rid, "status")
+        except HubUnavailable as err:
+            problems.append(str(err))
+            status = {}
+        counters = stats["nodes"].get(name, {})
+        nodes[name] = {
+            **{
+                k: counters.get(k, 0)
+                for k in (
+                    "sent",
+                    "delivered",
+                    "collided",
+                    "lost",
+                    "filtered",
+                    "mac_retries",
+                    "channel_access_failures",
+                    "no_ack",
+                    "acks_sent",
+                )
+            },
+            "heard_from": sorted(status.get("heard_from", {})),
+            "pings_sent": status.get("pings_sent", 0),
+            "pings_answered": status.get("pings_answered", 0),
+        }
+    everyone = set(range(1, opts.robots + 1))
+    all_pairs = all(set(n["heard_from"]) >= everyone - {rid} for rid, n in enumerate(nodes.values(), 1))
+    if opts.robots > 1 and not all_pairs:
+        problems.append("not every robot heard every other robot")
+    if stats["hub"]["transport_gaps"]:
+        problems.append(f"the transport lost {stats['hub']['transport_gaps']} messages")
+    return {
+        "ok": not problems,
+        "problems": problems,
+        "seed": opts.seed,
+        "world": world,
+        "endpoint": endpoint,
+        "robots": opts.robots,
+        "duration_s": opts.duration,
+        "all_pairs_heard": all_pairs,
+        "nodes": nodes,
+        "channels": stats["channels"],
+        "hub": stats["hub"],
+        "medium": stats["config"],
+    }
+
+
+def _print(summary: dict[str, Any], as_json: bool) -> None:
+    if as_json:
+        print(json.dumps(summary, indent=2))
+        return
+    print(f"seed {summary['seed']}  world {summary['world']}  {summary['robots']} robots  {summary['duration_s']:g} s")
+    header = (
+        f"{'node':<10}{'sent':>7}{'delivered':>11}{'collided':>10}{'lost':>7}{'retries':>9}{'cca fail':>10}  heard from"
+    )
+    print(header)
+    for name, n in summary["nodes"].items():
+        print(
+            f"{name:<10}{n['sent']:>7}{n['delivered']:>11}{n['collided']:>10}{n['lost']:>7}"
+            f"{n['mac_retries']:>9}{n['channel_access_failures']:>10}  {n['heard_from']}"
+        )
+    hub = summary["hub"]
+    print(
+        f"hub: delivery lag p50 {hub['lag_p50_us']:.0f} us, p99 {hub['lag_p99_us']:.0f} us; "
+        f"malformed {hub['malformed']}, transport gaps {hub['transport_gaps']}"
+    )
+    print("OK" if summary["ok"] else "PROBLEMS: " + "; ".join(summary["problems"]))

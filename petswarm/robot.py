@@ -1,0 +1,304 @@
+"""The robot process: its radio, its managers as asyncio tasks, and its control channel.
+
+For now a robot answers pings (and can ping its neighbours periodically) so the emulated air can be
+exercised end to end; the swarm managers build on the same RF communication manager.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import signal
+import sys
+import time
+from collections import Counter, deque
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import msgpack
+import numpy as np
+import zenoh
+
+from petswarm.control import all_robots_key, robot_key
+from petswarm.messages import Blob, Ping, Pong, SwarmMessage
+from petswarm.rf import Incoming, RfCommunicationManager
+from radio_hub.interface import (
+    BROADCAST,
+    DEFAULT_ENDPOINT,
+    DEFAULT_WORLD,
+    FrameError,
+    HubUnavailable,
+    RadioClient,
+    RadioError,
+    RadioIdentity,
+)
+
+DEFAULT_PAN = 0x1000
+"""The PAN every waiting robot starts on."""
+EXT_ADDR_BASE = 0x00124B0000000000
+"""Robot extended addresses: a fixed OUI-like prefix plus the robot id."""
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    """What a robot process is started with."""
+
+    robot_id: int
+    endpoint: str = DEFAULT_ENDPOINT
+    world: str = DEFAULT_WORLD
+    pan_id: int = DEFAULT_PAN
+    channel: int = 11
+    position: tuple[float, float] = (0.0, 0.0)
+    ping_interval: float = 0.0
+    """Seconds between broadcast pings (0: never ping on its own)."""
+    seed: int = 0
+
+    def identity(self) -> RadioIdentity:
+        """The robot's radio at start-up: short address = robot id."""
+        if not 1 <= self.robot_id <= 0xFFFD:
+            raise ValueError(f"robot id {self.robot_id} must be 1..65533 (it is the 16-bit short address)")
+        return RadioIdentity(
+            f"robot-{self.robot_id}",
+            EXT_ADDR_BASE + self.robot_id,
+            self.robot_id,
+            self.pan_id,
+            self.channel,
+            self.position,
+        )
+
+
+class Robot:
+    """One robot's middleware on top of its radio."""
+
+    def __init__(self, config: RobotConfig, radio: RadioClient) -> None:
+        self.config = config
+        self.rf = RfCommunicationManager(radio)
+        self.rng = np.random.default_rng([config.seed, config.robot_id])
+        self.started = time.monotonic()
+        self.pings_sent = 0
+        self.pings_answered = 0
+        self.heard_from: Counter[int] = Counter()
+        self.recent: deque[dict[str, Any]] = deque(maxlen=200)
+        self.stopping = asyncio.Event()
+        self._nonce = 0
+        self._waiting: dict[int, asyncio.Queue[tuple[int, float]]] = {}
+        self._tasks: set[asyncio.Task[Any]] = set()
+
+    # -- tasks -----------------------------------------------------------------------------------
+
+    async def run(self) -> None:
+        """Serve until ``stopping`` is set."""
+        workers = [asyncio.create_task(self._receive_loop())]
+        if self.config.ping_interval > 0:
+            workers.append(asyncio.create_task(self._ping_loop()))
+        stop = asyncio.create_task(self.stopping.wait())
+        done, _ = await asyncio.wait([*workers, stop], return_when=asyncio.FIRST_COMPLETED)
+        for task in [*workers, stop, *self._tasks]:
+            task.cancel()
+        for task in done:
+            if task is not stop and task.exception() is not None:
+                raise task.exception()  # type: ignore[misc]
+
+    async def _receive_loop(self) -> None:
+        while True:
+            incoming = await self.rf.receive()
+            self._remember(incoming)
+            await self._on_message(incoming)
+
+    async def _on_message(self, incoming: Incoming) -> None:
+        msg = incoming.message
+        if isinstance(msg, Ping):
+            self._spawn(self._answer(incoming.sender, msg.nonce))
+        elif isinstance(msg, Pong):
+            self.heard_from[incoming.sender] += 1
+            waiter = self._waiting.get(msg.nonce)
+            if waiter is not None:
+                waiter.put_nowait((incoming.sender, time.monotonic()))
+
+    async def _answer(self, dst: int, nonce: int) -> None:
+        result = await self.rf.send(dst, Pong(nonce))
+        if result.ok:
+            self.pings_answered += 1
+
+    async def _ping_loop(self) -> None:
+        interval = self.config.ping_interval
+        await asyncio.sleep(float(self.rng.uniform(0, interval)))
+        while True:
+            await self.ping(BROADCAST, wait=0.0)
+            await asyncio.sleep(float(self.rng.uniform(0.5, 1.5)) * interval)
+
+    def _spawn(self, coro: Any) -> None:
+        task = asyncio.create_task(coro)
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    def _remember(self, incoming: Incoming) -> None:
+        rx = incoming.rx
+        self.recent.append(
+            {
+                "src": rx.frame.src,
+                "dst": rx.frame.dst,
+                "pan_id": rx.frame.dst_pan,
+                "type": type(incoming.message).__name__.lower(),
+                "rssi_dbm": rx.rssi_dbm,
+                "lqi": rx.lqi,
+                "end_us": rx.end_us,
+            }
+        )
+
+    # -- actions ---------------------------------------------------------------------------------
+
+    async def ping(self, dst: int, wait: float = 1.0) -> dict[str, Any]:
+        """Send a ping and collect pongs for ``wait`` seconds."""
+        self._nonce = (self._nonce + 1) & 0xFFFFFFFF
+        nonce = self._nonce
+        replies: asyncio.Queue[tuple[int, float]] = asyncio.Queue()
+        self._waiting[nonce] = replies
+        start = time.monotonic()
+        try:
+            result = await self.rf.send(dst, Ping(nonce))
+            self.pings_sent += 1
+            await asyncio.sleep(wait)
+        finally:
+            self._waiting.pop(nonce, None)
+        answers = []
+        while not replies.empty():
+            src, at = replies.get_nowait()
+            answers.append({"from": src, "rtt_ms": round((at - start) * 1000, 3)})
+        return {"tx": _result_dict(result), "replies": answers}
+
+    async def handle(self, cmd: dict[str, Any]) -> dict[str, Any]:
+        """Carry out one control command; errors come back as ``{"error": ...}``."""
+        name = cmd.get("cmd")
+        try:
+            if name == "status":
+                return self.status()
+            if name == "ping":
+                return await self.ping(int(cmd.get("dst", BROADCAST)), float(cmd.get("wait", 1.0)))
+            if name == "send":
+                return await self._send_blob(cmd)
+            if name == "configure":
+                radio = await self.rf.radio.configure(
+                    **{k: int(cmd[k]) for k in ("pan_id", "short_addr", "channel") if k in cmd}
+                )
+                return {"radio": _identity_dict(radio)}
+            if name == "received":
+                return {"frames": list(self.recent)}
+            if name == "stop":
+                self.stopping.set()
+                return {"stopping": True}
+        except (FrameError, RadioError, HubUnavailable, ValueError, TypeError) as err:
+            return {"error": f"{type(err).__name__}: {err}"}
+        return {"error": f"unknown command {name!r}; known: status, ping, send, configure, received, stop"}
+
+    async def _send_blob(self, cmd: dict[str, Any]) -> dict[str, Any]:
+        only = cmd.get("only")
+        if only is not None and self.config.robot_id not in only:
+            return {"skipped": True}
+        size = int(cmd.get("payload_len", 20))
+        filler = bytes(max(size - 4, 0))
+        msg: SwarmMessage = Blob(int(cmd.get("tag", 0)), filler)
+        result = await self.rf.send(
+            int(cmd.get("dst", BROADCAST)), msg, dst_pan=cmd.get("dst_pan"), ack=bool(cmd.get("ack", True))
+        )
+        return {"tx": _result_dict(result)}
+
+    def status(self) -> dict[str, Any]:
+        """Counters and radio state, for ``petswarm run`` summaries and tests."""
+        radio = self.rf.radio
+        return {
+            "robot_id": self.config.robot_id,
+            "radio": _identity_dict(radio.identity),
+            "uptime_s": round(time.monotonic() - self.started, 3),
+            "pings_sent": self.pings_sent,
+            "pings_answered": self.pings_answered,
+            "heard_from": dict(self.heard_from),
+            "messages_received": self.rf.received,
+            "malformed_payloads": self.rf.malformed,
+            "tx_results": dict(self.rf.tx_results),
+            "radio_malformed": radio.malformed,
+            "transport_gaps": radio.transport_gaps,
+        }
+
+
+def _result_dict(result: Any) -> dict[str, Any]:
+    d = asdict(result)
+    d["status"] = result.status.value
+    return d
+
+
+def _identity_dict(radio: RadioIdentity) -> dict[str, Any]:
+    d = asdict(radio)
+    d["position"] = list(radio.position)
+    return d
+
+
+class ControlServer:
+    """Serves a robot's control queryable and the all-robots topic on the robot's event loop."""
+
+    def __init__(self, session: zenoh.Session, robot: Robot) -> None:
+        self.robot = robot
+        self.malformed = 0
+        self._loop = asyncio.get_running_loop()
+        keys = robot.rf.radio.keys
+        self._decls = [
+            session.declare_queryable(robot_key(keys, robot.config.robot_id), self._on_query),
+            session.declare_subscriber(all_robots_key(keys), self._on_broadcast),
+        ]
+
+    def _on_query(self, query: zenoh.Query) -> None:
+        payload = query.payload.to_bytes() if query.payload is not None else b""
+        self._loop.call_soon_threadsafe(self.robot._spawn, self._answer(query, payload))
+
+    def _on_broadcast(self, sample: zenoh.Sample) -> None:
+        self._loop.call_soon_threadsafe(self.robot._spawn, self._answer(None, sample.payload.to_bytes()))
+
+    async def _answer(self, query: zenoh.Query | None, payload: bytes) -> None:
+        try:
+            cmd = msgpack.unpackb(payload, raw=False)
+            if not isinstance(cmd, dict):
+                raise ValueError("command is not a map")
+        except Exception as err:  # garbage on the control key must not hurt the robot
+            self.malformed += 1
+            answer: dict[str, Any] = {"error": f"malformed command: {type(err).__name__}"}
+        else:
+            answer = await self.robot.handle(cmd)
+        if query is not None:
+            try:
+                query.reply(query.key_expr, msgpack.packb(answer, use_bin_type=True))
+            finally:
+                query.drop()
+
+    def close(self) -> None:
+        """Undeclare the control keys."""
+        for decl in self._decls:
+            decl.undeclare()
+
+
+async def run_robot(config: RobotConfig) -> int:
+    """The robot process's main coroutine; returns the exit code."""
+    try:
+        radio = await RadioClient.connect(config.identity(), config.endpoint, config.world)
+    except (HubUnavailable, RadioError) as err:
+        print(f"robot {config.robot_id}: {err}", file=sys.stderr)
+        return 2
+    robot = Robot(config, radio)
+    control = ControlServer(radio.session, robot)
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        loop.add_signal_handler(sig, robot.stopping.set)
+    print(
+        f"robot {config.robot_id}: attached as {radio.identity.node_id} "
+        f"(short 0x{radio.identity.short_addr:04x}, PAN 0x{radio.identity.pan_id:04x}, "
+        f"channel {radio.identity.channel})",
+        file=sys.stderr,
+        flush=True,
+    )
+    try:
+        await robot.run()
+    except HubUnavailable as err:
+        print(f"robot {config.robot_id}: {err}", file=sys.stderr)
+        return 3
+    finally:
+        control.close()
+        await radio.close()
+    return 0

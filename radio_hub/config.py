@@ -1,0 +1,199 @@
+"""Settings of the emulated air. Defaults follow IEEE 802.15.4-2006 (2.4 GHz O-QPSK PHY).
+
+A hub reads them from a TOML or JSON file (``petswarm hub --config FILE``) whose tables mirror these
+dataclasses; an unknown key is an error, not a silent default.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+SYMBOL_US = 16
+"""One O-QPSK symbol at 62.5 ksymbol/s; two symbols per byte, so 32 us per byte (250 kbit/s)."""
+BYTE_US = 2 * SYMBOL_US
+PHY_OVERHEAD_BYTES = 6
+"""Preamble (4), SFD (1) and PHR (1) precede every PSDU."""
+CHANNELS = range(11, 27)
+"""The sixteen 2.4 GHz channels."""
+
+
+def airtime_us(psdu_len: int) -> int:
+    """Time on air of a PPDU carrying ``psdu_len`` bytes: (6 + PSDU) x 32 us."""
+    return (PHY_OVERHEAD_BYTES + psdu_len) * BYTE_US
+
+
+@dataclass
+class MacConfig:
+    """MAC timing and retry settings (unslotted CSMA-CA, acknowledged unicast)."""
+
+    csma_enabled: bool = True
+    min_be: int = 3
+    max_be: int = 5
+    max_csma_backoffs: int = 4
+    unit_backoff_us: int = 20 * SYMBOL_US
+    cca_us: int = 8 * SYMBOL_US
+    turnaround_us: int = 12 * SYMBOL_US
+    ack_enabled: bool = True
+    ack_wait_us: int = 54 * SYMBOL_US
+    max_frame_retries: int = 3
+    queue_limit: int = 32
+    """Frames a node may have waiting in its MAC; more are refused (a real MAC has a small queue)."""
+
+    def validate(self) -> None:
+        """Raise ValueError on settings outside the standard's ranges."""
+        if not 0 <= self.min_be <= self.max_be <= 8:
+            raise ValueError("need 0 <= min_be <= max_be <= 8")
+        if not 0 <= self.max_csma_backoffs <= 5:
+            raise ValueError("max_csma_backoffs must be 0..5")
+        if not 0 <= self.max_frame_retries <= 7:
+            raise ValueError("max_frame_retries must be 0..7")
+        if min(self.unit_backoff_us, self.cca_us, self.turnaround_us, self.ack_wait_us) <= 0:
+            raise ValueError("MAC durations must be positive")
+        if self.queue_limit < 1:
+            raise ValueError("queue_limit must be at least 1")
+
+
+@dataclass
+class RangeConfig:
+    """Unit-disk graph medium, as in Cooja: decode inside tx range, interfere inside interference range."""
+
+    tx_range_m: float = 30.0
+    interference_range_m: float = 50.0
+    success_ratio_tx: float = 1.0
+    """Probability that a transmission leaves the sender at all."""
+    success_ratio_rx: float = 0.9
+    """Reception probability at the edge of tx range; it falls with the square of distance from 1 at 0 m."""
+
+    def validate(self) -> None:
+        """Raise ValueError on an inconsistent range model."""
+        if not 0 < self.tx_range_m <= self.interference_range_m:
+            raise ValueError("need 0 < tx_range_m <= interference_range_m")
+        for name in ("success_ratio_tx", "success_ratio_rx"):
+            _check_probability(name, getattr(self, name))
+
+
+@dataclass
+class GilbertElliottConfig:
+    """Two-state burst loss per directed link, stepped once per frame."""
+
+    p_good_to_bad: float = 0.0
+    p_bad_to_good: float = 1.0
+    loss_good: float = 0.0
+    loss_bad: float = 1.0
+
+    @property
+    def enabled(self) -> bool:
+        """True when the chain can ever lose a frame."""
+        return self.loss_good > 0 or (self.p_good_to_bad > 0 and self.loss_bad > 0)
+
+    def validate(self) -> None:
+        """Raise ValueError on a probability outside [0, 1]."""
+        for f in dataclasses.fields(self):
+            _check_probability(f.name, getattr(self, f.name))
+
+
+@dataclass
+class LossConfig:
+    """Loss on top of the range model."""
+
+    base: float = 0.0
+    """Independent loss probability of every reception."""
+    gilbert_elliott: GilbertElliottConfig = field(default_factory=GilbertElliottConfig)
+
+    def validate(self) -> None:
+        """Raise ValueError on a probability outside [0, 1]."""
+        _check_probability("base", self.base)
+        self.gilbert_elliott.validate()
+
+
+@dataclass
+class PathLossConfig:
+    """Log-distance path loss that gives each reception its RSSI and LQI."""
+
+    tx_power_dbm: float = 0.0
+    loss_at_1m_db: float = 40.0
+    """Free-space loss at 1 m for 2.45 GHz is about 40 dB."""
+    exponent: float = 3.0
+    shadowing_sigma_db: float = 2.0
+    sensitivity_dbm: float = -95.0
+    """RSSI that maps to LQI 0 (CC2420 sensitivity); LQI 255 at -20 dBm."""
+
+    def validate(self) -> None:
+        """Raise ValueError on a non-physical setting."""
+        if self.exponent <= 0 or self.shadowing_sigma_db < 0:
+            raise ValueError("path-loss exponent must be > 0 and shadowing sigma >= 0")
+        if self.sensitivity_dbm >= -20:
+            raise ValueError("sensitivity_dbm must be below -20 dBm")
+
+
+@dataclass
+class CaptureConfig:
+    """Capture effect: a frame survives overlap when it is stronger than every interferer by a margin."""
+
+    enabled: bool = False
+    margin_db: float = 6.0
+
+
+@dataclass
+class MediumConfig:
+    """Everything that decides a radio outcome."""
+
+    mac: MacConfig = field(default_factory=MacConfig)
+    range: RangeConfig = field(default_factory=RangeConfig)
+    loss: LossConfig = field(default_factory=LossConfig)
+    path_loss: PathLossConfig = field(default_factory=PathLossConfig)
+    capture: CaptureConfig = field(default_factory=CaptureConfig)
+
+    def validate(self) -> MediumConfig:
+        """Check every section; returns self so it can be chained."""
+        self.mac.validate()
+        self.range.validate()
+        self.loss.validate()
+        self.path_loss.validate()
+        return self
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain nested dict, as written in run summaries and accepted by ``from_dict``."""
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> MediumConfig:
+        """Build from nested tables; unknown keys raise ValueError naming them."""
+        return _build(cls, data, "").validate()
+
+    @classmethod
+    def from_file(cls, path: str | Path) -> MediumConfig:
+        """Read a TOML (``.toml``) or JSON file."""
+        path = Path(path)
+        text = path.read_text()
+        data = tomllib.loads(text) if path.suffix == ".toml" else json.loads(text)
+        return cls.from_dict(data.get("medium", data))
+
+
+def _build(cls: type, data: dict[str, Any], where: str) -> Any:
+    if not isinstance(data, dict):
+        raise ValueError(f"{where or 'config'}: expected a table, got {type(data).__name__}")
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - set(fields))
+    if unknown:
+        raise ValueError(f"{where or 'config'}: unknown keys {unknown}; known: {sorted(fields)}")
+    kwargs = {}
+    for name, value in data.items():
+        default = getattr(cls(), name)
+        if dataclasses.is_dataclass(default):
+            kwargs[name] = _build(type(default), value, f"{where}{name}.")
+        elif isinstance(default, bool) and not isinstance(value, bool):
+            raise ValueError(f"{where}{name}: expected true or false")
+        else:
+            kwargs[name] = type(default)(value)
+    return cls(**kwargs)
+
+
+def _check_probability(name: str, value: float) -> None:
+    if not 0.0 <= value <= 1.0:
+        raise ValueError(f"{name} must be a probability in [0, 1], got {value}")

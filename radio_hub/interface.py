@@ -1,0 +1,316 @@
+"""The radio hub's public face: what a node (a robot, a wearable, a test) uses to get on the air.
+
+``RadioClient`` gives an asyncio node the RF calls of a real 802.15.4 radio driver:
+``await send(frame) -> TxResult``, ``await receive() -> RxFrame`` (or ``async for``), and
+``await configure(pan_id=..., short_addr=..., channel=...)`` at run time. Everything goes over zenoh
+to the hub, which decides every outcome on its model timeline.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+from dataclasses import dataclass, replace
+from typing import Any
+
+import msgpack
+import zenoh
+
+from radio_hub import wire
+from radio_hub.config import MediumConfig, airtime_us
+from radio_hub.keys import DEFAULT_ENDPOINT, DEFAULT_WORLD, Keys, check_name, reliable_publisher, session_config
+from radio_hub.mac import BROADCAST, MAX_PSDU, Frame, FrameError, FrameType, max_payload
+from radio_hub.medium import TxStatus
+
+__all__ = [
+    "BROADCAST",
+    "DEFAULT_ENDPOINT",
+    "DEFAULT_WORLD",
+    "MAX_PSDU",
+    "Frame",
+    "FrameError",
+    "FrameType",
+    "HubUnavailable",
+    "Keys",
+    "MediumConfig",
+    "RadioClient",
+    "RadioError",
+    "RadioIdentity",
+    "RxFrame",
+    "TxResult",
+    "TxStatus",
+    "airtime_us",
+    "max_payload",
+    "open_session",
+    "query_hub",
+]
+
+
+class HubUnavailable(ConnectionError):
+    """No hub answers at the endpoint, or it stopped answering."""
+
+
+class RadioError(RuntimeError):
+    """The hub refused a request (bad channel, address, PAN...)."""
+
+
+@dataclass(frozen=True)
+class RadioIdentity:
+    """A node's radio: ids, addresses, PAN, channel and (until the world model) a fixed position."""
+
+    node_id: str
+    ext_addr: int
+    short_addr: int
+    pan_id: int
+    channel: int = 11
+    position: tuple[float, float] = (0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class RxFrame:
+    """A frame this node's MAC received, with its signal and model times (microseconds)."""
+
+    frame: Frame
+    rssi_dbm: float
+    lqi: int
+    start_us: int
+    end_us: int
+    submitted_us: int
+
+
+@dataclass(frozen=True)
+class TxResult:
+    """The MAC's answer to ``send``."""
+
+    status: TxStatus
+    retries: int = 0
+    backoffs: int = 0
+    submitted_us: int = 0
+    done_us: int = 0
+    reason: str = ""
+
+    @property
+    def ok(self) -> bool:
+        """True when the frame went out (and, for acknowledged unicast, was acknowledged)."""
+        return self.status == TxStatus.SUCCESS
+
+
+def open_session(mode: str, endpoint: str) -> zenoh.Session:
+    """Open a zenoh session, turning zenoh's error into HubUnavailable with the endpoint in it."""
+    try:
+        return zenoh.open(session_config(mode, endpoint))
+    except zenoh.ZError as err:
+        raise HubUnavailable(f"cannot open a zenoh {mode} session on {endpoint}: {err}") from None
+
+
+def query_hub(session: zenoh.Session, key: str, timeout: float = 2.0) -> dict[str, Any]:
+    """Ask one of the hub's queryables (blocking); raises HubUnavailable when nobody answers."""
+    for reply in session.get(key, timeout=timeout):
+        if reply.ok is not None:
+            return msgpack.unpackb(reply.ok.payload.to_bytes(), raw=False, strict_map_key=False)
+    raise HubUnavailable(f"no hub answered {key} within {timeout} s")
+
+
+class RadioClient:
+    """One node's 802.15.4 radio, attached to the hub's air."""
+
+    def __init__(self, session: zenoh.Session, keys: Keys, identity: RadioIdentity, owns_session: bool) -> None:
+        self.identity = identity
+        self.keys = keys
+        self.request_timeout = 5.0
+        self.malformed = 0
+        self.transport_gaps = 0
+        self.errors: list[str] = []
+        self._session = session
+        self._owns_session = owns_session
+        self._loop = asyncio.get_running_loop()
+        self._rx: asyncio.Queue[RxFrame] = asyncio.Queue()
+        self._pending: dict[int, asyncio.Future[Any]] = {}
+        self._tokens = itertools.count(1)
+        self._up_seq = itertools.count(1)
+        self._down_seq = 0
+        self._dsn = itertools.count()
+        node_id = identity.node_id
+        self._token = session.liveliness().declare_token(keys.alive(node_id))
+        self._sub = session.declare_subscriber(keys.down(node_id), self._from_zenoh)
+        self._pub = reliable_publisher(session, keys.up(node_id))
+
+    @classmethod
+    async def connect(
+        cls,
+        identity: RadioIdentity,
+        endpoint: str = DEFAULT_ENDPOINT,
+        world: str = DEFAULT_WORLD,
+        *,
+        session: zenoh.Session | None = None,
+        timeout: float = 5.0,
+    ) -> RadioClient:
+        """Attach ``identity`` to the hub at ``endpoint``; raises HubUnavailable if none answers."""
+        check_name("node", identity.node_id)
+        owns = session is None
+        if session is None:
+            session = await asyncio.to_thread(open_session, "client", endpoint)
+        client = cls(session, Keys(world), identity, owns)
+        client.request_timeout = timeout
+        attach = wire.Attach(
+            ext_addr=identity.ext_addr,
+            short_addr=identity.short_addr,
+            pan_id=identity.pan_id,
+            channel=identity.channel,
+            position=list(identity.position),
+        )
+        try:
+            attached = await client._request(0, attach)
+        except (HubUnavailable, RadioError):
+            await client.close(detach=False)
+            raise
+        client._adopt(attached)
+        return client
+
+    @property
+    def session(self) -> zenoh.Session:
+        """The zenoh session this radio uses (a node may serve its own keys on it)."""
+        return self._session
+
+    # -- the radio ---------------------------------------------------------------------------------
+
+    def next_dsn(self) -> int:
+        """The MAC data sequence number for the next frame (wraps at 256)."""
+        return next(self._dsn) & 0xFF
+
+    def data_frame(self, dst: int, payload: bytes, *, dst_pan: int | None = None, ack: bool = True) -> Frame:
+        """A data frame from this node; ``ack`` asks for an acknowledgement (ignored for broadcast)."""
+        me = self.identity
+        return Frame(
+            FrameType.DATA,
+            self.next_dsn(),
+            me.pan_id if dst_pan is None else dst_pan,
+            dst,
+            me.pan_id,
+            me.short_addr,
+            payload,
+            ack_request=ack and dst != BROADCAST,
+        )
+
+    async def send(self, frame: Frame) -> TxResult:
+        """Hand a frame to the MAC and wait for its result. FrameError if it cannot be encoded."""
+        psdu = frame.encode()
+        token = next(self._tokens)
+        done: wire.TxDone = await self._request(token, wire.Transmit(token=token, psdu=psdu))
+        return TxResult(
+            TxStatus(done.status), done.retries, done.backoffs, done.submitted_us, done.done_us, done.reason
+        )
+
+    async def receive(self) -> RxFrame:
+        """The next received frame."""
+        return await self._rx.get()
+
+    def __aiter__(self) -> RadioClient:
+        return self
+
+    async def __anext__(self) -> RxFrame:
+        return await self._rx.get()
+
+    async def configure(
+        self,
+        *,
+        pan_id: int | None = None,
+        short_addr: int | None = None,
+        channel: int | None = None,
+        position: tuple[float, float] | None = None,
+    ) -> RadioIdentity:
+        """Change the radio at run time; returns the radio as the hub now has it. RadioError if refused."""
+        token = next(self._tokens)
+        msg = wire.Configure(
+            token=token,
+            pan_id=pan_id,
+            short_addr=short_addr,
+            channel=channel,
+            position=None if position is None else list(position),
+        )
+        self._adopt(await self._request(token, msg))
+        return self.identity
+
+    async def close(self, detach: bool = True) -> None:
+        """Leave the air and close the session (if this client opened it)."""
+        if detach:
+            with contextlib.suppress(zenoh.ZError):
+                self._put(wire.Detach())
+        for decl in (self._sub, self._token, self._pub):
+            with contextlib.suppress(zenoh.ZError):
+                decl.undeclare()
+        for fut in self._pending.values():
+            if not fut.done():
+                fut.set_exception(HubUnavailable("radio closed"))
+        if self._owns_session:
+            await asyncio.to_thread(self._session.close)
+
+    # -- plumbing ----------------------------------------------------------------------------------
+
+    def _adopt(self, attached: wire.Attached) -> None:
+        self.identity = replace(
+            self.identity,
+            ext_addr=attached.ext_addr,
+            short_addr=attached.short_addr,
+            pan_id=attached.pan_id,
+            channel=attached.channel,
+            position=(attached.position[0], attached.position[1]),
+        )
+
+    def _put(self, msg: wire.Message) -> None:
+        msg.n = next(self._up_seq)
+        self._pub.put(msg.encode())
+
+    async def _request(self, token: int, msg: wire.Message) -> Any:
+        fut: asyncio.Future[Any] = self._loop.create_future()
+        self._pending[token] = fut
+        try:
+            self._put(msg)
+            return await asyncio.wait_for(fut, self.request_timeout)
+        except TimeoutError:
+            raise HubUnavailable(
+                f"no answer from the hub of world {self.keys.world!r} within {self.request_timeout} s"
+            ) from None
+        finally:
+            self._pending.pop(token, None)
+
+    def _from_zenoh(self, sample: zenoh.Sample) -> None:
+        # zenoh's thread: hand over and return at once
+        self._loop.call_soon_threadsafe(self._on_down, sample.payload.to_bytes())
+
+    def _on_down(self, data: bytes) -> None:
+        try:
+            msg = wire.decode(data)
+        except wire.WireError:
+            self.malformed += 1
+            return
+        if isinstance(msg, wire.Attached) and msg.token == 0:
+            self._down_seq = msg.n - 1  # the hub numbers afresh on every attach
+        if msg.n > self._down_seq + 1:
+            self.transport_gaps += msg.n - self._down_seq - 1
+        self._down_seq = max(self._down_seq, msg.n)
+        if isinstance(msg, wire.Received):
+            self._on_received(msg)
+        elif isinstance(msg, (wire.TxDone, wire.Attached)):
+            self._resolve(msg.token, msg)
+        elif isinstance(msg, wire.Error):
+            self.errors.append(msg.reason)
+            fut = self._pending.get(msg.token)
+            if fut is not None and not fut.done():
+                fut.set_exception(RadioError(msg.reason))
+        else:
+            self.malformed += 1
+
+    def _on_received(self, msg: wire.Received) -> None:
+        try:
+            frame = Frame.decode(msg.psdu)
+        except FrameError:
+            self.malformed += 1
+            return
+        self._rx.put_nowait(RxFrame(frame, msg.rssi_dbm, msg.lqi, msg.start_us, msg.end_us, msg.submitted_us))
+
+    def _resolve(self, token: int, msg: wire.Message) -> None:
+        fut = self._pending.get(token)
+        if fut is not None and not fut.done():
+            fut.set_result(msg)

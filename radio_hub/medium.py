@@ -1,0 +1,523 @@
+"""The 802.15.4 air as a discrete-event model (sans I/O).
+
+A ``Medium`` takes MAC data requests and the current model time in microseconds, and returns what
+happened: frames received by nodes (with RSSI/LQI) and MAC results for senders. It runs unslotted
+CSMA-CA, puts frames on the air for their exact airtime, decides at every receiver whether a frame
+collided, was lost or was filtered, and runs acknowledged unicast with retries. All randomness comes
+from the ``numpy.random.Generator`` it is given, so a seed and an arrival order fix every outcome.
+
+The caller owns the clock: it calls ``submit`` when a request arrives and ``advance`` when the time of
+``next_event_us`` has come. Events are processed strictly in model-time order, so an outcome does not
+depend on how late the caller's timer fires.
+"""
+
+from __future__ import annotations
+
+import enum
+import heapq
+import itertools
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+import numpy as np
+
+from radio_hub.config import CHANNELS, MediumConfig, airtime_us
+from radio_hub.mac import ACK_PSDU_LEN, BROADCAST, MAX_PSDU, Frame, FrameError, FrameType
+from radio_hub.propagation import (
+    GilbertElliott,
+    Position,
+    distance,
+    lqi_from_rssi,
+    mean_rssi_dbm,
+    reception_probability,
+)
+
+# Receptions are judged against every transmission that could still overlap them.
+_AIR_HORIZON_US = airtime_us(MAX_PSDU) * 2
+
+
+class TxStatus(enum.StrEnum):
+    """The MAC's answer to a data request (MCPS-DATA.confirm)."""
+
+    SUCCESS = "success"
+    NO_ACK = "no_ack"
+    CHANNEL_ACCESS_FAILURE = "channel_access_failure"
+    REFUSED = "refused"
+
+
+class RxOutcome(enum.StrEnum):
+    """What became of one frame at one receiver in its range."""
+
+    DELIVERED = "delivered"
+    COLLIDED = "collided"
+    LOST = "lost"
+    FILTERED = "filtered"
+
+
+@dataclass
+class RadioNode:
+    """A radio attached to the air: its addresses, PAN, channel and position."""
+
+    node_id: str
+    ext_addr: int
+    short_addr: int
+    pan_id: int
+    channel: int
+    position: Position = (0.0, 0.0)
+
+    def validate(self) -> None:
+        """Raise ValueError on a channel or address outside 802.15.4's ranges."""
+        if self.channel not in CHANNELS:
+            raise ValueError(f"channel {self.channel} is not a 2.4 GHz channel (11-26)")
+        for name, value, bits in (
+            ("short_addr", self.short_addr, 16),
+            ("pan_id", self.pan_id, 16),
+            ("ext_addr", self.ext_addr, 64),
+        ):
+            if not 0 <= value < 1 << bits:
+                raise ValueError(f"{name} {value} does not fit in {bits} bits")
+
+
+@dataclass
+class Counters:
+    """Per-node or per-channel counts. At every receiver heard = delivered + collided + lost + filtered."""
+
+    sent: int = 0
+    """Data frames put on the air, every attempt counted."""
+    acks_sent: int = 0
+    mac_retries: int = 0
+    channel_access_failures: int = 0
+    no_ack: int = 0
+    refused: int = 0
+    heard: int = 0
+    """Frames that arrived in range on this node's channel (the receiver side)."""
+    delivered: int = 0
+    collided: int = 0
+    lost: int = 0
+    filtered: int = 0
+    acks_lost: int = 0
+
+    def count(self, outcome: RxOutcome) -> None:
+        """Count one arrival and its outcome."""
+        self.heard += 1
+        setattr(self, outcome.value, getattr(self, outcome.value) + 1)
+
+    def to_dict(self) -> dict[str, int]:
+        """Plain dict for the wire and summaries."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+@dataclass(frozen=True, slots=True)
+class Reception:
+    """A frame handed up by a receiver's MAC at ``end_us``."""
+
+    node_id: str
+    sender: str
+    psdu: bytes
+    frame: Frame
+    rssi_dbm: float
+    lqi: int
+    start_us: int
+    end_us: int
+    submitted_us: int
+    """When the sender's MAC got the request: end_us - submitted_us is the modelled latency."""
+
+
+@dataclass(frozen=True, slots=True)
+class TxReport:
+    """The MAC result for one data request, delivered to the sender at ``done_us``."""
+
+    node_id: str
+    token: int
+    status: TxStatus
+    retries: int
+    backoffs: int
+    submitted_us: int
+    done_us: int
+    reason: str = ""
+
+
+Output = Reception | TxReport
+
+
+@dataclass
+class _Job:
+    node_id: str
+    token: int
+    frame: Frame
+    psdu: bytes
+    submitted_us: int
+    nb: int = 0
+    be: int = 0
+    retries: int = 0
+    backoffs: int = 0
+    done: bool = False
+
+    @property
+    def wants_ack(self) -> bool:
+        return self.frame.ack_request and not self.frame.is_broadcast
+
+
+@dataclass
+class Transmission:
+    """One PPDU on the air, with what each receiver made of it once it ended."""
+
+    tx_id: int
+    sender: str
+    channel: int
+    start_us: int
+    end_us: int
+    frame: Frame
+    psdu_len: int
+    position: Position
+    submitted_us: int
+    left_sender: bool = True
+    job: _Job | None = None
+    attempt: int = 0
+    outcomes: dict[str, RxOutcome] = field(default_factory=dict)
+
+    def overlaps(self, start_us: int, end_us: int) -> bool:
+        """True when this transmission is on the air at some instant of [start_us, end_us)."""
+        return self.start_us < end_us and self.end_us > start_us
+
+    def to_dict(self) -> dict[str, Any]:
+        """A frame-log record."""
+        return {
+            "tx_id": self.tx_id,
+            "sender": self.sender,
+            "channel": self.channel,
+            "start_us": self.start_us,
+            "end_us": self.end_us,
+            "type": self.frame.frame_type.name.lower(),
+            "seq": self.frame.seq,
+            "dst_pan": self.frame.dst_pan,
+            "dst": self.frame.dst,
+            "src": self.frame.src,
+            "psdu_len": self.psdu_len,
+            "outcomes": {k: v.value for k, v in self.outcomes.items()},
+        }
+
+
+class Medium:
+    """The air of every 2.4 GHz channel, shared by the attached nodes."""
+
+    def __init__(self, config: MediumConfig, rng: np.random.Generator, log_size: int = 4096) -> None:
+        self.config = config.validate()
+        self.rng = rng
+        self.nodes: dict[str, RadioNode] = {}
+        self.node_counters: dict[str, Counters] = {}
+        self.channel_counters: dict[int, Counters] = {ch: Counters() for ch in CHANNELS}
+        self.air_log: deque[Transmission] = deque(maxlen=log_size)
+        self.now_us = 0
+        self._burst = GilbertElliott(config.loss.gilbert_elliott)
+        self._queues: dict[str, deque[_Job]] = {}
+        self._air: list[Transmission] = []
+        self._events: list[tuple[int, int, Callable[..., None], tuple[Any, ...]]] = []
+        self._seq = itertools.count()
+        self._tx_ids = itertools.count(1)
+        self._out: list[Output] = []
+
+    # -- nodes -------------------------------------------------------------------------------
+
+    def attach(self, node: RadioNode) -> None:
+        """Put a node on the air; raises ValueError on a bad node or a duplicate id."""
+        node.validate()
+        if node.node_id in self.nodes:
+            raise ValueError(f"node {node.node_id!r} is already attached")
+        self.nodes[node.node_id] = node
+        self.node_counters.setdefault(node.node_id, Counters())
+        self._queues[node.node_id] = deque()
+
+    def update(self, node_id: str, **changes: Any) -> RadioNode:
+        """Change a node's PAN, short address, channel or position at run time."""
+        node = self.nodes[node_id]
+        candidate = RadioNode(**{**node.__dict__, **changes})
+        candidate.validate()
+        node.__dict__.update(candidate.__dict__)
+        return node
+
+    def detach(self, node_id: str) -> None:
+        """Take a node off the air; its queued requests are dropped without a report."""
+        self.nodes.pop(node_id, None)
+        for job in self._queues.pop(node_id, ()):
+            job.done = True
+        self._burst.forget(node_id)
+
+    # -- time ------------------------------------------------------------------------------------
+
+    def next_event_us(self) -> int | None:
+        """Model time of the earliest pending event, or None when the air is idle."""
+        return self._events[0][0] if self._events else None
+
+    def advance(self, now_us: int) -> list[Output]:
+        """Process every event due at or before ``now_us``; return what they produced."""
+        while self._events and self._events[0][0] <= now_us:
+            t, _, handler, args = heapq.heappop(self._events)
+            self.now_us = t
+            handler(*args)
+        self.now_us = max(self.now_us, now_us)
+        out, self._out = self._out, []
+        return out
+
+    def submit(self, node_id: str, psdu: bytes, token: int, now_us: int) -> list[Output]:
+        """A MAC data request from ``node_id`` at ``now_us``; returns every output due by then."""
+        out = self.advance(now_us)
+        node = self.nodes.get(node_id)
+        if node is None:
+            return [*out, self._refusal(node_id, token, "node is not attached")]
+        try:
+            frame = Frame.decode(psdu)
+        except FrameError as err:
+            return [*out, self._refusal(node_id, token, str(err))]
+        if frame.frame_type == FrameType.ACK:
+            return [*out, self._refusal(node_id, token, "ACK frames are sent by the MAC itself")]
+        queue = self._queues[node_id]
+        if len(queue) >= self.config.mac.queue_limit:
+            return [*out, self._refusal(node_id, token, "MAC queue full")]
+        if not self.config.mac.ack_enabled and frame.ack_request:
+            frame = Frame(**{**_frame_fields(frame), "ack_request": False})
+        queue.append(_Job(node_id, token, frame, bytes(psdu), self.now_us))
+        if len(queue) == 1:
+            self._start_csma(queue[0])
+        return out + self._drain()
+
+    def _refusal(self, node_id: str, token: int, reason: str) -> TxReport:
+        if node_id in self.node_counters:
+            self.node_counters[node_id].refused += 1
+        return TxReport(node_id, token, TxStatus.REFUSED, 0, 0, self.now_us, self.now_us, reason)
+
+    def _drain(self) -> list[Output]:
+        out, self._out = self._out, []
+        return out
+
+    def _at(self, t_us: int, handler: Callable[..., None], *args: Any) -> None:
+        heapq.heappush(self._events, (t_us, next(self._seq), handler, args))
+
+    # -- CSMA-CA ---------------------------------------------------------------------------------
+
+    def _start_csma(self, job: _Job) -> None:
+        job.nb, job.be = 0, self.config.mac.min_be
+        self._backoff(job)
+
+    def _backoff(self, job: _Job) -> None:
+        mac = self.config.mac
+        if not mac.csma_enabled:
+            self._at(self.now_us + mac.turnaround_us, self._on_tx_start, job)
+            return
+        slots = int(self.rng.integers(0, 1 << job.be))
+        cca_start = self.now_us + slots * mac.unit_backoff_us
+        self._at(cca_start + mac.cca_us, self._on_cca_end, job, cca_start)
+
+    def _on_cca_end(self, job: _Job, cca_start: int) -> None:
+        if job.done:
+            return
+        mac = self.config.mac
+        node = self.nodes[job.node_id]
+        if not self._energy_detected(node, cca_start, self.now_us):
+            self._at(self.now_us + mac.turnaround_us, self._on_tx_start, job)
+            return
+        job.nb += 1
+        job.backoffs += 1
+        job.be = min(job.be + 1, mac.max_be)
+        if job.nb > mac.max_csma_backoffs:
+            self._count(job.node_id, "channel_access_failures")
+            self._finish(job, TxStatus.CHANNEL_ACCESS_FAILURE)
+        else:
+            self._backoff(job)
+
+    def _energy_detected(self, node: RadioNode, start_us: int, end_us: int) -> bool:
+        reach = self.config.range.interference_range_m
+        return any(
+            tx.channel == node.channel
+            and tx.sender != node.node_id
+            and tx.overlaps(start_us, end_us)
+            and distance(tx.position, node.position) <= reach
+            for tx in self._air
+        )
+
+    # -- transmissions ---------------------------------------------------------------------------
+
+    def _put_on_air(self, sender: RadioNode, frame: Frame, psdu_len: int, submitted_us: int) -> Transmission:
+        tx = Transmission(
+            tx_id=next(self._tx_ids),
+            sender=sender.node_id,
+            channel=sender.channel,
+            start_us=self.now_us,
+            end_us=self.now_us + airtime_us(psdu_len),
+            frame=frame,
+            psdu_len=psdu_len,
+            position=sender.position,
+            submitted_us=submitted_us,
+        )
+        ratio = self.config.range.success_ratio_tx
+        tx.left_sender = ratio >= 1.0 or self.rng.random() < ratio
+        self._air.append(tx)
+        return tx
+
+    def _on_tx_start(self, job: _Job) -> None:
+        if job.done:
+            return
+        tx = self._put_on_air(self.nodes[job.node_id], job.frame, len(job.psdu), job.submitted_us)
+        tx.job, tx.attempt = job, job.retries
+        self._count(job.node_id, "sent", tx.channel)
+        self._at(tx.end_us, self._on_tx_end, tx)
+
+    def _on_tx_end(self, tx: Transmission) -> None:
+        self._prune_air()
+        job = tx.job
+        assert job is not None
+        for node in self._receivers(tx):
+            outcome = self._judge(tx, node, filtered=not _addressed_to(tx.frame, node))
+            tx.outcomes[node.node_id] = outcome
+            self.node_counters[node.node_id].count(outcome)
+            self.channel_counters[tx.channel].count(outcome)
+            if outcome == RxOutcome.DELIVERED:
+                self._deliver(tx, node, job.psdu)
+                if job.wants_ack and node.short_addr == tx.frame.dst:
+                    self._at(self.now_us + self.config.mac.turnaround_us, self._on_ack_start, tx, node)
+        self.air_log.append(tx)
+        if job.done:
+            return
+        if job.wants_ack:
+            self._at(self.now_us + self.config.mac.ack_wait_us, self._on_ack_timeout, job, tx.attempt)
+        else:
+            self._finish(job, TxStatus.SUCCESS)
+
+    def _receivers(self, tx: Transmission) -> list[RadioNode]:
+        reach = self.config.range.tx_range_m
+        return [
+            n
+            for n in self.nodes.values()
+            if n.channel == tx.channel and n.node_id != tx.sender and distance(tx.position, n.position) <= reach
+        ]
+
+    def _judge(self, tx: Transmission, node: RadioNode, filtered: bool) -> RxOutcome:
+        """Collision first (the bits are garbled), then random loss, then the address filter."""
+        if not tx.left_sender:
+            return RxOutcome.LOST
+        if self._collided(tx, node):
+            return RxOutcome.COLLIDED
+        if self._lost(tx, node):
+            return RxOutcome.LOST
+        return RxOutcome.FILTERED if filtered else RxOutcome.DELIVERED
+
+    def _collided(self, tx: Transmission, node: RadioNode) -> bool:
+        reach = self.config.range.interference_range_m
+        interferers = []
+        for other in self._air:
+            if other is tx or other.channel != tx.channel or not other.overlaps(tx.start_us, tx.end_us):
+                continue
+            if other.sender == node.node_id:
+                return True  # half duplex: a node that is transmitting receives nothing
+            if other.sender != tx.sender and distance(other.position, node.position) <= reach:
+                interferers.append(other)
+        if not interferers:
+            return False
+        capture = self.config.capture
+        if not capture.enabled:
+            return True
+        wanted = mean_rssi_dbm(self.config.path_loss, distance(tx.position, node.position))
+        strongest = max(mean_rssi_dbm(self.config.path_loss, distance(o.position, node.position)) for o in interferers)
+        return wanted - strongest < capture.margin_db
+
+    def _lost(self, tx: Transmission, node: RadioNode) -> bool:
+        rng = self.rng
+        p = reception_probability(self.config.range, distance(tx.position, node.position))
+        if p < 1.0 and rng.random() >= p:
+            return True
+        base = self.config.loss.base
+        if base > 0.0 and rng.random() < base:
+            return True
+        return self._burst.lost((tx.sender, node.node_id), rng)
+
+    def _deliver(self, tx: Transmission, node: RadioNode, psdu: bytes) -> None:
+        pl = self.config.path_loss
+        rssi = mean_rssi_dbm(pl, distance(tx.position, node.position))
+        if pl.shadowing_sigma_db > 0:
+            rssi += float(self.rng.normal(0.0, pl.shadowing_sigma_db))
+        self._out.append(
+            Reception(
+                node.node_id,
+                tx.sender,
+                psdu,
+                tx.frame,
+                round(rssi, 1),
+                lqi_from_rssi(pl, rssi),
+                tx.start_us,
+                tx.end_us,
+                tx.submitted_us,
+            )
+        )
+
+    # -- acknowledgements ------------------------------------------------------------------------
+
+    def _on_ack_start(self, data: Transmission, responder: RadioNode) -> None:
+        if responder.node_id not in self.nodes:
+            return
+        ack = self._put_on_air(responder, Frame(FrameType.ACK, data.frame.seq), ACK_PSDU_LEN, self.now_us)
+        ack.job, ack.attempt = data.job, data.attempt
+        self._count(responder.node_id, "acks_sent")
+        self._at(ack.end_us, self._on_ack_end, ack)
+
+    def _on_ack_end(self, ack: Transmission) -> None:
+        job = ack.job
+        assert job is not None
+        self.air_log.append(ack)
+        sender = self.nodes.get(job.node_id)
+        if job.done or sender is None or job.retries != ack.attempt:
+            return
+        in_range = distance(ack.position, sender.position) <= self.config.range.tx_range_m
+        outcome = self._judge(ack, sender, filtered=False) if in_range else RxOutcome.LOST
+        ack.outcomes[sender.node_id] = outcome
+        if outcome == RxOutcome.DELIVERED:
+            self._finish(job, TxStatus.SUCCESS)
+        else:
+            self._count(job.node_id, "acks_lost")
+
+    def _on_ack_timeout(self, job: _Job, attempt: int) -> None:
+        if job.done or job.retries != attempt:
+            return
+        if job.retries < self.config.mac.max_frame_retries:
+            job.retries += 1
+            self._count(job.node_id, "mac_retries", self.nodes[job.node_id].channel)
+            self._start_csma(job)
+        else:
+            self._count(job.node_id, "no_ack")
+            self._finish(job, TxStatus.NO_ACK)
+
+    def _finish(self, job: _Job, status: TxStatus) -> None:
+        job.done = True
+        self._out.append(
+            TxReport(job.node_id, job.token, status, job.retries, job.backoffs, job.submitted_us, self.now_us)
+        )
+        queue = self._queues.get(job.node_id)
+        if queue and queue[0] is job:
+            queue.popleft()
+            if queue:
+                self._start_csma(queue[0])
+
+    # -- bookkeeping -----------------------------------------------------------------------------
+
+    def _count(self, node_id: str, name: str, channel: int | None = None) -> None:
+        counters = self.node_counters.get(node_id)
+        if counters is not None:
+            setattr(counters, name, getattr(counters, name) + 1)
+        if channel is not None:
+            cc = self.channel_counters[channel]
+            setattr(cc, name, getattr(cc, name) + 1)
+
+    def _prune_air(self) -> None:
+        horizon = self.now_us - _AIR_HORIZON_US
+        if self._air and self._air[0].end_us < horizon:
+            self._air = [tx for tx in self._air if tx.end_us >= horizon]
+
+
+def _addressed_to(frame: Frame, node: RadioNode) -> bool:
+    pan_ok = frame.dst_pan in (node.pan_id, BROADCAST)
+    return pan_ok and frame.dst in (node.short_addr, BROADCAST)
+
+
+def _frame_fields(frame: Frame) -> dict[str, Any]:
+    return {f: getattr(frame, f) for f in Frame.__slots__}

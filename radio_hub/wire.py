@@ -1,0 +1,176 @@
+"""Messages between a node and the hub, encoded with msgpack.
+
+Every message is a map with the envelope version ``v``, a type ``t`` and a per-sender sequence number
+``n`` (so either side can count messages the transport lost: it should lose none). Decoding is strict:
+anything malformed raises ``WireError``, which the receiver counts and drops.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+from typing import Any, ClassVar
+
+import msgpack
+
+WIRE_VERSION = 1
+
+
+class WireError(ValueError):
+    """Input that is not a valid message of this protocol version."""
+
+
+@dataclass
+class Message:
+    """Base of all node/hub messages; subclasses set TYPE and their fields."""
+
+    TYPE: ClassVar[str] = ""
+    n: int = field(default=0, kw_only=True)
+
+    def encode(self) -> bytes:
+        """msgpack bytes with the envelope."""
+        body = {f.name: getattr(self, f.name) for f in fields(self)}
+        body["v"], body["t"] = WIRE_VERSION, self.TYPE
+        return msgpack.packb(body, use_bin_type=True)
+
+
+@dataclass
+class Attach(Message):
+    """Node -> hub: put me on the air."""
+
+    TYPE: ClassVar[str] = "attach"
+    ext_addr: int = 0
+    short_addr: int = 0
+    pan_id: int = 0
+    channel: int = 11
+    position: list[float] = field(default_factory=lambda: [0.0, 0.0])
+
+
+@dataclass
+class Configure(Message):
+    """Node -> hub: change PAN, short address, channel or position; None leaves a field as it is."""
+
+    TYPE: ClassVar[str] = "configure"
+    token: int = 0
+    pan_id: int | None = None
+    short_addr: int | None = None
+    channel: int | None = None
+    position: list[float] | None = None
+
+
+@dataclass
+class Transmit(Message):
+    """Node -> hub: a MAC data request carrying a complete PSDU."""
+
+    TYPE: ClassVar[str] = "transmit"
+    token: int = 0
+    psdu: bytes = b""
+
+
+@dataclass
+class Detach(Message):
+    """Node -> hub: I am leaving."""
+
+    TYPE: ClassVar[str] = "detach"
+
+
+@dataclass
+class Attached(Message):
+    """Hub -> node: the node's radio as the hub now has it (answer to Attach and Configure)."""
+
+    TYPE: ClassVar[str] = "attached"
+    token: int = 0
+    ext_addr: int = 0
+    short_addr: int = 0
+    pan_id: int = 0
+    channel: int = 11
+    position: list[float] = field(default_factory=lambda: [0.0, 0.0])
+    now_us: int = 0
+
+
+@dataclass
+class Received(Message):
+    """Hub -> node: a frame the node's MAC received."""
+
+    TYPE: ClassVar[str] = "received"
+    psdu: bytes = b""
+    rssi_dbm: float = 0.0
+    lqi: int = 0
+    start_us: int = 0
+    end_us: int = 0
+    submitted_us: int = 0
+
+
+@dataclass
+class TxDone(Message):
+    """Hub -> node: the MAC result of a Transmit."""
+
+    TYPE: ClassVar[str] = "tx_done"
+    token: int = 0
+    status: str = ""
+    retries: int = 0
+    backoffs: int = 0
+    submitted_us: int = 0
+    done_us: int = 0
+    reason: str = ""
+
+
+@dataclass
+class Error(Message):
+    """Hub -> node: a request the hub could not take, and why."""
+
+    TYPE: ClassVar[str] = "error"
+    token: int = 0
+    reason: str = ""
+
+
+_TYPES: dict[str, type[Message]] = {
+    cls.TYPE: cls for cls in (Attach, Configure, Transmit, Detach, Attached, Received, TxDone, Error)
+}
+
+
+def decode(data: bytes) -> Message:
+    """Parse one message; raises WireError on anything but a well-formed, known, current message."""
+    try:
+        body = msgpack.unpackb(data, raw=False)
+    except Exception as err:  # msgpack raises several unrelated types on garbage
+        raise WireError(f"not msgpack ({type(err).__name__})") from None
+    if not isinstance(body, dict):
+        raise WireError("message is not a map")
+    if body.pop("v", None) != WIRE_VERSION:
+        raise WireError(f"unsupported wire version (want {WIRE_VERSION})")
+    cls = _TYPES.get(body.pop("t", None))  # type: ignore[arg-type]
+    if cls is None:
+        raise WireError("unknown message type")
+    try:
+        msg = cls(**body)
+    except TypeError as err:
+        raise WireError(f"bad {cls.TYPE} fields: {err}") from None
+    _check_types(msg)
+    return msg
+
+
+_SCALARS: dict[str, tuple[type, ...]] = {
+    "int": (int,),
+    "str": (str,),
+    "bytes": (bytes,),
+    "float": (float, int),
+}
+
+
+def _check_types(msg: Message) -> None:
+    for f in fields(msg):
+        value: Any = getattr(msg, f.name)
+        annotation = str(f.type)
+        if value is None and "None" in annotation:
+            continue
+        base = annotation.split(" |")[0]
+        if base.startswith("list"):
+            ok = (
+                isinstance(value, list)
+                and len(value) == 2
+                and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+            )
+        else:
+            ok = isinstance(value, _SCALARS.get(base, (object,))) and not isinstance(value, bool)
+        if not ok:
+            raise WireError(f"{msg.TYPE}.{f.name} has the wrong type ({type(value).__name__})")
