@@ -40,9 +40,13 @@ class Supervisor:
 
     def spawn(self, name: str, args: list[str]) -> subprocess.Popen[bytes]:
         """Start ``petswarm <args>`` as a child; its stdout and stderr go to ``<log_dir>/<name>.log``."""
+        return self.spawn_module(name, "cli", args)
+
+    def spawn_module(self, name: str, module: str, args: list[str]) -> subprocess.Popen[bytes]:
+        """Start ``python -m <module> <args>`` as a child, logged and stopped like ``spawn``'s."""
         log = open(self.log_dir / f"{name}.log", "wb")  # noqa: SIM115 - closed in stop_all
         proc = subprocess.Popen(
-            [sys.executable, "-m", "cli", *args],
+            [sys.executable, "-m", module, *args],
             stdin=subprocess.DEVNULL,
             stdout=log,
             stderr=subprocess.STDOUT,

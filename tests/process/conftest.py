@@ -1,0 +1,101 @@
+"""Process-level fixtures: a real hub process and real robot processes on loopback."""
+
+from __future__ import annotations
+
+import json
+import time
+import uuid
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+import zenoh
+
+from cli.processes import Supervisor, free_tcp_port
+from petswarm import control
+from radio_hub.interface import HubUnavailable, Keys, open_session, query_hub
+
+LOSSLESS = {"range": {"success_ratio_rx": 1.0}, "path_loss": {"shadowing_sigma_db": 0.0}}
+
+
+class Air:
+    """A hub process with robots attached to it, and a client session to drive them."""
+
+    def __init__(self, tmp: Path, config: dict[str, Any], seed: int = 1) -> None:
+        self.world = f"t{uuid.uuid4().hex[:10]}"
+        self.keys = Keys(self.world)
+        self.endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+        self.sup = Supervisor(tmp / "logs")
+        config_file = tmp / "medium.json"
+        config_file.write_text(json.dumps(config))
+        self.sup.spawn("hub", ["hub", "--listen", self.endpoint, "--world", self.world,
+                               "--seed", str(seed), "--config", str(config_file)])
+        self.session = self._connect()
+
+    def _connect(self) -> zenoh.Session:
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline:
+            assert not self.sup.dead(), self.sup.log_tail("hub")
+            try:
+                session = open_session("client", self.endpoint)
+            except HubUnavailable:
+                time.sleep(0.1)
+                continue
+            try:
+                query_hub(session, self.keys.stats, timeout=1.0)
+                return session
+            except HubUnavailable:
+                session.close()
+        raise AssertionError("hub did not come up:\n" + self.sup.log_tail("hub"))
+
+    def robot(self, rid: int, pos: tuple[float, float] = (0.0, 0.0), pan: int = 0x1000, channel: int = 11) -> None:
+        """Start robot ``rid`` and wait until the hub has it attached."""
+        self.sup.spawn(f"robot-{rid}", ["robot", "--id", str(rid), "--hub", self.endpoint, "--world", self.world,
+                                        "--pos", f"{pos[0]},{pos[1]}", "--pan", str(pan), "--channel", str(channel)])
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline:
+            assert not self.sup.dead(), {n: self.sup.log_tail(n) for n in self.sup.dead()}
+            node = self.stats()["nodes"].get(f"robot-{rid}")
+            if node and node["attached"]:
+                self.cmd(rid, "status")  # its control channel answers too
+                return
+            time.sleep(0.1)
+        raise AssertionError(f"robot {rid} did not attach:\n{self.sup.log_tail(f'robot-{rid}')}")
+
+    def cmd(self, rid: int, name: str, **args: Any) -> dict[str, Any]:
+        """A control command to one robot."""
+        return control.command(self.session, self.keys, rid, name, **args)
+
+    def stats(self) -> dict[str, Any]:
+        """The hub's counters."""
+        return query_hub(self.session, self.keys.stats)
+
+    def node(self, rid: int) -> dict[str, Any]:
+        """The hub's counters of one robot."""
+        return self.stats()["nodes"][f"robot-{rid}"]
+
+    def air_log(self) -> list[dict[str, Any]]:
+        """The hub's recent transmissions."""
+        return query_hub(self.session, self.keys.air)["transmissions"]
+
+    def close(self) -> dict[str, int]:
+        """Stop everything; returns exit codes."""
+        self.session.close()
+        return self.sup.stop_all()
+
+
+@pytest.fixture
+def make_air(tmp_path: Path) -> Iterator[Any]:
+    """``make_air(config=None, seed=1)`` starts a hub process; everything is stopped after the test."""
+    started: list[Air] = []
+
+    def factory(config: dict[str, Any] | None = None, seed: int = 1) -> Air:
+        air = Air(tmp_path / f"air{len(started)}", LOSSLESS if config is None else config, seed)
+        started.append(air)
+        return air
+
+    yield factory
+    for air in started:
+        if air.sup.children and any(p.poll() is None for p in air.sup.children.values()):
+            air.close()

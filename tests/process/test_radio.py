@@ -1,0 +1,143 @@
+"""The emulated radio through real processes: a hub process, robot processes, zenoh on loopback."""
+
+from __future__ import annotations
+
+import time
+
+import msgpack
+import pytest
+
+from petswarm import control
+from radio_hub import wire
+from radio_hub.mac import Frame, FrameType
+
+from .conftest import LOSSLESS
+
+pytestmark = pytest.mark.process
+
+
+def _senders(reply: dict) -> set[int]:
+    return {r["from"] for r in reply["replies"]}
+
+
+def test_broadcast_and_unicast_delivery_among_three_robots(make_air):
+    air = make_air()
+    for rid, x in ((1, 0.0), (2, 1.5), (3, 3.0)):
+        air.robot(rid, (x, 0.0))
+    broadcast = air.cmd(1, "ping", wait=0.5)
+    assert broadcast["tx"]["status"] == "success"
+    assert _senders(broadcast) == {2, 3}
+    filtered_before = air.node(3)["filtered"]
+    unicast = air.cmd(1, "ping", dst=2, wait=0.5)
+    assert unicast["tx"]["status"] == "success"  # acknowledged by robot 2's MAC
+    assert _senders(unicast) == {2}
+    assert air.node(3)["filtered"] >= filtered_before + 1  # robot 3 heard it and its MAC dropped it
+    assert air.node(2)["acks_sent"] >= 1
+    codes = air.close()
+    assert set(codes.values()) == {0}, codes  # every process shut down cleanly
+
+
+def test_two_pans_do_not_hear_each_other_and_a_pan_switch_takes_effect(make_air):
+    air = make_air()
+    air.robot(1, (0.0, 0.0), pan=0x1000)
+    air.robot(2, (1.0, 0.0), pan=0x1000)
+    air.robot(3, (2.0, 0.0), pan=0x2000)
+    assert _senders(air.cmd(1, "ping", wait=0.5)) == {2}
+    assert _senders(air.cmd(3, "ping", wait=0.5)) == set()
+    assert all(f["src"] != 1 for f in air.cmd(3, "received")["frames"])
+
+    switched = air.cmd(3, "configure", pan_id=0x1000)
+    assert switched["radio"]["pan_id"] == 0x1000
+    assert air.node(3)["pan_id"] == 0x1000
+    assert _senders(air.cmd(1, "ping", wait=0.5)) == {2, 3}
+
+
+def test_configure_with_a_bad_channel_is_refused_clearly(make_air):
+    air = make_air()
+    air.robot(1)
+    answer = air.cmd(1, "configure", channel=30)
+    assert "RadioError" in answer["error"] and "11-26" in answer["error"]
+    assert air.node(1)["channel"] == 11
+
+
+def _overlap(a: dict, b: dict) -> bool:
+    return a["start_us"] < b["end_us"] and b["start_us"] < a["end_us"]
+
+
+def test_simultaneous_sends_collide_as_the_model_says(make_air):
+    # Without CSMA-CA two robots told to send at once overlap on the air whenever their requests reach
+    # the hub within one airtime (about 3.7 ms for these frames).
+    air = make_air({**LOSSLESS, "mac": {"csma_enabled": False}})
+    air.robot(1, (0.0, 0.0))
+    air.robot(2, (2.0, 0.0))
+    air.robot(3, (1.0, 0.0))
+    overlaps = 0
+    for tag in range(1, 11):
+        control.broadcast(air.session, air.keys, "send", payload_len=100, ack=False, tag=tag, only=[1, 2])
+        time.sleep(0.3)
+        sent = [t for t in air.air_log() if t["type"] == "data" and t["sender"] in ("robot-1", "robot-2")][-2:]
+        assert {t["sender"] for t in sent} == {"robot-1", "robot-2"}
+        at_3 = {t["outcomes"]["robot-3"] for t in sent}
+        if _overlap(*sent):
+            overlaps += 1
+            assert at_3 == {"collided"}
+            assert sent[0]["outcomes"]["robot-2" if sent[0]["sender"] == "robot-1" else "robot-1"] == "collided"
+        else:
+            assert at_3 == {"delivered"}
+        if overlaps >= 2:
+            break
+    assert overlaps >= 1, "no two sends ever overlapped"
+    node3 = air.node(3)
+    assert node3["heard"] == node3["delivered"] + node3["collided"] + node3["lost"] + node3["filtered"]
+
+
+def test_malformed_and_oversize_input_from_a_raw_client_is_counted_and_dropped(make_air):
+    air = make_air()
+    air.robot(1, (0.0, 0.0))
+    air.robot(2, (1.0, 0.0))
+    session, keys = air.session, air.keys
+    replies: list[wire.Message] = []
+    sub = session.declare_subscriber(keys.down("raw-1"), lambda s: replies.append(wire.decode(s.payload.to_bytes())))
+    for junk in (b"", b"\xc1\xc1", msgpack.packb({"v": 9, "t": "transmit"}), msgpack.packb([1, 2, 3])):
+        session.put(keys.up("raw-1"), junk)
+    session.put(keys.up("robot-1"), b"\xff garbage on a robot's own key")
+    session.put(keys.up("raw-1"), wire.Attach(ext_addr=1, short_addr=77, pan_id=0x1000, channel=11, n=1).encode())
+    oversize = Frame(FrameType.DATA, 1, 0x1000, 0xFFFF, 0x1000, 77, bytes(60)).encode() + bytes(70)
+    session.put(keys.up("raw-1"), wire.Transmit(token=5, psdu=oversize, n=2).encode())
+    session.put(keys.up("raw-1"), wire.Transmit(token=6, psdu=b"\x41\x88\x01\x00\x10", n=3).encode())
+    session.put(control.robot_key(keys, 2), b"not msgpack")
+    session.put(control.all_robots_key(keys), b"\x93\x01")
+    time.sleep(0.5)
+    sub.undeclare()
+
+    hub = air.stats()["hub"]
+    assert hub["malformed"] == 5
+    done = {m.token: m for m in replies if isinstance(m, wire.TxDone)}
+    assert done[5].status == "refused" and "127" in done[5].reason
+    assert done[6].status == "refused" and "FCS" in done[6].reason
+    assert sum(isinstance(m, wire.Error) for m in replies) == 4
+    assert air.stats()["nodes"]["raw-1"]["refused"] == 2
+    assert not air.sup.dead()
+    assert _senders(air.cmd(1, "ping", wait=0.5)) == {2}  # the robots still talk
+
+
+def test_oversize_payload_from_a_robot_gets_a_clear_error(make_air):
+    air = make_air()
+    air.robot(1)
+    answer = air.cmd(1, "send", payload_len=200)
+    assert "FrameError" in answer["error"] and "127" in answer["error"]
+    assert air.cmd(1, "status")["robot_id"] == 1
+
+
+def test_a_killed_robot_is_detached_and_unicast_to_it_gets_no_ack(make_air):
+    air = make_air()
+    air.robot(1, (0.0, 0.0))
+    air.robot(2, (1.0, 0.0))
+    air.sup.children["robot-2"].kill()
+    deadline = time.monotonic() + 10
+    while air.node(2)["attached"] and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not air.node(2)["attached"]
+    answer = air.cmd(1, "ping", dst=2, wait=0.2)
+    assert answer["tx"]["status"] == "no_ack" and answer["tx"]["retries"] == 3
+    assert air.cmd(1, "status")["robot_id"] == 1

@@ -1,0 +1,85 @@
+"""``petswarm run`` as a user runs it: real processes, JSON out, clean stop on Ctrl-C."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+import uuid
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.process
+
+
+def _petswarm(*args: str) -> list[str]:
+    return [sys.executable, "-m", "cli", *args]
+
+
+def _processes_mentioning(tag: str) -> list[int]:
+    pids = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit() or int(entry.name) == os.getpid():
+            continue
+        try:
+            cmdline = (entry / "cmdline").read_bytes()
+        except OSError:
+            continue
+        if tag.encode() in cmdline:
+            pids.append(int(entry.name))
+    return pids
+
+
+def test_run_five_robots_exchanges_frames_among_all_and_reports_json():
+    proc = subprocess.run(
+        _petswarm("run", "--robots", "5", "--duration", "4", "--seed", "3", "--json"),
+        capture_output=True, text=True, timeout=120,
+    )
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads(proc.stdout)
+    assert summary["seed"] == 3 and summary["ok"] and summary["all_pairs_heard"]
+    assert set(summary["nodes"]) == {f"robot-{i}" for i in range(1, 6)}
+    for rid, node in enumerate(summary["nodes"].values(), start=1):
+        assert node["sent"] > 0 and node["delivered"] > 0
+        assert node["heard_from"] == sorted(set(range(1, 6)) - {rid})
+    assert summary["hub"]["transport_gaps"] == 0
+    assert "robots attached" in proc.stderr  # progress is shown on stderr, not mixed into the JSON
+
+
+def test_ctrl_c_stops_every_process_of_the_run():
+    world = f"orphan{uuid.uuid4().hex[:8]}"
+    proc = subprocess.Popen(
+        _petswarm("run", "--robots", "3", "--duration", "60", "--world", world),
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    try:
+        seen = ""
+        deadline = time.monotonic() + 60
+        while "3/3 robots attached" not in seen and time.monotonic() < deadline:
+            seen += proc.stderr.readline()
+        assert "3/3 robots attached" in seen, seen
+        assert len(_processes_mentioning(world)) >= 4  # the run, its hub and three robots
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=30) == 130
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    deadline = time.monotonic() + 5
+    while _processes_mentioning(world) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert _processes_mentioning(world) == []
+
+
+def test_absurd_arguments_get_clear_errors():
+    bad = subprocess.run(_petswarm("run", "--robots", "0"), capture_output=True, text=True, timeout=30)
+    assert bad.returncode == 2 and "outside 1..200" in bad.stderr
+    bad = subprocess.run(_petswarm("robot", "--id", "3", "--pos", "nowhere"), capture_output=True, text=True, timeout=30)
+    assert bad.returncode == 2 and "position" in bad.stderr
+    nohub = subprocess.run(
+        _petswarm("stats", "--hub", "tcp/127.0.0.1:9"), capture_output=True, text=True, timeout=60
+    )
+    assert nohub.returncode == 2 and "petswarm stats:" in nohub.stderr
