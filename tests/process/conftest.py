@@ -29,8 +29,20 @@ class Air:
         self.sup = Supervisor(tmp / "logs")
         config_file = tmp / "medium.json"
         config_file.write_text(json.dumps(config))
-        self.sup.spawn("hub", ["hub", "--listen", self.endpoint, "--world", self.world,
-                               "--seed", str(seed), "--config", str(config_file)])
+        self.sup.spawn(
+            "hub",
+            [
+                "hub",
+                "--listen",
+                self.endpoint,
+                "--world",
+                self.world,
+                "--seed",
+                str(seed),
+                "--config",
+                str(config_file),
+            ],
+        )
         self.session = self._connect()
 
     def _connect(self) -> zenoh.Session:
@@ -51,8 +63,24 @@ class Air:
 
     def robot(self, rid: int, pos: tuple[float, float] = (0.0, 0.0), pan: int = 0x1000, channel: int = 11) -> None:
         """Start robot ``rid`` and wait until the hub has it attached."""
-        self.sup.spawn(f"robot-{rid}", ["robot", "--id", str(rid), "--hub", self.endpoint, "--world", self.world,
-                                        "--pos", f"{pos[0]},{pos[1]}", "--pan", str(pan), "--channel", str(channel)])
+        self.sup.spawn(
+            f"robot-{rid}",
+            [
+                "robot",
+                "--id",
+                str(rid),
+                "--hub",
+                self.endpoint,
+                "--world",
+                self.world,
+                "--pos",
+                f"{pos[0]},{pos[1]}",
+                "--pan",
+                str(pan),
+                "--channel",
+                str(channel),
+            ],
+        )
         deadline = time.monotonic() + 20
         while time.monotonic() < deadline:
             assert not self.sup.dead(), {n: self.sup.log_tail(n) for n in self.sup.dead()}

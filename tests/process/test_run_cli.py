@@ -37,7 +37,9 @@ def _processes_mentioning(tag: str) -> list[int]:
 def test_run_five_robots_exchanges_frames_among_all_and_reports_json():
     proc = subprocess.run(
         _petswarm("run", "--robots", "5", "--duration", "4", "--seed", "3", "--json"),
-        capture_output=True, text=True, timeout=120,
+        capture_output=True,
+        text=True,
+        timeout=120,
     )
     assert proc.returncode == 0, proc.stderr
     summary = json.loads(proc.stdout)
@@ -54,7 +56,9 @@ def test_ctrl_c_stops_every_process_of_the_run():
     world = f"orphan{uuid.uuid4().hex[:8]}"
     proc = subprocess.Popen(
         _petswarm("run", "--robots", "3", "--duration", "60", "--world", world),
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
     )
     try:
         seen = ""
@@ -77,9 +81,9 @@ def test_ctrl_c_stops_every_process_of_the_run():
 def test_absurd_arguments_get_clear_errors():
     bad = subprocess.run(_petswarm("run", "--robots", "0"), capture_output=True, text=True, timeout=30)
     assert bad.returncode == 2 and "outside 1..200" in bad.stderr
-    bad = subprocess.run(_petswarm("robot", "--id", "3", "--pos", "nowhere"), capture_output=True, text=True, timeout=30)
-    assert bad.returncode == 2 and "position" in bad.stderr
-    nohub = subprocess.run(
-        _petswarm("stats", "--hub", "tcp/127.0.0.1:9"), capture_output=True, text=True, timeout=60
+    bad = subprocess.run(
+        _petswarm("robot", "--id", "3", "--pos", "nowhere"), capture_output=True, text=True, timeout=30
     )
+    assert bad.returncode == 2 and "position" in bad.stderr
+    nohub = subprocess.run(_petswarm("stats", "--hub", "tcp/127.0.0.1:9"), capture_output=True, text=True, timeout=60)
     assert nohub.returncode == 2 and "petswarm stats:" in nohub.stderr
