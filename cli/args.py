@@ -44,3 +44,13 @@ def seed(text: str) -> int:
     if value < 0:
         raise argparse.ArgumentTypeError("seed must be >= 0")
     return value
+
+
+def robot_id(text: str) -> int:
+    """A robot id 1..65533, or ``auto`` (0) to claim a free one at the hub."""
+    if text == "auto":
+        return 0
+    value = int_auto(text)
+    if not 1 <= value <= 0xFFFD:
+        raise argparse.ArgumentTypeError(f"robot id {value} is outside 1..65533 (it is the 16-bit short address)")
+    return value

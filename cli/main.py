@@ -10,7 +10,7 @@ import signal
 import sys
 from typing import Any
 
-from cli.args import bounded, int_auto, position, seed
+from cli.args import bounded, int_auto, position, robot_id, seed
 
 EPILOG = """examples:
   petswarm run --robots 5 --duration 5          a hub and 5 robots pinging each other; prints a summary
@@ -35,11 +35,18 @@ def build_parser() -> argparse.ArgumentParser:
     hub.add_argument("--config", help="TOML or JSON file with [mac], [range], [loss], [path_loss], [capture] tables")
 
     robot = sub.add_parser("robot", help="run one robot process attached to a hub")
-    robot.add_argument("--id", type=bounded(int, 1, 0xFFFD), required=True, help="robot id, also its short address")
+    robot.add_argument(
+        "--id",
+        type=robot_id,
+        required=True,
+        help="robot id 1-65533, also its short address; 'auto' claims the lowest free one",
+    )
     _add_hub(robot)
     robot.add_argument("--pan", type=int_auto, default=0x1000, help="PAN ID to start on (default 0x1000)")
     robot.add_argument("--channel", type=bounded(int, 11, 26), default=11, help="802.15.4 channel 11-26 (default 11)")
-    robot.add_argument("--pos", type=position, default=(0.0, 0.0), help="position x,y in metres (default 0,0)")
+    robot.add_argument(
+        "--pos", type=position, default=None, help="position x,y in metres (default: a 1.5 m grid by id, five to a row)"
+    )
     robot.add_argument(
         "--ping-interval",
         type=bounded(float, 0, 3600),

@@ -18,9 +18,6 @@ from cli.processes import Supervisor, free_tcp_port
 from petswarm import control
 from radio_hub.interface import HubUnavailable, Keys, open_session, query_hub
 
-_SPACING_M = 1.5
-_ROW = 5
-
 
 @dataclass(frozen=True)
 class RunOptions:
@@ -34,12 +31,6 @@ class RunOptions:
     config: str | None = None
     as_json: bool = False
     startup_timeout: float = 30.0
-
-
-def robot_position(robot_id: int) -> tuple[float, float]:
-    """Robots stand on a grid 1.5 m apart, five to a row: every robot hears every other by default."""
-    index = robot_id - 1
-    return (index % _ROW * _SPACING_M, index // _ROW * _SPACING_M)
 
 
 def progress(text: str) -> None:
@@ -66,24 +57,9 @@ def run(opts: RunOptions) -> int:
         sup.spawn("hub", hub_args + (["--config", opts.config] if opts.config else []))
         session = _wait_for_hub(sup, endpoint, keys, opts.startup_timeout)
         for rid in range(1, opts.robots + 1):
-            x, y = robot_position(rid)
+            robot_args = ["robot", "--id", str(rid), "--hub", endpoint, "--world", world]
             sup.spawn(
-                f"robot-{rid}",
-                [
-                    "robot",
-                    "--id",
-                    str(rid),
-                    "--hub",
-                    endpoint,
-                    "--world",
-                    world,
-                    "--pos",
-                    f"{x},{y}",
-                    "--ping-interval",
-                    str(opts.ping_interval),
-                    "--seed",
-                    str(opts.seed),
-                ],
+                f"robot-{rid}", [*robot_args, "--ping-interval", str(opts.ping_interval), "--seed", str(opts.seed)]
             )
         _wait_for_robots(sup, session, keys, opts.robots, opts.startup_timeout)
         _exercise(sup, session, keys, opts.duration)

@@ -33,7 +33,10 @@ def command(
     for reply in session.get(robot_key(keys, robot_id), payload=payload, timeout=timeout):
         if reply.ok is not None:
             return msgpack.unpackb(reply.ok.payload.to_bytes(), raw=False, strict_map_key=False)
-    raise HubUnavailable(f"robot {robot_id} of world {keys.world!r} did not answer {cmd!r} within {timeout} s")
+    raise HubUnavailable(
+        f"robot {robot_id} of world {keys.world!r} did not answer {cmd!r} (not running, not serving yet, "
+        f"or slower than {timeout} s)"
+    )
 
 
 def broadcast(session: zenoh.Session, keys: Keys, cmd: str, **args: Any) -> None:

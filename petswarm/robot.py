@@ -11,7 +11,7 @@ import signal
 import sys
 import time
 from collections import Counter, deque
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 import msgpack
@@ -30,12 +30,23 @@ from radio_hub.interface import (
     RadioClient,
     RadioError,
     RadioIdentity,
+    open_session,
 )
 
 DEFAULT_PAN = 0x1000
 """The PAN every waiting robot starts on."""
 EXT_ADDR_BASE = 0x00124B0000000000
 """Robot extended addresses: a fixed OUI-like prefix plus the robot id."""
+AUTO_ID = 0
+"""``--id auto``: claim the lowest id no live robot of the world uses."""
+_GRID_SPACING_M = 1.5
+_GRID_ROW = 5
+
+
+def default_position(robot_id: int) -> tuple[float, float]:
+    """Where a robot stands unless told: a grid 1.5 m apart, five to a row, so every robot hears every other."""
+    index = robot_id - 1
+    return (index % _GRID_ROW * _GRID_SPACING_M, index // _GRID_ROW * _GRID_SPACING_M)
 
 
 @dataclass(frozen=True)
@@ -47,7 +58,8 @@ class RobotConfig:
     world: str = DEFAULT_WORLD
     pan_id: int = DEFAULT_PAN
     channel: int = 11
-    position: tuple[float, float] = (0.0, 0.0)
+    position: tuple[float, float] | None = None
+    """None: the default grid position of the robot's id."""
     ping_interval: float = 0.0
     """Seconds between broadcast pings (0: never ping on its own)."""
     seed: int = 0
@@ -56,13 +68,9 @@ class RobotConfig:
         """The robot's radio at start-up: short address = robot id."""
         if not 1 <= self.robot_id <= 0xFFFD:
             raise ValueError(f"robot id {self.robot_id} must be 1..65533 (it is the 16-bit short address)")
+        position = self.position if self.position is not None else default_position(self.robot_id)
         return RadioIdentity(
-            f"robot-{self.robot_id}",
-            EXT_ADDR_BASE + self.robot_id,
-            self.robot_id,
-            self.pan_id,
-            self.channel,
-            self.position,
+            f"robot-{self.robot_id}", EXT_ADDR_BASE + self.robot_id, self.robot_id, self.pan_id, self.channel, position
         )
 
 
@@ -274,12 +282,32 @@ class ControlServer:
             decl.undeclare()
 
 
+async def attach(config: RobotConfig) -> tuple[RobotConfig, RadioClient]:
+    """Put the robot's radio on the air; with ``AUTO_ID`` claim ids 1, 2, ... until one is free."""
+    if config.robot_id != AUTO_ID:
+        return config, await RadioClient.connect(config.identity(), config.endpoint, config.world)
+    session = await asyncio.to_thread(open_session, "client", config.endpoint)
+    for candidate in range(1, 0xFFFE):
+        claimed = replace(config, robot_id=candidate)
+        try:
+            radio = await RadioClient.connect(
+                claimed.identity(), config.endpoint, config.world, session=session, exclusive=True
+            )
+        except RadioError as err:
+            if "is taken" in str(err):
+                continue
+            raise
+        radio.owns_session = True
+        return claimed, radio
+    raise RadioError("every robot id is taken")
+
+
 async def run_robot(config: RobotConfig) -> int:
     """The robot process's main coroutine; returns the exit code."""
     try:
-        radio = await RadioClient.connect(config.identity(), config.endpoint, config.world)
+        config, radio = await attach(config)
     except (HubUnavailable, RadioError) as err:
-        print(f"robot {config.robot_id}: {err}", file=sys.stderr)
+        print(f"robot {config.robot_id or 'auto'}: {err}", file=sys.stderr)
         return 2
     robot = Robot(config, radio)
     control = ControlServer(radio.session, robot)

@@ -77,6 +77,7 @@ class RadioHub:
         self._stop = threading.Event()
         self._pubs: dict[str, zenoh.Publisher] = {}
         self._up_seq: dict[str, int] = {}
+        self._instances: dict[str, str] = {}
         self._down_seq: dict[str, int] = {}
         self._t0_ns = time.perf_counter_ns()
         self._session: zenoh.Session | None = None
@@ -138,7 +139,7 @@ class RadioHub:
         if kind == "up":
             self._on_up(self.keys.node_of(item[1]), item[2])
         elif kind == "alive":
-            self._on_alive(self.keys.node_of(item[1]), item[2])
+            self._on_alive(*self.keys.alive_of(item[1]), item[2])
         elif kind == "stats":
             self._reply(item[1], self.stats())
         elif kind == "air":
@@ -175,6 +176,9 @@ class RadioHub:
         self._up_seq[node_id] = msg.n
 
     def _on_attach(self, node_id: str, msg: wire.Attach) -> None:
+        if msg.exclusive and node_id in self.medium.nodes:
+            self._send_down(node_id, wire.Error(reason=f"node id {node_id} is taken"))
+            return
         self.medium.detach(node_id)  # a node that restarts under the same id starts afresh
         node = RadioNode(node_id, msg.ext_addr, msg.short_addr, msg.pan_id, msg.channel, _pos(msg.position))
         try:
@@ -184,7 +188,10 @@ class RadioHub:
             self._send_down(node_id, wire.Error(reason=f"cannot attach: {err}"))
             return
         self.counters.attaches += 1
-        self._pubs[node_id] = reliable_publisher(self._require_session(), self.keys.down(node_id))
+        self._instances[node_id] = msg.instance
+        if node_id not in self._pubs:
+            self._pubs[node_id] = reliable_publisher(self._require_session(), self.keys.down(node_id))
+
         self._down_seq[node_id] = 0
         self._send_down(node_id, self._attached(node, 0))
 
@@ -213,8 +220,9 @@ class RadioHub:
             now_us=self.now_us(),
         )
 
-    def _on_alive(self, node_id: str, kind: zenoh.SampleKind) -> None:
-        if kind == zenoh.SampleKind.DELETE and node_id in self.medium.nodes:
+    def _on_alive(self, node_id: str, instance: str, kind: zenoh.SampleKind) -> None:
+        gone = kind == zenoh.SampleKind.DELETE
+        if gone and node_id in self.medium.nodes and self._instances.get(node_id) == instance:
             self._detach(node_id)
 
     def _detach(self, node_id: str) -> None:

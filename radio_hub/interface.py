@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import itertools
+import secrets
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -123,7 +124,8 @@ class RadioClient:
         self.transport_gaps = 0
         self.errors: list[str] = []
         self._session = session
-        self._owns_session = owns_session
+        self.owns_session = owns_session
+        """Close the session with the radio (True when the radio opened it)."""
         self._loop = asyncio.get_running_loop()
         self._rx: asyncio.Queue[RxFrame] = asyncio.Queue()
         self._pending: dict[int, asyncio.Future[Any]] = {}
@@ -132,7 +134,8 @@ class RadioClient:
         self._down_seq = 0
         self._dsn = itertools.count()
         node_id = identity.node_id
-        self._token = session.liveliness().declare_token(keys.alive(node_id))
+        self.instance = secrets.token_hex(8)
+        self._token = session.liveliness().declare_token(keys.alive(node_id, self.instance))
         self._sub = session.declare_subscriber(keys.down(node_id), self._from_zenoh)
         self._pub = reliable_publisher(session, keys.up(node_id))
 
@@ -145,8 +148,12 @@ class RadioClient:
         *,
         session: zenoh.Session | None = None,
         timeout: float = 5.0,
+        exclusive: bool = False,
     ) -> RadioClient:
-        """Attach ``identity`` to the hub at ``endpoint``; raises HubUnavailable if none answers."""
+        """Attach ``identity`` to the hub at ``endpoint``; raises HubUnavailable if none answers.
+
+        With ``exclusive`` the hub refuses (RadioError) when a live node already uses the id.
+        """
         check_name("node", identity.node_id)
         owns = session is None
         if session is None:
@@ -159,6 +166,8 @@ class RadioClient:
             pan_id=identity.pan_id,
             channel=identity.channel,
             position=list(identity.position),
+            instance=client.instance,
+            exclusive=exclusive,
         )
         try:
             attached = await client._request(0, attach)
@@ -243,7 +252,7 @@ class RadioClient:
         for fut in self._pending.values():
             if not fut.done():
                 fut.set_exception(HubUnavailable("radio closed"))
-        if self._owns_session:
+        if self.owns_session:
             await asyncio.to_thread(self._session.close)
 
     # -- plumbing ----------------------------------------------------------------------------------
@@ -267,7 +276,9 @@ class RadioClient:
         self._pending[token] = fut
         try:
             self._put(msg)
-            return await asyncio.wait_for(fut, self.request_timeout)
+            # asyncio.timeout, not wait_for: on 3.11 wait_for can swallow a cancellation that races the answer
+            async with asyncio.timeout(self.request_timeout):
+                return await fut
         except TimeoutError:
             raise HubUnavailable(
                 f"no answer from the hub of world {self.keys.world!r} within {self.request_timeout} s"

@@ -42,14 +42,19 @@ class Keys:
         """Hub -> node messages of one node."""
         return f"{self.prefix}/down/{node_id}"
 
-    def alive(self, node_id: str) -> str:
-        """A node's liveliness token."""
-        return f"{self.prefix}/alive/{node_id}"
+    def alive(self, node_id: str, instance: str) -> str:
+        """A node's liveliness token; ``instance`` tells a restarted node from its earlier self."""
+        return f"{self.prefix}/alive/{node_id}/{instance}"
 
     @property
     def alive_all(self) -> str:
         """What the hub watches for arrivals and departures."""
-        return f"{self.prefix}/alive/*"
+        return f"{self.prefix}/alive/*/*"
+
+    def alive_of(self, key: str) -> tuple[str, str]:
+        """(node id, instance) of a liveliness key."""
+        node_id, instance = str(key).rsplit("/", 2)[-2:]
+        return node_id, instance
 
     @property
     def stats(self) -> str:
@@ -62,7 +67,7 @@ class Keys:
         return f"{self.prefix}/hub/air"
 
     def node_of(self, key: str) -> str:
-        """The node id at the end of an up/alive key."""
+        """The node id at the end of an up key."""
         return str(key).rsplit("/", 1)[-1]
 
 

@@ -43,6 +43,10 @@ class Attach(Message):
     pan_id: int = 0
     channel: int = 11
     position: list[float] = field(default_factory=lambda: [0.0, 0.0])
+    instance: str = ""
+    """The node's liveliness instance: only that token's disappearance detaches this attachment."""
+    exclusive: bool = False
+    """Refuse (instead of replacing) when a live node already has this id: how ``--id auto`` claims one."""
 
 
 @dataclass
@@ -154,6 +158,7 @@ _SCALARS: dict[str, tuple[type, ...]] = {
     "str": (str,),
     "bytes": (bytes,),
     "float": (float, int),
+    "bool": (bool,),
 }
 
 
@@ -171,6 +176,6 @@ def _check_types(msg: Message) -> None:
                 and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
             )
         else:
-            ok = isinstance(value, _SCALARS.get(base, (object,))) and not isinstance(value, bool)
+            ok = isinstance(value, _SCALARS.get(base, (object,))) and (base == "bool") == isinstance(value, bool)
         if not ok:
             raise WireError(f"{msg.TYPE}.{f.name} has the wrong type ({type(value).__name__})")

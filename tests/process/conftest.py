@@ -85,15 +85,20 @@ class Air:
         while time.monotonic() < deadline:
             assert not self.sup.dead(), {n: self.sup.log_tail(n) for n in self.sup.dead()}
             node = self.stats()["nodes"].get(f"robot-{rid}")
-            if node and node["attached"]:
-                self.cmd(rid, "status")  # its control channel answers too
+            if node and node["attached"] and self._answers(rid):
                 return
             time.sleep(0.1)
         raise AssertionError(f"robot {rid} did not attach:\n{self.sup.log_tail(f'robot-{rid}')}")
 
-    def cmd(self, rid: int, name: str, **args: Any) -> dict[str, Any]:
+    def _answers(self, rid: int) -> bool:
+        try:
+            return self.cmd(rid, "status", timeout=1.0)["robot_id"] == rid
+        except HubUnavailable:
+            return False
+
+    def cmd(self, rid: int, name: str, timeout: float = 5.0, **args: Any) -> dict[str, Any]:
         """A control command to one robot."""
-        return control.command(self.session, self.keys, rid, name, **args)
+        return control.command(self.session, self.keys, rid, name, timeout, **args)
 
     def stats(self) -> dict[str, Any]:
         """The hub's counters."""

@@ -141,3 +141,18 @@ def test_a_killed_robot_is_detached_and_unicast_to_it_gets_no_ack(make_air):
     answer = air.cmd(1, "ping", dst=2, wait=0.2)
     assert answer["tx"]["status"] == "no_ack" and answer["tx"]["retries"] == 3
     assert air.cmd(1, "status")["robot_id"] == 1
+
+
+def test_robots_started_with_id_auto_claim_distinct_ids(make_air):
+    air = make_air()
+    for n in range(3):
+        air.sup.spawn(f"auto-{n}", ["robot", "--id", "auto", "--hub", air.endpoint, "--world", air.world])
+    deadline = time.monotonic() + 20
+    while time.monotonic() < deadline:
+        attached = sorted(name for name, n in air.stats()["nodes"].items() if n["attached"])
+        if len(attached) == 3:
+            break
+        time.sleep(0.1)
+    assert attached == ["robot-1", "robot-2", "robot-3"]
+    assert not air.sup.dead()
+    assert air.stats()["hub"]["detaches"] == 0  # a refused claim did not knock out the robot that holds the id
