@@ -13,7 +13,7 @@ ROOT = Path(__file__).resolve().parents[2]
 def test_compose_file_validates_against_the_compose_specification():
     schema = json.loads((ROOT / "tests/data/compose-spec.json").read_text())
     compose = yaml.safe_load((ROOT / "compose.yaml").read_text())
-    jsonschema.validate(compose, schema)
+    jsonschema.Draft7Validator(schema).validate(compose)
     assert {"hub", "robot", "user"} <= set(compose["services"])
     robot = compose["services"]["robot"]["command"]
     assert "auto" in robot and "tcp/hub:7447" in robot  # replicas can scale, explicit endpoint
