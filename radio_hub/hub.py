@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import json
+import os
 import queue
 import sys
 import threading
@@ -29,7 +30,10 @@ from radio_hub.config import MediumConfig
 from radio_hub.keys import Keys, check_name, reliable_publisher, session_config
 from radio_hub.medium import Medium, Output, RadioNode, Reception, TxReport
 
-_IDLE_WAKE_S = 0.2
+_IDLE_WAKE_US = 200_000
+_SPIN_US = 100
+"""Sleep until this close to the next model event, then spin: deliveries land within a few us of model time."""
+
 _PR_SET_TIMERSLACK = 29
 
 
@@ -126,14 +130,18 @@ class RadioHub:
         inbox, medium = self._inbox, self.medium
         while not self._stop.is_set():
             due = medium.next_event_us()
-            wait = _IDLE_WAKE_S if due is None else max(due - self.now_us(), 0) / 1e6
+            until_due = _IDLE_WAKE_US if due is None else due - self.now_us()
             try:
-                item = inbox.get(timeout=wait) if wait > 0 else inbox.get_nowait()
-                self._handle(item)
+                if until_due > _SPIN_US:
+                    self._handle(inbox.get(timeout=(until_due - _SPIN_US) / 1e6))
+                else:
+                    self._handle(inbox.get_nowait())
                 while True:  # take everything that arrived meanwhile before advancing time
                     self._handle(inbox.get_nowait())
             except queue.Empty:
-                pass
+                if 0 < until_due <= _SPIN_US:
+                    # a timed wait wakes tens of microseconds late; yield-spin the last stretch instead
+                    os.sched_yield()
             self._dispatch(medium.advance(self.now_us()))
 
     # -- inputs ----------------------------------------------------------------------------------
