@@ -54,6 +54,52 @@ def build_parser() -> argparse.ArgumentParser:
         help="broadcast a ping every this many seconds (default 0: never)",
     )
     robot.add_argument("--seed", type=seed, default=0, help="seed of the robot's own random choices")
+    robot.add_argument(
+        "--user",
+        type=bounded(int, 0, 65535),
+        default=0,
+        help="start connected to this user, following (default 0: a waiting robot)",
+    )
+    robot.add_argument(
+        "--region-rssi",
+        type=bounded(int, -120, 0),
+        default=-70,
+        help="as master: the available region, in dBm heard (default -70, about 10 m)",
+    )
+    robot.add_argument(
+        "--step-deadline",
+        type=bounded(float, 0.005, 10),
+        default=0.1,
+        help="seconds each organizing step waits for answers before retrying (default 0.1)",
+    )
+    robot.add_argument(
+        "--step-retries",
+        type=bounded(int, 0, 50),
+        default=5,
+        help="retries of an organizing step before it gives up on the missing (default 5)",
+    )
+    robot.add_argument(
+        "--protocol",
+        choices=("paper", "slotted"),
+        default="paper",
+        help="organizing protocol when this robot is master (default paper)",
+    )
+
+    swarm = sub.add_parser("swarm", help="ask a running robot to organize or disperse a swarm (the watch's requests)")
+    swarm_sub = swarm.add_subparsers(dest="action", required=True, metavar="ACTION")
+    org = swarm_sub.add_parser("organize", help="the user asks the robot connected to them for a swarm of N")
+    org.add_argument("--master", type=robot_id, required=True, help="id of the user-connected robot")
+    org.add_argument("--count", type=bounded(int, 1, 200), required=True, help="robots wanted besides the master")
+    org.add_argument("--protocol", choices=("paper", "slotted"), help="override the robot's organizing protocol")
+    org.add_argument(
+        "--user", type=bounded(int, 1, 65535), help="connect the robot to this user first (until the wearables exist)"
+    )
+    _add_hub(org)
+    dis = swarm_sub.add_parser("disperse", help="the user ends the swarm")
+    dis.add_argument("--master", type=robot_id, required=True, help="id of the master robot")
+    _add_hub(dis)
+    for p in (org, dis):
+        p.add_argument("--json", action="store_true", help="print the answer as JSON")
 
     run = sub.add_parser("run", help="run a hub and N robots on this machine and summarise the radio traffic")
     run.add_argument("--robots", type=bounded(int, 1, 200), default=5, help="number of robot processes (default 5)")
@@ -68,6 +114,15 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--world", help="key prefix of the run (default: derived from pid and seed)")
     run.add_argument("--config", help="hub medium config file (see petswarm hub --help)")
     run.add_argument("--json", action="store_true", help="print the summary as JSON on stdout")
+    run.add_argument(
+        "--organize",
+        type=bounded(int, 0, 199),
+        default=0,
+        help="robot 1 is connected to user 1 and organizes a swarm of this many (default 0: none)",
+    )
+    run.add_argument(
+        "--protocol", choices=("paper", "slotted"), default="paper", help="organizing protocol (default paper)"
+    )
 
     stats = sub.add_parser("stats", help="print a running hub's counters")
     _add_hub(stats)
@@ -101,7 +156,9 @@ def _add_hub(p: argparse.ArgumentParser) -> None:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``petswarm`` console script."""
     args = build_parser().parse_args(argv)
-    handler = {"hub": _hub, "robot": _robot, "run": _run, "stats": _stats, "bench": _bench}[args.command]
+    handler = {"hub": _hub, "robot": _robot, "run": _run, "stats": _stats, "bench": _bench, "swarm": _swarm}[
+        args.command
+    ]
     try:
         return handler(args)
     except KeyboardInterrupt:
@@ -135,8 +192,12 @@ def _hub(args: argparse.Namespace) -> int:
 
 
 def _robot(args: argparse.Namespace) -> int:
+    from petswarm.exchange import StepTiming
+    from petswarm.formation import FormationConfig
     from petswarm.robot import RobotConfig, run_robot
 
+    timing = StepTiming(args.step_deadline, args.step_retries)
+    formation = FormationConfig(protocol=args.protocol, step=timing, min_rssi_dbm=args.region_rssi)
     config = RobotConfig(
         robot_id=args.id,
         endpoint=args.hub,
@@ -146,6 +207,8 @@ def _robot(args: argparse.Namespace) -> int:
         position=args.pos,
         ping_interval=args.ping_interval,
         seed=args.seed,
+        user=args.user,
+        formation=formation,
     )
     return asyncio.run(run_robot(config))
 
@@ -162,8 +225,16 @@ def _run(args: argparse.Namespace) -> int:
         world=args.world,
         config=args.config,
         as_json=args.json,
+        organize=args.organize,
+        protocol=args.protocol,
     )
     return run(opts)
+
+
+def _swarm(args: argparse.Namespace) -> int:
+    from cli.swarm import swarm_command
+
+    return swarm_command(args)
 
 
 def _stats(args: argparse.Namespace) -> int:

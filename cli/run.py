@@ -31,6 +31,9 @@ class RunOptions:
     config: str | None = None
     as_json: bool = False
     startup_timeout: float = 30.0
+    organize: int = 0
+    """Robot 1 organizes a swarm of this many after the ping phase (0: no swarm)."""
+    protocol: str = "paper"
 
 
 def progress(text: str) -> None:
@@ -58,12 +61,18 @@ def run(opts: RunOptions) -> int:
         session = _wait_for_hub(sup, endpoint, keys, opts.startup_timeout)
         for rid in range(1, opts.robots + 1):
             robot_args = ["robot", "--id", str(rid), "--hub", endpoint, "--world", world]
+            if rid == 1 and opts.organize:
+                robot_args += ["--user", "1", "--protocol", opts.protocol]
             sup.spawn(
                 f"robot-{rid}", [*robot_args, "--ping-interval", str(opts.ping_interval), "--seed", str(opts.seed)]
             )
         _wait_for_robots(sup, session, keys, opts.robots, opts.startup_timeout)
         _exercise(sup, session, keys, opts.duration)
+        swarm = organize_and_disperse(session, keys, opts) if opts.organize else {}
         summary = _summarise(session, keys, opts, world, endpoint)
+        summary.update(swarm)
+        summary["problems"] += swarm.get("problems", [])
+        summary["ok"] = not summary["problems"]
     except RunFailed as err:
         progress(f"failed: {err}")
         return 1
@@ -151,6 +160,47 @@ def _totals(stats: dict[str, Any]) -> dict[str, int]:
             if isinstance(value, int) and not isinstance(value, bool):
                 totals[name] = totals.get(name, 0) + value
     return totals
+
+
+def organize_and_disperse(session: zenoh.Session, keys: Keys, opts: RunOptions) -> dict[str, Any]:
+    """Robot 1 (connected to user 1) organizes, the swarm holds a second, then disperses; states are checked."""
+    progress(f"robot 1 organizes a swarm of {opts.organize} ({opts.protocol} protocol)")
+    organized = control.command(session, keys, 1, "organize", 60.0, count=opts.organize)
+    if "error" in organized:
+        return {"organization": organized, "problems": [f"organize failed: {organized['error']}"]}
+    progress(
+        f"members {organized['members']} on PAN {organized['pan_id']:#06x} in "
+        f"{organized['organize_time_s'] * 1000:.1f} ms, {organized['retries']} retries"
+    )
+    time.sleep(1.0)
+    problems = check_swarm(session, keys, opts.robots, organized)
+    dispersed = control.command(session, keys, 1, "disperse", 60.0)
+    progress(f"dispersed in {dispersed.get('disperse_time_s', 0) * 1000:.1f} ms")
+    time.sleep(0.3)
+    problems += check_swarm(session, keys, opts.robots, None)
+    return {"organization": organized, "dispersal": dispersed, "problems": problems}
+
+
+def check_swarm(session: zenoh.Session, keys: Keys, robots: int, organized: dict[str, Any] | None) -> list[str]:
+    """Every robot's own belief against the master's: members are slaves on the swarm's PAN, others wait."""
+    members = set(organized["members"]) if organized else set()
+    problems = []
+    for rid in range(2, robots + 1):
+        status = control.command(session, keys, rid, "status")
+        swarm = status.get("swarm")
+        if rid in members:
+            ok = status["state"] == "slave-driving" and swarm and swarm["pan_id"] == organized["pan_id"]  # type: ignore[index]
+        else:
+            ok = (
+                status["state"] == "waiting"
+                and swarm is None
+                and status["radio"]["pan_id"] != 0
+                and (organized is not None or status["radio"]["pan_id"] == 0x1000)
+            )
+        if not ok:
+            when = "after organizing" if organized else "after dispersing"
+            problems.append(f"robot {rid} is {status['state']} (swarm {swarm}) {when}")
+    return problems
 
 
 def _summarise(session: zenoh.Session, keys: Keys, opts: RunOptions, world: str, endpoint: str) -> dict[str, Any]:

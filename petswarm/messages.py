@@ -25,6 +25,17 @@ class MessageType(enum.IntEnum):
     PING = 1
     PONG = 2
     BLOB = 3
+    SCAN = 10
+    SCAN_REPLY = 11
+    JOIN_QUERY = 12
+    JOIN_AVAILABLE = 13
+    JOIN_UNAVAILABLE = 14
+    JOIN_NOTICE = 15
+    NOT_PARTICIPATING = 16
+    JOINED = 17
+    ROSTER = 18
+    DISPERSE = 19
+    DISPERSED = 20
 
 
 @dataclass(frozen=True)
@@ -36,6 +47,11 @@ class SwarmMessage:
     def encode(self) -> bytes:
         """The frame payload."""
         return msgpack.packb([MESSAGE_VERSION, int(self.TYPE), *astuple(self)], use_bin_type=True)
+
+    @property
+    def session_id(self) -> int | None:
+        """The organizing session a message belongs to (None for messages outside any session)."""
+        return getattr(self, "session", None)
 
 
 @dataclass(frozen=True)
@@ -63,8 +79,143 @@ class Blob(SwarmMessage):
     filler: bytes
 
 
-_BY_TYPE: dict[int, type[SwarmMessage]] = {int(c.TYPE): c for c in (Ping, Pong, Blob)}
-_FIELD_TYPES = {"int": int, "bytes": bytes, "str": str, "float": (int, float)}
+class Refusal(enum.IntEnum):
+    """Why a waiting robot answers joining-unavailable (Table 1, plus being taken by another master)."""
+
+    CONNECTED_TO_USER = 1
+    OUTSIDE_REGION = 2
+    BUSY = 3
+
+
+@dataclass(frozen=True)
+class Scan(SwarmMessage):
+    """Master -> everyone on the channel (broadcast PAN): who is around, and on which PAN?"""
+
+    TYPE: ClassVar[MessageType] = MessageType.SCAN
+    session: int
+    user: int
+    slot_ms: int
+    """0: answer at once (the paper's protocol); otherwise answer in the slot of your address."""
+
+
+@dataclass(frozen=True)
+class ScanReply(SwarmMessage):
+    """Robot -> master: my state (a ``RobotState`` code), my PAN and my user (0: none)."""
+
+    TYPE: ClassVar[MessageType] = MessageType.SCAN_REPLY
+    session: int
+    state: int
+    pan_id: int
+    user: int
+
+
+@dataclass(frozen=True)
+class JoinQuery(SwarmMessage):
+    """Master -> waiting robots: may you join? ``pending`` lists who should answer (empty: all)."""
+
+    TYPE: ClassVar[MessageType] = MessageType.JOIN_QUERY
+    session: int
+    user: int
+    min_rssi_dbm: int
+    """The available region: a robot is inside when it hears the master at least this strongly."""
+    slot_ms: int
+    """0: answer at once (the paper's protocol); otherwise answer in your slot of ``pending``."""
+    pending: tuple[int, ...]
+
+
+@dataclass(frozen=True)
+class JoinAvailable(SwarmMessage):
+    """Robot -> master: I can join; how strongly I hear you (dBm)."""
+
+    TYPE: ClassVar[MessageType] = MessageType.JOIN_AVAILABLE
+    session: int
+    rssi_dbm: int
+
+
+@dataclass(frozen=True)
+class JoinUnavailable(SwarmMessage):
+    """Robot -> master: I cannot join, and why (a ``Refusal`` code)."""
+
+    TYPE: ClassVar[MessageType] = MessageType.JOIN_UNAVAILABLE
+    session: int
+    reason: int
+
+
+@dataclass(frozen=True)
+class JoinNotice(SwarmMessage):
+    """Master -> selected robot: switch to ``pan_id``; the swarm has ``members`` robots, you are ``number``."""
+
+    TYPE: ClassVar[MessageType] = MessageType.JOIN_NOTICE
+    session: int
+    pan_id: int
+    members: int
+    number: int
+    slot_ms: int
+
+
+@dataclass(frozen=True)
+class NotParticipating(SwarmMessage):
+    """Master -> robot: you are not (or no longer) part of this swarm; return to waiting."""
+
+    TYPE: ClassVar[MessageType] = MessageType.NOT_PARTICIPATING
+    session: int
+
+
+@dataclass(frozen=True)
+class Joined(SwarmMessage):
+    """Member -> master, sent on the new PAN: I have switched."""
+
+    TYPE: ClassVar[MessageType] = MessageType.JOINED
+    session: int
+    number: int
+
+
+@dataclass(frozen=True)
+class Roster(SwarmMessage):
+    """Master -> swarm PAN, periodically: the members (short addresses, by member number from 1)."""
+
+    TYPE: ClassVar[MessageType] = MessageType.ROSTER
+    session: int
+    members: tuple[int, ...]
+
+
+@dataclass(frozen=True)
+class Disperse(SwarmMessage):
+    """Master -> members: the swarm is over; return to waiting on your original PAN."""
+
+    TYPE: ClassVar[MessageType] = MessageType.DISPERSE
+    session: int
+    slot_ms: int
+
+
+@dataclass(frozen=True)
+class Dispersed(SwarmMessage):
+    """Member -> master: I am leaving the swarm."""
+
+    TYPE: ClassVar[MessageType] = MessageType.DISPERSED
+    session: int
+
+
+_BY_TYPE: dict[int, type[SwarmMessage]] = {
+    int(c.TYPE): c
+    for c in (
+        Ping,
+        Pong,
+        Blob,
+        Scan,
+        ScanReply,
+        JoinQuery,
+        JoinAvailable,
+        JoinUnavailable,
+        JoinNotice,
+        NotParticipating,
+        Joined,
+        Roster,
+        Disperse,
+        Dispersed,
+    )
+}
+_FIELD_TYPES: dict[str, type | tuple[type, ...]] = {"int": int, "bytes": bytes, "str": str, "float": (int, float)}
 
 
 def decode(payload: bytes) -> SwarmMessage:
@@ -84,8 +235,18 @@ def decode(payload: bytes) -> SwarmMessage:
     names = [(f, t) for f, t in cls.__annotations__.items() if f != "TYPE"]
     if len(values) != len(names):
         raise MessageError(f"{cls.__name__} needs {len(names)} fields, got {len(values)}")
+    checked = []
     for (name, annotation), value in zip(names, values, strict=True):
-        expected = _FIELD_TYPES.get(str(annotation), object)
-        if not isinstance(value, expected) or isinstance(value, bool):
+        if str(annotation) == "tuple[int, ...]":
+            ok = isinstance(value, list) and all(_is_int(v) for v in value)
+            value = tuple(value) if ok else value
+        else:
+            ok = isinstance(value, _FIELD_TYPES.get(str(annotation), object)) and not isinstance(value, bool)
+        if not ok:
             raise MessageError(f"{cls.__name__}.{name} has the wrong type")
-    return cls(*values)
+        checked.append(value)
+    return cls(*checked)
+
+
+def _is_int(value: object) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)

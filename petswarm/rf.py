@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import time
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from petswarm.messages import MessageError, SwarmMessage, decode
 from radio_hub.interface import BROADCAST, RadioClient, RxFrame, TxResult
@@ -15,6 +16,8 @@ class Incoming:
 
     message: SwarmMessage
     rx: RxFrame
+    received_at: float = field(default_factory=time.monotonic)
+    """Monotonic seconds when the robot got it."""
 
     @property
     def sender(self) -> int:

@@ -11,7 +11,7 @@ import signal
 import sys
 import time
 from collections import Counter, deque
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import msgpack
@@ -19,8 +19,11 @@ import numpy as np
 import zenoh
 
 from petswarm.control import all_robots_key, robot_key
+from petswarm.exchange import MessageProcessingManager
+from petswarm.formation import RESPONSES, FormationConfig, FormationError, NetworkFormation
 from petswarm.messages import Blob, Ping, Pong, SwarmMessage
 from petswarm.rf import Incoming, RfCommunicationManager
+from petswarm.sequence import EventLog, RobotState, SequenceManager, TransitionError
 from radio_hub.interface import (
     BROADCAST,
     DEFAULT_ENDPOINT,
@@ -37,6 +40,7 @@ DEFAULT_PAN = 0x1000
 """The PAN every waiting robot starts on."""
 EXT_ADDR_BASE = 0x00124B0000000000
 """Robot extended addresses: a fixed OUI-like prefix plus the robot id."""
+COMMANDS = ("status", "ping", "send", "configure", "received", "organize", "disperse", "connect", "events", "stop")
 AUTO_ID = 0
 """``--id auto``: claim the lowest id no live robot of the world uses."""
 _GRID_SPACING_M = 1.5
@@ -63,6 +67,9 @@ class RobotConfig:
     ping_interval: float = 0.0
     """Seconds between broadcast pings (0: never ping on its own)."""
     seed: int = 0
+    user: int = 0
+    """The user this robot is connected to at start (0: none, the robot waits)."""
+    formation: FormationConfig = field(default_factory=FormationConfig)
 
     def identity(self) -> RadioIdentity:
         """The robot's radio at start-up: short address = robot id."""
@@ -81,6 +88,16 @@ class Robot:
         self.config = config
         self.rf = RfCommunicationManager(radio)
         self.rng = np.random.default_rng([config.seed, config.robot_id])
+        self.log = EventLog()
+        self.sequence = SequenceManager(self.log, RobotState.FOLLOWING if config.user else RobotState.WAITING)
+        self.mpm = MessageProcessingManager(self.log)
+        formation_config = replace(config.formation, waiting_pan=config.pan_id)
+        self.formation = NetworkFormation(
+            self.rf, self.sequence, self.mpm, self.log, formation_config, self.rng, config.user
+        )
+        self.log.record(
+            "start", robot_id=config.robot_id, state=self.sequence.state.label, user=config.user, seed=config.seed
+        )
         self.started = time.monotonic()
         self.pings_sent = 0
         self.pings_answered = 0
@@ -95,7 +112,7 @@ class Robot:
 
     async def run(self) -> None:
         """Serve until ``stopping`` is set."""
-        workers = [asyncio.create_task(self._receive_loop())]
+        workers = [asyncio.create_task(self._receive_loop()), asyncio.create_task(self.formation.watch())]
         if self.config.ping_interval > 0:
             workers.append(asyncio.create_task(self._ping_loop()))
         stop = asyncio.create_task(self.stopping.wait())
@@ -114,7 +131,13 @@ class Robot:
 
     async def _on_message(self, incoming: Incoming) -> None:
         msg = incoming.message
-        if isinstance(msg, Ping):
+        if self.mpm.offer(incoming):
+            return
+        if isinstance(msg, RESPONSES):
+            self.mpm.count_late()
+        elif msg.session_id is not None:
+            self._spawn(self.formation.on_message(incoming))
+        elif isinstance(msg, Ping):
             self._spawn(self._answer(incoming.sender, msg.nonce))
         elif isinstance(msg, Pong):
             self.heard_from[incoming.sender] += 1
@@ -194,9 +217,30 @@ class Robot:
             if name == "stop":
                 self.stopping.set()
                 return {"stopping": True}
-        except (FrameError, RadioError, HubUnavailable, ValueError, TypeError) as err:
+            if name == "organize":
+                return await self.formation.organize(int(cmd.get("count", 0)), cmd.get("protocol"))
+            if name == "disperse":
+                return await self.formation.disperse(cmd.get("protocol"))
+            if name == "connect":
+                return self._connect_user(int(cmd.get("user", 1)), str(cmd.get("mode", "following")))
+            if name == "events":
+                return {"events": self.log.events}
+        except (FrameError, RadioError, HubUnavailable, FormationError, TransitionError, ValueError, TypeError) as err:
             return {"error": f"{type(err).__name__}: {err}"}
-        return {"error": f"unknown command {name!r}; known: status, ping, send, configure, received, stop"}
+        return {"error": f"unknown command {name!r}; known: {', '.join(COMMANDS)}"}
+
+    def _connect_user(self, user: int, mode: str) -> dict[str, Any]:
+        """Stand-in for the LF/BLE pairing the wearables issue brings: this robot now serves ``user``."""
+        states = {
+            "following": RobotState.FOLLOWING,
+            "leading": RobotState.LEADING,
+            "remote-control": RobotState.REMOTE_CONTROL,
+        }
+        if mode not in states or user < 1:
+            raise ValueError(f"need user >= 1 and mode one of {sorted(states)}")
+        self.formation.user = user
+        self.sequence.transition(states[mode], user=user)
+        return {"state": self.sequence.state.label, "user": user}
 
     async def _send_blob(self, cmd: dict[str, Any]) -> dict[str, Any]:
         only = cmd.get("only")
@@ -225,6 +269,13 @@ class Robot:
             "tx_results": dict(self.rf.tx_results),
             "radio_malformed": radio.malformed,
             "transport_gaps": radio.transport_gaps,
+            "state": self.sequence.state.label,
+            "user": self.formation.user if self.sequence.user_connected else 0,
+            "swarm": None if self.formation.swarm is None else self.formation.swarm.to_dict(),
+            "organizations": self.formation.organizations,
+            "retries": self.mpm.retries,
+            "duplicates": self.mpm.duplicates,
+            "late_responses": self.mpm.late,
         }
 
 

@@ -1,0 +1,62 @@
+"""``petswarm swarm organize|disperse``: the user's watch requests, sent to a running robot."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Any
+
+from petswarm import control
+from radio_hub.interface import HubUnavailable, Keys, open_session
+
+_ORGANIZE_TIMEOUT_S = 60.0
+
+
+def swarm_command(args: argparse.Namespace) -> int:
+    """Send the request, print the robot's answer; exit 1 when the robot refused, 2 when unreachable."""
+    keys = Keys(args.world)
+    try:
+        session = open_session("client", args.hub)
+    except HubUnavailable as err:
+        print(f"petswarm swarm: {err}", file=sys.stderr)
+        return 2
+    try:
+        answer = _request(session, keys, args)
+    except HubUnavailable as err:
+        print(f"petswarm swarm: {err}", file=sys.stderr)
+        return 2
+    finally:
+        session.close()
+    if "error" in answer:
+        print(f"petswarm swarm {args.action}: robot {args.master} refused: {answer['error']}", file=sys.stderr)
+        return 1
+    print(json.dumps(answer, indent=2) if args.json else describe(args.action, answer))
+    return 0
+
+
+def _request(session: Any, keys: Keys, args: argparse.Namespace) -> dict[str, Any]:
+    if args.action == "disperse":
+        return control.command(session, keys, args.master, "disperse", _ORGANIZE_TIMEOUT_S)
+    if args.user:
+        connected = control.command(session, keys, args.master, "connect", user=args.user)
+        if "error" in connected:
+            return connected
+    extra = {"protocol": args.protocol} if args.protocol else {}
+    return control.command(session, keys, args.master, "organize", _ORGANIZE_TIMEOUT_S, count=args.count, **extra)
+
+
+def describe(action: str, answer: dict[str, Any]) -> str:
+    """One human line per figure."""
+    if action == "disperse":
+        return (
+            f"dispersed {len(answer['members'])} members in {answer['disperse_time_s'] * 1000:.1f} ms "
+            f"({answer['retries']} retries); master back to {answer['restored']}; "
+            f"unconfirmed: {answer['unconfirmed'] or 'none'}"
+        )
+    return (
+        f"swarm on PAN {answer['pan_id']:#06x}: members {answer['members'] or 'none'} of {answer['requested']} "
+        f"requested ({len(answer['available'])} available, refused {answer['refused'] or 'none'})\n"
+        f"organized in {answer['organize_time_s'] * 1000:.1f} ms with {answer['retries']} retries "
+        f"{answer['step_retries']} [{answer['protocol']} protocol]"
+    )

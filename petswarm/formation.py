@@ -1,0 +1,425 @@
+"""Forming and dispersing the swarm network (paper section 3.4, Fig. 8), both sides of it.
+
+Master side: ``organize(count)`` runs scan -> joining query -> result notices over the emulated radio,
+each a step of the message-processing manager with deadlines and retries, then announces the roster
+on the new PAN; ``disperse()`` sends every member home. Member side: ``on_message`` answers the
+master's requests per Table 1 and switches PAN when chosen. A member that hears no roster for a while,
+or that is left out of one, returns to waiting: membership is never believed by a robot that the master
+does not count.
+
+Frames to a particular robot use the broadcast PAN ID (0xFFFF) with its short address, so they reach it
+whether it is still on the waiting PAN or already on the swarm's; answers go to the sender's PAN.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from petswarm import messages as m
+from petswarm.decisions import choose_pan, may_join, reply_delay_s, select_members
+from petswarm.exchange import MessageProcessingManager, StepResult, StepTiming
+from petswarm.rf import Incoming, RfCommunicationManager
+from petswarm.sequence import DRIVING, EventLog, RobotState, SequenceManager
+from radio_hub.interface import BROADCAST
+
+PROTOCOLS = ("paper", "slotted")
+_FREE = frozenset(int(s) for s in (RobotState.WAITING, *DRIVING))
+
+
+
+class FormationError(RuntimeError):
+    """An organize or disperse request this robot cannot carry out."""
+
+
+@dataclass(frozen=True)
+class FormationConfig:
+    """Timing of the swarm process. ``paper`` answers at once; ``slotted`` answers in address slots."""
+
+    waiting_pan: int = 0x1000
+    protocol: str = "paper"
+    slot_ms: int = 4
+    step: StepTiming = field(default_factory=StepTiming)
+    min_rssi_dbm: int = -70
+    """The available region: -70 dBm is about 10 m with the hub's default path loss."""
+    candidate_timeout_s: float = 1.0
+    """A robot that said 'available' returns to waiting if no result notice comes in this time."""
+    roster_interval_s: float = 0.25
+    master_silence_s: float = 2.0
+    """A member that hears no roster for this long returns to waiting (the master is gone)."""
+
+    def __post_init__(self) -> None:
+        if self.protocol not in PROTOCOLS:
+            raise ValueError(f"protocol must be one of {PROTOCOLS}, not {self.protocol!r}")
+
+    def slot(self, protocol: str | None = None) -> int:
+        """The slot length to put in requests: 0 for the paper's protocol."""
+        return self.slot_ms if (protocol or self.protocol) == "slotted" else 0
+
+
+@dataclass
+class Swarm:
+    """A robot's view of the swarm it belongs to."""
+
+    session: int
+    pan_id: int
+    master: int
+    number: int
+    """0 for the master, 1.. for members in the order chosen (closest first)."""
+    members: tuple[int, ...] = ()
+    """Short addresses of the members, by member number from 1."""
+
+    @property
+    def neighbours(self) -> tuple[int, ...]:
+        """Members next in number (a column by default; formation shapes come with driving)."""
+        chain = (self.master, *self.members)
+        i = self.number
+        return tuple(chain[j] for j in (i - 1, i + 1) if 0 <= j < len(chain))
+
+    def to_dict(self) -> dict[str, Any]:
+        """For status answers."""
+        return {
+            "session": self.session,
+            "pan_id": self.pan_id,
+            "master": self.master,
+            "number": self.number,
+            "members": list(self.members),
+            "neighbours": list(self.neighbours),
+        }
+
+
+class NetworkFormation:
+    """Organizes (as master) or joins (as a waiting robot) a swarm network."""
+
+    def __init__(
+        self,
+        rf: RfCommunicationManager,
+        sequence: SequenceManager,
+        mpm: MessageProcessingManager,
+        log: EventLog,
+        config: FormationConfig,
+        rng: np.random.Generator,
+        user: int = 0,
+    ) -> None:
+        self.rf, self.sequence, self.mpm, self.log = rf, sequence, mpm, log
+        self.config = config
+        self.rng = rng
+        self.user = user
+        self.swarm: Swarm | None = None
+        self.candidate_of: tuple[int, int] | None = None
+        """(session, master) while this robot said 'available' and waits for the result."""
+        self.organizations: list[dict[str, Any]] = []
+        self._last_left: int | None = None
+        self._deadline = 0.0
+        self._roster_task: asyncio.Task[None] | None = None
+        self._busy = asyncio.Lock()
+
+    @property
+    def me(self) -> int:
+        """This robot's short address."""
+        return self.rf.radio.identity.short_addr
+
+    # == master side ==================================================================================
+
+    async def organize(self, count: int, protocol: str | None = None) -> dict[str, Any]:
+        """Form a swarm of up to ``count`` other robots; returns the organization's figures."""
+        if count < 1:
+            raise FormationError("the user must ask for at least one robot")
+        if self._busy.locked():
+            raise FormationError("already organizing or dispersing")
+        async with self._busy:
+            if self.sequence.state not in DRIVING:
+                raise FormationError(
+                    f"robot is {self.sequence.state.label}: only a robot driving with its user can organize"
+                )
+            return await self._organize(count, protocol or self.config.protocol)
+
+    async def _organize(self, count: int, protocol: str) -> dict[str, Any]:
+        session = int(self.rng.integers(1, 0xFFFF))
+        slot = self.config.slot(protocol)
+        t0 = time.monotonic()
+        self.sequence.transition(RobotState.ORGANIZING, session=session, requested=count, protocol=protocol)
+        steps: dict[str, StepResult] = {}
+        try:
+            steps["scan"] = await self._scan(session, slot)
+            replies = {a: i.message for a, i in steps["scan"].responses.items() if isinstance(i.message, m.ScanReply)}
+            # everyone not already in a swarm is asked: each decides with Table 1 (a robot connected
+            # to another user refuses on its own)
+            candidates = {a for a, r in replies.items() if r.state in _FREE}
+
+            pan = choose_pan(self.rng, {r.pan_id for r in replies.values()} | {self.config.waiting_pan})
+            steps["query"] = await self._query(session, slot, candidates)
+            available, refused = _answers(steps["query"])
+            chosen = select_members(available, count)
+            await self.rf.radio.configure(pan_id=pan)
+            await self._release(session, set(available) - set(chosen))
+            steps["notice"] = await self._notify(session, slot, pan, chosen)
+            members = tuple(a for a in chosen if a in steps["notice"].responses)
+            await self._release(session, set(chosen) - set(members))
+        except BaseException:
+            await self._abandon(session)
+            raise
+        elapsed = _last_arrival(steps["notice"], t0) if members else time.monotonic() - t0
+        if not members:
+            await self.rf.radio.configure(pan_id=self.config.waiting_pan)
+        figures = {
+            "session": session,
+            "protocol": protocol,
+            "requested": count,
+            "pan_id": pan,
+            "candidates": sorted(candidates),
+            "available": sorted(available),
+            "refused": refused,
+            "members": list(members),
+            "missing": sorted(set(chosen) - set(members)),
+            "organize_time_s": round(elapsed, 6),
+            "retries": sum(s.retries for s in steps.values()),
+            "step_retries": {name: s.retries for name, s in steps.items()},
+        }
+        self._settle(session, pan, members, figures)
+        return figures
+
+    def _settle(self, session: int, pan: int, members: tuple[int, ...], figures: dict[str, Any]) -> None:
+        self.organizations.append(figures)
+        if not members:
+            self.log.record("organized", **figures)
+            self.sequence.restore_driving(session=session, reason="no robot joined")
+            return
+
+        self.swarm = Swarm(session, pan, self.me, 0, members)
+        self.sequence.transition(RobotState.MASTER_DRIVING, session=session, members=list(members))
+        self.log.record("organized", **figures)
+        self._roster_task = asyncio.get_running_loop().create_task(self._announce_roster())
+
+    async def _abandon(self, session: int) -> None:
+        self.log.record("organize_failed", session=session)
+        if self.sequence.state == RobotState.ORGANIZING:
+            self.sequence.restore_driving(session=session, reason="organizing failed")
+        try:
+            await self.rf.radio.configure(pan_id=self.config.waiting_pan)
+        except Exception as err:  # the hub may be the reason organizing failed
+            self.log.record("error", where="abandon", error=str(err))
+
+    async def _scan(self, session: int, slot: int) -> StepResult:
+        async def send(_: set[int] | None) -> None:
+            await self.rf.send(BROADCAST, m.Scan(session, self.user, slot), dst_pan=BROADCAST, ack=False)
+
+        timing = self._timing(slot, 8)
+        return await self.mpm.step("scan", session, (m.ScanReply,), send, None, timing)
+
+    async def _query(self, session: int, slot: int, candidates: set[int]) -> StepResult:
+        async def send(missing: set[int] | None) -> None:
+            pending = tuple(sorted(missing or candidates))
+            query = m.JoinQuery(session, self.user, self.config.min_rssi_dbm, slot, pending)
+            await self.rf.send(BROADCAST, query, dst_pan=BROADCAST, ack=False)
+
+        timing = self._timing(slot, len(candidates))
+        return await self.mpm.step("query", session, (m.JoinAvailable, m.JoinUnavailable), send, candidates, timing)
+
+    async def _notify(self, session: int, slot: int, pan: int, chosen: list[int]) -> StepResult:
+        async def send(missing: set[int] | None) -> None:
+            for number, addr in enumerate(chosen, start=1):
+                if missing is None or addr in missing:
+                    notice = m.JoinNotice(session, pan, len(chosen) + 1, number, slot)
+                    await self.rf.send(addr, notice, dst_pan=BROADCAST)
+
+        timing = self._timing(slot, len(chosen))
+        return await self.mpm.step("notice", session, (m.Joined,), send, set(chosen), timing)
+
+    async def _release(self, session: int, robots: set[int]) -> None:
+        for addr in sorted(robots):
+            await self.rf.send(addr, m.NotParticipating(session), dst_pan=BROADCAST)
+
+    def _timing(self, slot: int, responders: int) -> StepTiming:
+        # the slotted protocol's deadline grows with the slots it asked responders to use
+        base = self.config.step
+        if not slot:
+            return base
+        return StepTiming(base.deadline_s + min(responders, 8) * slot / 1000.0, base.max_retries)
+
+    async def _announce_roster(self) -> None:
+        while self.swarm is not None and self.sequence.state == RobotState.MASTER_DRIVING:
+            swarm = self.swarm
+            await self.rf.send(BROADCAST, m.Roster(swarm.session, swarm.members), ack=False)
+            await asyncio.sleep(self.config.roster_interval_s)
+
+    async def disperse(self, protocol: str | None = None) -> dict[str, Any]:
+        """End the swarm: every member back to waiting, this robot back to its driving state."""
+        async with self._busy:
+            swarm = self.swarm
+            if swarm is None or self.sequence.state != RobotState.MASTER_DRIVING:
+                raise FormationError(f"robot is {self.sequence.state.label}, not the master of a swarm")
+            slot = self.config.slot(protocol)
+            t0 = time.monotonic()
+
+            async def send(missing: set[int] | None) -> None:
+                for addr in swarm.members:
+                    if missing is None or addr in missing:
+                        await self.rf.send(addr, m.Disperse(swarm.session, slot), dst_pan=BROADCAST)
+
+            timing = self._timing(slot, len(swarm.members))
+            step = await self.mpm.step("disperse", swarm.session, (m.Dispersed,), send, set(swarm.members), timing)
+            self.swarm = None
+            if self._roster_task is not None:
+                self._roster_task.cancel()
+            await self.rf.radio.configure(pan_id=self.config.waiting_pan)
+            restored = self.sequence.restore_driving(session=swarm.session)
+            figures = {
+                "session": swarm.session,
+                "disperse_time_s": round(time.monotonic() - t0, 6),
+                "retries": step.retries,
+                "members": list(swarm.members),
+                "unconfirmed": sorted(step.missing),
+                "restored": restored.label,
+            }
+            self.log.record("dispersed", **figures)
+            return figures
+
+    # == member side ==================================================================================
+
+    async def on_message(self, incoming: Incoming) -> None:
+        """Answer a master's request (called for every formation message the robot receives)."""
+        msg = incoming.message
+        handler = _MEMBER_HANDLERS.get(type(msg))
+        if handler is not None:
+            await handler(self, incoming)
+
+    async def _on_scan(self, incoming: Incoming) -> None:
+        msg: m.Scan = incoming.message  # type: ignore[assignment]
+        reply = m.ScanReply(msg.session, int(self.sequence.state), self.rf.radio.identity.pan_id, self._user_now())
+        await self._answer(incoming, reply, reply_delay_s(self.me, msg.slot_ms))
+
+    async def _on_query(self, incoming: Incoming) -> None:
+        msg: m.JoinQuery = incoming.message  # type: ignore[assignment]
+        if msg.pending and self.me not in msg.pending:
+            return
+        answer = self._judge_query(msg, incoming)
+        await self._answer(incoming, answer, reply_delay_s(self.me, msg.slot_ms, msg.pending))
+
+    def _judge_query(self, msg: m.JoinQuery, incoming: Incoming) -> m.SwarmMessage:
+        rssi = round(incoming.rx.rssi_dbm)
+        state = self.sequence.state
+        if self.candidate_of == (msg.session, incoming.sender):
+            return m.JoinAvailable(msg.session, rssi)  # a retried query: same answer
+        refusal = may_join(self._user_now(), rssi, msg.min_rssi_dbm)
+        if refusal != m.Refusal.CONNECTED_TO_USER and state != RobotState.WAITING:
+            refusal = m.Refusal.BUSY  # taken by another master, or already in a swarm
+        if refusal is not None:
+            return m.JoinUnavailable(msg.session, int(refusal))
+        self.candidate_of = (msg.session, incoming.sender)
+        self._deadline = time.monotonic() + self.config.candidate_timeout_s
+        self.sequence.transition(RobotState.ORGANIZING, session=msg.session, master=incoming.sender)
+        return m.JoinAvailable(msg.session, rssi)
+
+    async def _on_notice(self, incoming: Incoming) -> None:
+        msg: m.JoinNotice = incoming.message  # type: ignore[assignment]
+        swarm = self.swarm
+        if swarm is not None and swarm.session == msg.session:
+            await self._send_joined(swarm, msg.slot_ms)  # our Joined was lost: say it again
+            return
+        if self.candidate_of != (msg.session, incoming.sender) or self.sequence.state != RobotState.ORGANIZING:
+            return  # not our master's notice (or we gave up waiting): no answer, the master will release
+        self.candidate_of = None
+        self.swarm = Swarm(msg.session, msg.pan_id, incoming.sender, msg.number)
+        self._deadline = time.monotonic() + self.config.master_silence_s
+        self.sequence.transition(RobotState.SLAVE_DRIVING, session=msg.session, pan_id=msg.pan_id, number=msg.number)
+        await self.rf.radio.configure(pan_id=msg.pan_id)
+        await self._send_joined(self.swarm, msg.slot_ms)
+
+    async def _send_joined(self, swarm: Swarm, slot_ms: int) -> None:
+        await asyncio.sleep(reply_delay_s(swarm.number, slot_ms))
+        await self.rf.send(swarm.master, m.Joined(swarm.session, swarm.number), dst_pan=swarm.pan_id)
+
+    async def _on_not_participating(self, incoming: Incoming) -> None:
+        session = incoming.message.session_id
+        if self.candidate_of is not None and self.candidate_of[0] == session:
+            await self._leave(reason="not selected")
+        elif self.swarm is not None and self.swarm.session == session and self.swarm.number:
+            await self._leave(reason="released by the master")
+
+    async def _on_roster(self, incoming: Incoming) -> None:
+        msg: m.Roster = incoming.message  # type: ignore[assignment]
+        swarm = self.swarm
+        if swarm is None or swarm.session != msg.session or not swarm.number:
+            return
+        if self.me not in msg.members:
+            await self._leave(reason="not in the master's roster")
+            return
+        swarm.members = msg.members
+        swarm.number = msg.members.index(self.me) + 1
+        self._deadline = time.monotonic() + self.config.master_silence_s
+
+    async def _on_disperse(self, incoming: Incoming) -> None:
+        msg: m.Disperse = incoming.message  # type: ignore[assignment]
+        swarm = self.swarm
+        if swarm is not None and swarm.session == msg.session and swarm.number:
+            number = swarm.number
+            await self._leave(reason="dispersed")
+        elif self._last_left == msg.session:
+            number = 1  # already home: the master missed our answer
+        else:
+            return
+        await self._answer(incoming, m.Dispersed(msg.session), reply_delay_s(number, msg.slot_ms))
+
+    async def _leave(self, reason: str) -> None:
+        session = self.swarm.session if self.swarm else (self.candidate_of or (None,))[0]
+        self.swarm = None
+        self.candidate_of = None
+        self._last_left = session
+        if self.sequence.state in (RobotState.ORGANIZING, RobotState.SLAVE_DRIVING):
+            self.sequence.transition(RobotState.WAITING, session=session, reason=reason)
+        if self.rf.radio.identity.pan_id != self.config.waiting_pan:
+            await self.rf.radio.configure(pan_id=self.config.waiting_pan)
+
+    async def _answer(self, incoming: Incoming, reply: m.SwarmMessage, delay_s: float) -> None:
+        if delay_s:
+            await asyncio.sleep(delay_s)
+        await self.rf.send(incoming.sender, reply, dst_pan=incoming.rx.frame.src_pan)
+
+    def _user_now(self) -> int:
+        return self.user if self.sequence.user_connected else 0
+
+    async def watch(self) -> None:
+        """Member-side timeouts: a candidate never told the result, a member whose master went silent."""
+        while True:
+            await asyncio.sleep(0.05)
+            waiting_for_master = self.candidate_of is not None or (self.swarm is not None and self.swarm.number)
+            if waiting_for_master and time.monotonic() > self._deadline:
+                reason = "no result notice" if self.candidate_of else "master silent"
+                await self._leave(reason=reason)
+
+
+_MEMBER_HANDLERS = {
+    m.Scan: NetworkFormation._on_scan,
+    m.JoinQuery: NetworkFormation._on_query,
+    m.JoinNotice: NetworkFormation._on_notice,
+    m.NotParticipating: NetworkFormation._on_not_participating,
+    m.Roster: NetworkFormation._on_roster,
+    m.Disperse: NetworkFormation._on_disperse,
+}
+RESPONSES = (m.ScanReply, m.JoinAvailable, m.JoinUnavailable, m.Joined, m.Dispersed)
+"""Messages that only ever answer a master's step; outside a step they are late."""
+
+
+def _answers(step: StepResult) -> tuple[dict[int, float], dict[str, list[int]]]:
+    """Available robots with the master's closeness estimate, and refusals by reason."""
+    available: dict[int, float] = {}
+    refused: dict[str, list[int]] = {}
+    for addr, incoming in step.responses.items():
+        msg = incoming.message
+        if isinstance(msg, m.JoinAvailable):
+            # both directions of the link, averaged: less shadowing noise in the ranking
+            available[addr] = (incoming.rx.rssi_dbm + msg.rssi_dbm) / 2
+        elif isinstance(msg, m.JoinUnavailable):
+            reason = m.Refusal(msg.reason).name.lower() if msg.reason in iter(m.Refusal) else "unknown"
+            refused.setdefault(reason, []).append(addr)
+    return available, refused
+
+
+def _last_arrival(step: StepResult, t0: float) -> float:
+    """Seconds from the request to the last member's Joined (the last member switched)."""
+    return max(i.received_at for i in step.responses.values()) - t0

@@ -1,0 +1,94 @@
+"""Sequence manager: the robot's states (paper Fig. 4) and the record of every transition.
+
+Pure code: it keeps the state, refuses transitions the design does not allow, and records each one as
+a structured event with wall and monotonic timestamps. The asyncio procedures that cause transitions
+live in ``petswarm.formation``.
+"""
+
+from __future__ import annotations
+
+import enum
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+
+class RobotState(enum.IntEnum):
+    """Where a robot is in the swarm process. Codes go on the wire in scan replies."""
+
+    WAITING = 1
+    FOLLOWING = 2
+    LEADING = 3
+    REMOTE_CONTROL = 4
+    ORGANIZING = 5
+    MASTER_DRIVING = 6
+    SLAVE_DRIVING = 7
+
+    @property
+    def label(self) -> str:
+        """Lower-case name with dashes, as printed."""
+        return self.name.lower().replace("_", "-")
+
+
+DRIVING = frozenset({RobotState.FOLLOWING, RobotState.LEADING, RobotState.REMOTE_CONTROL})
+"""The states of a robot connected to its user, outside any swarm."""
+
+_ALLOWED: dict[RobotState, frozenset[RobotState]] = {
+    RobotState.WAITING: frozenset({RobotState.ORGANIZING, *DRIVING}),
+    RobotState.ORGANIZING: frozenset(
+        {RobotState.WAITING, RobotState.SLAVE_DRIVING, RobotState.MASTER_DRIVING, *DRIVING}
+    ),
+    RobotState.SLAVE_DRIVING: frozenset({RobotState.WAITING}),
+    RobotState.MASTER_DRIVING: DRIVING,
+    **{s: frozenset({RobotState.ORGANIZING, RobotState.WAITING, *DRIVING} - {s}) for s in DRIVING},
+}
+
+
+class TransitionError(RuntimeError):
+    """A transition the state machine does not allow."""
+
+
+@dataclass
+class EventLog:
+    """Structured events of one robot, in order."""
+
+    events: list[dict[str, Any]] = field(default_factory=list)
+
+    def record(self, kind: str, **detail: Any) -> dict[str, Any]:
+        """Append an event stamped with wall time and monotonic time (seconds)."""
+        event = {"t": round(time.time(), 6), "mono": round(time.monotonic(), 6), "kind": kind, **detail}
+        self.events.append(event)
+        return event
+
+
+class SequenceManager:
+    """The robot's state, its previous driving state (restored after a swarm), and its transitions."""
+
+    def __init__(self, log: EventLog, state: RobotState = RobotState.WAITING) -> None:
+        self.log = log
+        self.state = state
+        self.previous_driving: RobotState | None = None
+
+    def transition(self, to: RobotState, **detail: Any) -> None:
+        """Move to ``to``; raises TransitionError when Fig. 4 has no such arrow."""
+        if to not in _ALLOWED[self.state]:
+            raise TransitionError(f"no transition from {self.state.label} to {to.label}")
+        if self.state in DRIVING and to == RobotState.ORGANIZING:
+            self.previous_driving = self.state
+        self.log.record("state", frm=self.state.label, to=to.label, **detail)
+        self.state = to
+
+    def restore_driving(self, **detail: Any) -> RobotState:
+        """Back to the driving state the robot had before it organized a swarm."""
+        target = self.previous_driving or RobotState.FOLLOWING
+        self.transition(target, **detail)
+        return target
+
+    @property
+    def user_connected(self) -> bool:
+        """True in a driving state or as a master (the user is this robot's owner)."""
+        return (
+            self.state in DRIVING
+            or self.state == RobotState.MASTER_DRIVING
+            or (self.state == RobotState.ORGANIZING and self.previous_driving is not None)
+        )
