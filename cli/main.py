@@ -45,7 +45,10 @@ def build_parser() -> argparse.ArgumentParser:
     robot.add_argument("--pan", type=int_auto, default=0x1000, help="PAN ID to start on (default 0x1000)")
     robot.add_argument("--channel", type=bounded(int, 11, 26), default=11, help="802.15.4 channel 11-26 (default 11)")
     robot.add_argument(
-        "--pos", type=position, default=None, help="position x,y in metres (default: a 1.5 m grid by id, five to a row)"
+        "--pos",
+        type=position,
+        default=None,
+        help="position x,y in metres; write --pos=-1,2 when x is negative (default: a 1.5 m grid by id, five to a row)",
     )
     robot.add_argument(
         "--ping-interval",

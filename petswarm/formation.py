@@ -31,7 +31,6 @@ PROTOCOLS = ("paper", "slotted")
 _FREE = frozenset(int(s) for s in (RobotState.WAITING, *DRIVING))
 
 
-
 class FormationError(RuntimeError):
     """An organize or disperse request this robot cannot carry out."""
 

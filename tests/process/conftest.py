@@ -61,26 +61,13 @@ class Air:
                 session.close()
         raise AssertionError("hub did not come up:\n" + self.sup.log_tail("hub"))
 
-    def robot(self, rid: int, pos: tuple[float, float] = (0.0, 0.0), pan: int = 0x1000, channel: int = 11) -> None:
-        """Start robot ``rid`` and wait until the hub has it attached."""
-        self.sup.spawn(
-            f"robot-{rid}",
-            [
-                "robot",
-                "--id",
-                str(rid),
-                "--hub",
-                self.endpoint,
-                "--world",
-                self.world,
-                "--pos",
-                f"{pos[0]},{pos[1]}",
-                "--pan",
-                str(pan),
-                "--channel",
-                str(channel),
-            ],
-        )
+    def robot(
+        self, rid: int, pos: tuple[float, float] = (0.0, 0.0), pan: int = 0x1000, channel: int = 11, *extra: str
+    ) -> None:
+        """Start robot ``rid`` (``extra``: more ``petswarm robot`` arguments) and wait until it serves."""
+        where = [f"--pos={pos[0]},{pos[1]}", "--pan", str(pan), "--channel", str(channel)]
+        args = ["robot", "--id", str(rid), "--hub", self.endpoint, "--world", self.world, *where, *extra]
+        self.sup.spawn(f"robot-{rid}", args)
         deadline = time.monotonic() + 20
         while time.monotonic() < deadline:
             assert not self.sup.dead(), {n: self.sup.log_tail(n) for n in self.sup.dead()}

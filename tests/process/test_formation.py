@@ -1,0 +1,137 @@
+"""Forming and dispersing swarm networks with real hub and robot processes."""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+
+import pytest
+
+from .conftest import LOSSLESS
+
+pytestmark = pytest.mark.process
+WAITING_PAN = 0x1000
+
+
+def _ring(air, rids_and_distances: dict[int, float]) -> None:
+    """Waiting robots around the master (at the origin), each at its distance, in different directions."""
+    for k, (rid, dist) in enumerate(rids_and_distances.items()):
+        angle = 2 * math.pi * k / len(rids_and_distances)
+        air.robot(rid, (dist * math.cos(angle), dist * math.sin(angle)))
+
+
+def _master(air, rid: int = 1, user: int = 1, pos=(0.0, 0.0), *extra: str) -> None:
+    air.robot(rid, pos, WAITING_PAN, 11, "--user", str(user), *extra)
+
+
+def _states(air, rids) -> dict[int, dict]:
+    return {rid: air.cmd(rid, "status") for rid in rids}
+
+
+def test_the_closest_join_the_others_wait_and_disperse_restores_everyone(make_air):
+    air = make_air()
+    _master(air)
+    _ring(air, {2: 4.0, 3: 1.0, 4: 5.0, 5: 2.0, 6: 3.0})
+    organized = air.cmd(1, "organize", timeout=30, count=3)
+    assert "error" not in organized, organized
+    assert organized["members"] == [3, 5, 6]  # closest first: 1 m, 2 m, 3 m
+    assert organized["available"] == [2, 3, 4, 5, 6]
+    pan = organized["pan_id"]
+    assert pan != WAITING_PAN
+    time.sleep(0.3)
+    states = _states(air, range(1, 7))
+    assert states[1]["state"] == "master-driving" and states[1]["radio"]["pan_id"] == pan
+    for number, rid in enumerate([3, 5, 6], start=1):
+        s = states[rid]
+        assert s["state"] == "slave-driving" and s["radio"]["pan_id"] == pan, s
+        assert s["swarm"]["master"] == 1 and s["swarm"]["number"] == number
+        assert air.node(rid)["pan_id"] == pan  # the hub agrees: the radio really switched
+    assert s["swarm"]["members"] == [3, 5, 6] and s["swarm"]["neighbours"] == [5]
+    for rid in (2, 4):
+        assert states[rid]["state"] == "waiting" and states[rid]["radio"]["pan_id"] == WAITING_PAN
+
+    dispersed = air.cmd(1, "disperse", timeout=30)
+    assert dispersed["unconfirmed"] == [] and dispersed["restored"] == "following"
+    time.sleep(0.2)
+    states = _states(air, range(1, 7))
+    assert states[1]["state"] == "following" and states[1]["radio"]["pan_id"] == WAITING_PAN
+    for rid in range(2, 7):
+        assert states[rid]["state"] == "waiting" and states[rid]["swarm"] is None
+        assert states[rid]["radio"]["pan_id"] == WAITING_PAN
+    transitions = [(e["frm"], e["to"]) for e in air.cmd(3, "events")["events"] if e["kind"] == "state"]
+    assert transitions == [("waiting", "organizing"), ("organizing", "slave-driving"), ("slave-driving", "waiting")]
+
+    everyone = air.cmd(1, "organize", timeout=30, count=8)
+    assert sorted(everyone["members"]) == [2, 3, 4, 5, 6]  # asked for 8, five available: all join
+
+
+def test_outside_the_region_or_connected_to_another_user_refuses(make_air):
+    air = make_air()
+    _master(air)
+    air.robot(2, (1.0, 0.0))
+    air.robot(3, (15.0, 0.0))  # about -75 dBm from the master: outside the -70 dBm region
+    air.robot(4, (0.0, 1.0), WAITING_PAN, 11, "--user", "2")  # a robot driving with another user
+    organized = air.cmd(1, "organize", timeout=30, count=3)
+    assert organized["members"] == [2]
+    assert organized["refused"] == {"outside_region": [3], "connected_to_user": [4]}
+    assert air.cmd(3, "status")["state"] == "waiting"
+    assert air.cmd(4, "status")["state"] == "following"
+
+
+@pytest.mark.parametrize("protocol", ["paper", "slotted"])
+def test_two_masters_at_once_get_different_pans_and_disjoint_members(make_air, protocol):
+    air = make_air()
+    _master(air, 1, 1, (0.0, 0.0))
+    _master(air, 2, 2, (3.0, 0.0))
+    for rid, pos in {3: (1.0, 1.0), 4: (2.0, 1.0), 5: (1.0, -1.0), 6: (2.0, -1.0)}.items():
+        air.robot(rid, pos)
+    results: dict[int, dict] = {}
+
+    def organize(master: int) -> None:
+        results[master] = air.cmd(master, "organize", timeout=30, count=2, protocol=protocol)
+
+    threads = [threading.Thread(target=organize, args=(m,)) for m in (1, 2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(40)
+    one, two = results[1], results[2]
+    assert "error" not in one and "error" not in two, results
+    assert one["pan_id"] != two["pan_id"]
+    assert not set(one["members"]) & set(two["members"])
+    assert one["members"] or two["members"]
+    time.sleep(0.3)
+    for master, result in results.items():
+        for rid in result["members"]:
+            swarm = air.cmd(rid, "status")["swarm"]
+            assert swarm["master"] == master and swarm["pan_id"] == result["pan_id"]
+
+
+def test_heavy_loss_ends_in_a_bounded_outcome_and_consistent_states(make_air):
+    lossy = {**LOSSLESS, "loss": {"base": 0.35}}
+    air = make_air(lossy, seed=4)
+    _master(air, 1, 1, (0.0, 0.0), "--step-deadline", "0.05", "--step-retries", "4")
+    _ring(air, {2: 1.0, 3: 1.5, 4: 2.0, 5: 2.5})
+    started = time.monotonic()
+    organized = air.cmd(1, "organize", timeout=60, count=4)
+    assert time.monotonic() - started < 30  # bounded: every step has a deadline and a retry limit
+    assert "error" not in organized, organized
+    assert organized["retries"] >= 1  # at 35% loss per reception, some step had to be repeated
+    time.sleep(2.5)  # past the members' master-silence timeout: every robot has settled
+    master = air.cmd(1, "status")
+    members = set(master["swarm"]["members"]) if master["swarm"] else set()
+    for rid in range(2, 6):
+        s = air.cmd(rid, "status")
+        believes = s["state"] == "slave-driving"
+        assert not believes or rid in members, (rid, s, master)
+        if not believes:
+            assert s["state"] == "waiting" and s["radio"]["pan_id"] == WAITING_PAN
+
+
+def test_a_robot_that_cannot_organize_says_why(make_air):
+    air = make_air()
+    air.robot(1)
+    answer = air.cmd(1, "organize", count=2)
+    assert "FormationError" in answer["error"] and "driving with its user" in answer["error"]
+    assert "not the master" in air.cmd(1, "disperse")["error"]

@@ -1,0 +1,73 @@
+"""The message-processing manager: deadlines, retries of the missing only, duplicates, late answers."""
+
+import asyncio
+
+from petswarm.exchange import MessageProcessingManager, StepTiming
+from petswarm.messages import JoinAvailable, Joined
+from petswarm.rf import Incoming
+from petswarm.sequence import EventLog
+from radio_hub.interface import RxFrame
+from radio_hub.mac import Frame, FrameType
+
+TIMING = StepTiming(deadline_s=0.02, max_retries=3)
+
+
+def _incoming(src: int, message) -> Incoming:
+    frame = Frame(FrameType.DATA, 0, 0x1000, 1, 0x1000, src, message.encode())
+    return Incoming(message, RxFrame(frame, -50.0, 200, 0, 0, 0))
+
+
+async def test_step_ends_as_soon_as_everyone_answered():
+    mpm = MessageProcessingManager(EventLog())
+    sent = []
+
+    async def send(missing):
+        sent.append(missing)
+        for addr in (2, 3):
+            mpm.offer(_incoming(addr, Joined(7, addr - 1)))
+
+    result = await asyncio.wait_for(mpm.step("notice", 7, (Joined,), send, {2, 3}, StepTiming(5.0, 3)), 1.0)
+    assert set(result.responses) == {2, 3} and result.retries == 0 and sent == [{2, 3}]
+
+
+async def test_missing_robots_are_asked_again_until_the_retries_run_out():
+    log = EventLog()
+    mpm = MessageProcessingManager(log)
+    asked = []
+
+    async def send(missing):
+        asked.append(sorted(missing))
+        if len(asked) == 2:
+            mpm.offer(_incoming(3, Joined(7, 2)))
+        mpm.offer(_incoming(2, Joined(7, 1)))  # robot 2 answers every time: a duplicate after the first
+
+    result = await mpm.step("notice", 7, (Joined,), send, {2, 3, 4}, TIMING)
+    assert asked == [[2, 3, 4], [3, 4], [4], [4]]
+    assert result.attempts == 4 and result.retries == 3 and result.missing == {4}
+    assert mpm.duplicates == 3 and mpm.retries == 3
+    assert [e["missing"] for e in log.events if e["kind"] == "retry"] == [[3, 4], [4], [4]]
+
+
+async def test_answers_of_another_session_or_type_are_not_taken():
+    mpm = MessageProcessingManager(EventLog())
+
+    async def send(missing):
+        assert not mpm.offer(_incoming(2, Joined(8, 1)))  # other session
+        assert not mpm.offer(_incoming(2, JoinAvailable(7, -50)))  # other type
+
+    result = await mpm.step("notice", 7, (Joined,), send, {2}, StepTiming(0.01, 0))
+    assert result.responses == {} and result.missing == {2}
+    assert not mpm.offer(_incoming(2, Joined(7, 1)))  # the step is over: the caller counts it late
+
+
+async def test_open_step_collects_until_the_deadline_and_retries_only_if_nobody_answered():
+    mpm = MessageProcessingManager(EventLog())
+    calls = []
+
+    async def send(missing):
+        calls.append(missing)
+        if len(calls) == 2:
+            mpm.offer(_incoming(5, Joined(1, 1)))
+
+    result = await mpm.step("scan", 1, (Joined,), send, None, TIMING)
+    assert calls == [None, None] and set(result.responses) == {5} and result.retries == 1

@@ -1,0 +1,81 @@
+"""Tables 1 and 2, the PAN choice, answer slots and the robot state machine."""
+
+import numpy as np
+import pytest
+
+from petswarm.decisions import SWARM_PANS, choose_pan, may_join, reply_delay_s, select_members
+from petswarm.messages import Refusal
+from petswarm.sequence import EventLog, RobotState, SequenceManager, TransitionError
+
+
+@pytest.mark.parametrize(
+    "user, rssi, expected",
+    [
+        (0, -60, None),  # not connected, inside: can join
+        (0, -80, Refusal.OUTSIDE_REGION),  # not connected, outside: cannot
+        (2, -60, Refusal.CONNECTED_TO_USER),  # connected to another user: cannot
+        (2, -80, Refusal.CONNECTED_TO_USER),  # connection is checked before the region
+    ],
+)
+def test_table_1(user, rssi, expected):
+    assert may_join(user, rssi, -70) == expected
+
+
+def test_table_1_region_edge_is_inside():
+    assert may_join(0, -70, -70) is None
+
+
+def test_table_2_closest_first_when_more_are_available():
+    available = {5: -60.0, 6: -45.0, 7: -52.0, 8: -71.0}
+    assert select_members(available, 2) == [6, 7]
+
+
+def test_table_2_all_when_not_more_are_available():
+    available = {5: -60.0, 6: -45.0}
+    assert sorted(select_members(available, 2)) == [5, 6]
+    assert sorted(select_members(available, 8)) == [5, 6]
+
+
+def test_table_2_ties_go_to_the_lower_address():
+    assert select_members({9: -50.0, 4: -50.0, 7: -50.0}, 2) == [4, 7]
+
+
+def test_pan_choice_avoids_every_pan_in_use_and_is_reproducible():
+    used = set(range(SWARM_PANS.start, SWARM_PANS.stop - 3))  # only three free swarm PANs left
+    pan = choose_pan(np.random.default_rng(1), used)
+    assert pan not in used and pan in SWARM_PANS
+    assert choose_pan(np.random.default_rng(9), ()) == choose_pan(np.random.default_rng(9), ())
+
+
+def test_answer_slots():
+    assert reply_delay_s(5, 0, (3, 5)) == 0.0  # the paper's protocol answers at once
+    assert reply_delay_s(5, 4, (3, 5)) == pytest.approx(0.004)  # second in the pending list
+    assert reply_delay_s(3, 4, (3, 5)) == 0.0
+    assert reply_delay_s(10, 4) == pytest.approx(0.008)  # not listed: address modulo 8 slots
+    delays = {reply_delay_s(a, 4, (2, 3, 4, 5, 6)) for a in (2, 3, 4, 5, 6)}
+    assert len(delays) == 5  # nobody shares a slot
+
+
+def test_states_follow_fig_4_and_record_every_transition():
+    log = EventLog()
+    seq = SequenceManager(log, RobotState.LEADING)
+    seq.transition(RobotState.ORGANIZING, session=7)
+    seq.transition(RobotState.MASTER_DRIVING)
+    assert seq.restore_driving() == RobotState.LEADING  # the previous driving state comes back
+    assert [(e["frm"], e["to"]) for e in log.events] == [
+        ("leading", "organizing"),
+        ("organizing", "master-driving"),
+        ("master-driving", "leading"),
+    ]
+    assert log.events[0]["session"] == 7 and log.events[0]["t"] <= log.events[-1]["t"]
+
+
+def test_impossible_transitions_are_refused():
+    seq = SequenceManager(EventLog())
+    with pytest.raises(TransitionError):
+        seq.transition(RobotState.SLAVE_DRIVING)  # waiting -> slave needs organizing first
+    seq.transition(RobotState.ORGANIZING)
+    seq.transition(RobotState.SLAVE_DRIVING)
+    with pytest.raises(TransitionError):
+        seq.transition(RobotState.MASTER_DRIVING)
+    assert not seq.user_connected
