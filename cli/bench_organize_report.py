@@ -55,7 +55,13 @@ def stats_ms(values: list[float]) -> dict[str, float]:
     if not values:
         return {"mean": math.nan, "min": math.nan, "p50": math.nan, "max": math.nan, "n": 0}
     a = np.array(values)
-    return {"mean": float(a.mean()), "min": float(a.min()), "p50": float(np.median(a)), "max": float(a.max()), "n": a.size}
+    return {
+        "mean": float(a.mean()),
+        "min": float(a.min()),
+        "p50": float(np.median(a)),
+        "max": float(a.max()),
+        "n": int(a.size),
+    }
 
 
 def rows_by(summary: list[dict[str, Any]]) -> dict[tuple[str, int], dict[str, Any]]:

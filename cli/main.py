@@ -18,6 +18,7 @@ EPILOG = """examples:
   petswarm robot --id 3 --pos 1.5,0             one robot attached to that hub
   petswarm stats                                the hub's counters per node and per channel
   petswarm bench hub                            hub overhead, throughput and delivery lag
+  petswarm bench organize --slaves 1-5          swarm organizing time vs slaves, paper vs slotted protocol
 """
 
 
@@ -144,6 +145,30 @@ def build_parser() -> argparse.ArgumentParser:
     bhub.add_argument("--seed", type=seed, default=1)
     bhub.add_argument("--out", default="bench-results", help="directory for JSON and plots (default %(default)s)")
     bhub.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
+    borg = bench_sub.add_parser("organize", help="swarm organizing time vs number of slaves, per protocol")
+    borg.add_argument(
+        "--slaves", type=_slave_counts, default=[1, 2, 3, 4, 5], help="slave counts: N, A-B or N,M,... (default 1-5)"
+    )
+    borg.add_argument(
+        "--runs", type=bounded(int, 1, 10000), default=50, help="organizations per count and protocol (default 50)"
+    )
+    borg.add_argument(
+        "--protocol", choices=("paper", "slotted", "both"), default="both", help="protocols to measure (default both)"
+    )
+    borg.add_argument("--mac-ack", choices=("on", "off"), default="on", help="MAC acknowledgements (default on)")
+    borg.add_argument(
+        "--step-deadline",
+        type=bounded(float, 0.005, 10),
+        help="seconds each organizing step waits before retrying (default: the robot's, 0.1)",
+    )
+    borg.add_argument(
+        "--step-retries",
+        type=bounded(int, 0, 50),
+        help="retries of an organizing step (default: the robot's, 5)",
+    )
+    borg.add_argument("--seed", type=seed, default=1, help="seed of the hub and the robots (default %(default)s)")
+    borg.add_argument("--out", default="bench-results", help="directory for JSON and plots (default %(default)s)")
+    borg.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
     return parser
 
 
@@ -272,9 +297,19 @@ def _print_stats(stats: dict[str, Any]) -> None:
 
 
 def _bench(args: argparse.Namespace) -> int:
+    if args.bench == "organize":
+        from cli.bench_organize import bench_organize
+
+        return bench_organize(args)
     from cli.bench_hub import bench_hub
 
     return bench_hub(args)
+
+
+def _slave_counts(text: str) -> list[int]:
+    from cli.bench_organize import slave_counts  # imported here: it brings zenoh, which --help does not need
+
+    return slave_counts(text)
 
 
 if __name__ == "__main__":

@@ -15,6 +15,7 @@ from typing import Any
 import zenoh
 
 from cli.processes import Supervisor, free_tcp_port
+from cli.swarm import describe
 from petswarm import control
 from radio_hub.interface import HubUnavailable, Keys, open_session, query_hub
 
@@ -275,4 +276,9 @@ def _print(summary: dict[str, Any], as_json: bool) -> None:
         f"hub: delivery lag p50 {hub['lag_p50_us']:.0f} us, p99 {hub['lag_p99_us']:.0f} us; "
         f"malformed {hub['malformed']}, transport gaps {hub['transport_gaps']}"
     )
+    organized = summary.get("organization")
+    if organized and "error" not in organized:
+        print(describe("organize", organized))
+        if "disperse_time_s" in summary.get("dispersal", {}):
+            print(describe("disperse", summary["dispersal"]))
     print("OK" if summary["ok"] else "PROBLEMS: " + "; ".join(summary["problems"]))

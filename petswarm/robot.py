@@ -160,7 +160,14 @@ class Robot:
     def _spawn(self, coro: Any) -> None:
         task = asyncio.create_task(coro)
         self._tasks.add(task)
-        task.add_done_callback(self._tasks.discard)
+        task.add_done_callback(self._task_done)
+
+    def _task_done(self, task: asyncio.Task[Any]) -> None:
+        # a handler that failed (the hub went away mid-answer, say) is recorded, never lost silently
+        self._tasks.discard(task)
+        if not task.cancelled() and task.exception() is not None:
+            err = task.exception()
+            self.log.record("error", where=task.get_coro().__qualname__, error=f"{type(err).__name__}: {err}")
 
     def _remember(self, incoming: Incoming) -> None:
         rx = incoming.rx

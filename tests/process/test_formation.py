@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import json
 import math
+import subprocess
+import sys
 import threading
 import time
 
@@ -135,3 +138,33 @@ def test_a_robot_that_cannot_organize_says_why(make_air):
     answer = air.cmd(1, "organize", count=2)
     assert "FormationError" in answer["error"] and "driving with its user" in answer["error"]
     assert "not the master" in air.cmd(1, "disperse")["error"]
+
+
+def _cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "cli", *args], capture_output=True, text=True, timeout=120)
+
+
+def test_swarm_commands_from_the_cli(make_air):
+    air = make_air()
+    air.robot(1, (0.0, 0.0))
+    air.robot(2, (1.0, 0.0))
+    air.robot(3, (2.0, 0.0))
+    hub = ["--hub", air.endpoint, "--world", air.world]
+    refused = _cli("swarm", "organize", "--master", "1", "--count", "2", *hub)
+    assert refused.returncode == 1 and "driving with its user" in refused.stderr
+    organized = _cli("swarm", "organize", "--master", "1", "--count", "1", "--user", "1", "--json", *hub)
+    assert organized.returncode == 0, organized.stderr
+    assert json.loads(organized.stdout)["members"] == [2]
+    dispersed = _cli("swarm", "disperse", "--master", "1", *hub)
+    assert dispersed.returncode == 0 and "dispersed 1 members" in dispersed.stdout
+    assert _cli("swarm", "disperse", "--master", "9", *hub).returncode == 2  # no such robot: clear error
+
+
+def test_run_organizes_reports_figures_and_disperses():
+    proc = _cli("run", "--robots", "4", "--duration", "1", "--organize", "2", "--seed", "2", "--json")
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads(proc.stdout)
+    organization = summary["organization"]
+    assert len(organization["members"]) == 2 and organization["organize_time_s"] > 0
+    assert {"retries", "step_retries", "members", "protocol"} <= organization.keys()
+    assert summary["dispersal"]["unconfirmed"] == [] and summary["ok"]
