@@ -124,12 +124,15 @@ def _plot_times(ax: Any, summary: list[dict[str, Any]], protocols: list[str], co
 def _plot_retries(ax: Any, summary: list[dict[str, Any]], protocols: list[str], counts: list[int]) -> None:
     rows = rows_by(summary)
     width = 0.8 / max(len(protocols), 1)
+    top = 0.0
     for protocol, dx in _offsets(protocols).items():
-        prob = [rows[(protocol, n)]["retry_probability"] for n in counts]
-        ax.bar(np.array(counts) + dx, prob, width=width, label=protocol)
-    ax.set(xlabel="number of slaves", ylabel="organizations with a retry", title="Retry probability")
+        prob = np.nan_to_num([rows[(protocol, n)]["retry_probability"] for n in counts])
+        bars = ax.bar(np.array(counts) + dx, prob, width=width, label=protocol)
+        ax.bar_label(bars, labels=[f"{p:.2f}" for p in prob], fontsize=7)
+        top = max(top, float(prob.max(initial=0.0)))
+    ax.set(xlabel="number of slaves", ylabel="fraction of organizations with a retry", title="Retry probability")
     ax.set_xticks(counts)
-    ax.set_ylim(0, 1.05)
+    ax.set_ylim(0, min(1.1, max(0.25, top * 1.25)))
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3, axis="y")
 
@@ -185,7 +188,7 @@ def _counts(counts: list[int]) -> str:
 
 
 def _block_header(protocols: list[str], width: int) -> str:
-    return f"{'':<7}" + "".join(f" | {p:^{width}}" for p in protocols)
+    return (f"{'':<7}" + "".join(f" | {p:^{width}}" for p in protocols)).rstrip()
 
 
 def _time_lines(summary: list[dict[str, Any]], protocols: list[str], counts: list[int]) -> list[str]:
