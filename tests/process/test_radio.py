@@ -156,3 +156,20 @@ def test_robots_started_with_id_auto_claim_distinct_ids(make_air):
     assert attached == ["robot-1", "robot-2", "robot-3"]
     assert not air.sup.dead()
     assert air.stats()["hub"]["detaches"] == 0  # a refused claim did not knock out the robot that holds the id
+
+
+def test_stats_command_shows_every_node_and_channel(make_air):
+    import json
+    import subprocess
+    import sys
+
+    air = make_air()
+    air.robot(1, (0.0, 0.0))
+    air.robot(2, (1.0, 0.0), 0x2000)
+    air.cmd(1, "ping", wait=0.2)
+    args = [sys.executable, "-m", "cli", "stats", "--hub", air.endpoint, "--world", air.world]
+    table = subprocess.run(args, capture_output=True, text=True, timeout=60)
+    assert table.returncode == 0, table.stderr
+    assert "robot-1" in table.stdout and "0x2000" in table.stdout and "channel 11" in table.stdout
+    raw = json.loads(subprocess.run([*args, "--json"], capture_output=True, text=True, timeout=60).stdout)
+    assert raw["nodes"]["robot-1"]["sent"] == 1 and raw["nodes"]["robot-2"]["filtered"] == 1
