@@ -17,6 +17,7 @@ import zenoh
 from cli.processes import Supervisor, free_tcp_port
 from cli.swarm import describe
 from petswarm import control
+from petswarm.robot import DEFAULT_PAN
 from radio_hub.interface import HubUnavailable, Keys, open_session, query_hub
 
 
@@ -74,9 +75,10 @@ def run(opts: RunOptions) -> int:
         summary.update(swarm)
         summary["problems"] += swarm.get("problems", [])
         summary["ok"] = not summary["problems"]
-    except RunFailed as err:
+    except (RunFailed, HubUnavailable) as err:
         progress(f"failed: {err}")
         return 1
+
     except KeyboardInterrupt:
         progress("interrupted; stopping every process")
         return 130
@@ -183,24 +185,27 @@ def organize_and_disperse(session: zenoh.Session, keys: Keys, opts: RunOptions) 
 
 
 def check_swarm(session: zenoh.Session, keys: Keys, robots: int, organized: dict[str, Any] | None) -> list[str]:
-    """Every robot's own belief against the master's: members are slaves on the swarm's PAN, others wait."""
+    """Every robot's own belief against the master's: the master and its members on the swarm's PAN in
+    their swarm states, everyone else waiting on the waiting PAN (and the master following, after)."""
     members = set(organized["members"]) if organized else set()
+    pan = organized["pan_id"] if members else DEFAULT_PAN
+    when = "after organizing" if organized else "after dispersing"
     problems = []
-    for rid in range(2, robots + 1):
-        status = control.command(session, keys, rid, "status")
-        swarm = status.get("swarm")
-        if rid in members:
-            ok = status["state"] == "slave-driving" and swarm and swarm["pan_id"] == organized["pan_id"]  # type: ignore[index]
+    for rid in range(1, robots + 1):
+        if rid == 1:
+            want = ("master-driving", pan) if members else ("following", DEFAULT_PAN)
         else:
-            ok = (
-                status["state"] == "waiting"
-                and swarm is None
-                and status["radio"]["pan_id"] != 0
-                and (organized is not None or status["radio"]["pan_id"] == 0x1000)
+            want = ("slave-driving", pan) if rid in members else ("waiting", DEFAULT_PAN)
+        try:
+            status = control.command(session, keys, rid, "status")
+        except HubUnavailable as err:
+            problems.append(f"{err} {when}")
+            continue
+        got = (status["state"], status["radio"]["pan_id"])
+        if got != want:
+            problems.append(
+                f"robot {rid} is {got[0]} on PAN {got[1]:#06x} {when}; the master says {want[0]} on {want[1]:#06x}"
             )
-        if not ok:
-            when = "after organizing" if organized else "after dispersing"
-            problems.append(f"robot {rid} is {status['state']} (swarm {swarm}) {when}")
     return problems
 
 
@@ -232,6 +237,7 @@ def _summarise(session: zenoh.Session, keys: Keys, opts: RunOptions, world: str,
                 )
             },
             "heard_from": sorted(status.get("heard_from", {})),
+            "transport_gaps": status.get("transport_gaps", 0),
             "pings_sent": status.get("pings_sent", 0),
             "pings_answered": status.get("pings_answered", 0),
         }
@@ -239,8 +245,9 @@ def _summarise(session: zenoh.Session, keys: Keys, opts: RunOptions, world: str,
     all_pairs = all(set(n["heard_from"]) >= everyone - {rid} for rid, n in enumerate(nodes.values(), 1))
     if opts.robots > 1 and not all_pairs:
         problems.append("not every robot heard every other robot")
-    if stats["hub"]["transport_gaps"]:
-        problems.append(f"the transport lost {stats['hub']['transport_gaps']} messages")
+    gaps = stats["hub"]["transport_gaps"] + sum(n["transport_gaps"] for n in nodes.values())
+    if gaps:
+        problems.append(f"the transport lost {gaps} messages (robots to hub and hub to robots)")
     return {
         "ok": not problems,
         "problems": problems,

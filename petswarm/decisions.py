@@ -49,5 +49,5 @@ def reply_delay_s(short_addr: int, slot_ms: int, pending: tuple[int, ...] = (), 
     ``slots``. 0 when the slot length is 0 (the paper's protocol: answer at once)."""
     if slot_ms <= 0:
         return 0.0
-    index = pending.index(short_addr) if short_addr in pending else short_addr % slots
-    return index * slot_ms / 1000.0
+    index = pending.index(short_addr) if short_addr in pending else short_addr
+    return index % slots * slot_ms / 1000.0

@@ -28,6 +28,11 @@ from petswarm.sequence import DRIVING, EventLog, RobotState, SequenceManager
 from radio_hub.interface import BROADCAST
 
 PROTOCOLS = ("paper", "slotted")
+MAX_MEMBERS = 32
+"""Members of one swarm besides the master: the roster lists them all in one frame."""
+MAX_LISTED = 30
+"""Robots a joining query can list as pending in one frame."""
+
 _FREE = frozenset(int(s) for s in (RobotState.WAITING, *DRIVING))
 
 
@@ -45,8 +50,9 @@ class FormationConfig:
     step: StepTiming = field(default_factory=StepTiming)
     min_rssi_dbm: int = -70
     """The available region: -70 dBm is about 10 m with the hub's default path loss."""
-    candidate_timeout_s: float = 1.0
-    """A robot that said 'available' returns to waiting if no result notice comes in this time."""
+    candidate_timeout_s: float = 3.0
+    """A robot that said 'available' returns to waiting if no result notice comes in this time; it covers
+    the query's and the notice's retries at the default timing."""
     roster_interval_s: float = 0.25
     master_silence_s: float = 2.0
     """A member that hears no roster for this long returns to waiting (the master is gone)."""
@@ -116,6 +122,7 @@ class NetworkFormation:
         self._deadline = 0.0
         self._roster_task: asyncio.Task[None] | None = None
         self._busy = asyncio.Lock()
+        self._member_lock = asyncio.Lock()
 
     @property
     def me(self) -> int:
@@ -126,8 +133,10 @@ class NetworkFormation:
 
     async def organize(self, count: int, protocol: str | None = None) -> dict[str, Any]:
         """Form a swarm of up to ``count`` other robots; returns the organization's figures."""
-        if count < 1:
-            raise FormationError("the user must ask for at least one robot")
+        if not 1 <= count <= MAX_MEMBERS:
+            raise FormationError(
+                f"a swarm has 1 to {MAX_MEMBERS} members besides the master (its roster fills a frame)"
+            )
         if self._busy.locked():
             raise FormationError("already organizing or dispersing")
         async with self._busy:
@@ -213,6 +222,8 @@ class NetworkFormation:
     async def _query(self, session: int, slot: int, candidates: set[int]) -> StepResult:
         async def send(missing: set[int] | None) -> None:
             pending = tuple(sorted(missing or candidates))
+            if len(pending) > MAX_LISTED:
+                pending = ()  # too many to list in one frame: every free robot answers
             query = m.JoinQuery(session, self.user, self.config.min_rssi_dbm, slot, pending)
             await self.rf.send(BROADCAST, query, dst_pan=BROADCAST, ack=False)
 
@@ -243,7 +254,10 @@ class NetworkFormation:
     async def _announce_roster(self) -> None:
         while self.swarm is not None and self.sequence.state == RobotState.MASTER_DRIVING:
             swarm = self.swarm
-            await self.rf.send(BROADCAST, m.Roster(swarm.session, swarm.members), ack=False)
+            try:
+                await self.rf.send(BROADCAST, m.Roster(swarm.session, swarm.members), ack=False)
+            except Exception as err:  # keep announcing: members leave after 2 s without a roster
+                self.log.record("error", where="roster", error=f"{type(err).__name__}: {err}")
             await asyncio.sleep(self.config.roster_interval_s)
 
     async def disperse(self, protocol: str | None = None) -> dict[str, Any]:
@@ -261,12 +275,15 @@ class NetworkFormation:
                         await self.rf.send(addr, m.Disperse(swarm.session, slot), dst_pan=BROADCAST)
 
             timing = self._timing(slot, len(swarm.members))
-            step = await self.mpm.step("disperse", swarm.session, (m.Dispersed,), send, set(swarm.members), timing)
-            self.swarm = None
-            if self._roster_task is not None:
-                self._roster_task.cancel()
+            try:
+                step = await self.mpm.step("disperse", swarm.session, (m.Dispersed,), send, set(swarm.members), timing)
+            finally:
+                # whatever happened on the air, this robot is no longer a master
+                self.swarm = None
+                if self._roster_task is not None:
+                    self._roster_task.cancel()
+                restored = self.sequence.restore_driving(session=swarm.session)
             await self.rf.radio.configure(pan_id=self.config.waiting_pan)
-            restored = self.sequence.restore_driving(session=swarm.session)
             figures = {
                 "session": swarm.session,
                 "disperse_time_s": round(time.monotonic() - t0, 6),
@@ -280,12 +297,28 @@ class NetworkFormation:
 
     # == member side ==================================================================================
 
+    @staticmethod
+    def handles(message: m.SwarmMessage) -> bool:
+        """True for the messages ``on_message`` acts on."""
+        return type(message) in _MEMBER_HANDLERS
+
     async def on_message(self, incoming: Incoming) -> None:
-        """Answer a master's request (called for every formation message the robot receives)."""
-        msg = incoming.message
-        handler = _MEMBER_HANDLERS.get(type(msg))
+        """Act on a formation message. One at a time: a handler's state change and the PAN switch it
+        implies complete before the next message is looked at, so no interleaving can leave a robot on
+        the wrong PAN."""
+        handler = _MEMBER_HANDLERS.get(type(incoming.message))
         if handler is not None:
-            await handler(self, incoming)
+            async with self._member_lock:
+                await handler(self, incoming)
+
+    async def _on_member_left(self, incoming: Incoming) -> None:
+        """Master side: a member that gave up on us (it heard no roster) says so; stop counting it."""
+        swarm = self.swarm
+        if swarm is None or swarm.number or swarm.session != incoming.message.session_id:
+            return
+        if incoming.sender in swarm.members:
+            swarm.members = tuple(a for a in swarm.members if a != incoming.sender)
+            self.log.record("member_left", session=swarm.session, member=incoming.sender)
 
     async def _on_scan(self, incoming: Incoming) -> None:
         msg: m.Scan = incoming.message  # type: ignore[assignment]
@@ -296,6 +329,8 @@ class NetworkFormation:
         msg: m.JoinQuery = incoming.message  # type: ignore[assignment]
         if msg.pending and self.me not in msg.pending:
             return
+        if not msg.pending and self.candidate_of is None and self.sequence.state != RobotState.WAITING:
+            return  # an unlisted query asks the free robots only
         answer = self._judge_query(msg, incoming)
         await self._answer(incoming, answer, reply_delay_s(self.me, msg.slot_ms, msg.pending))
 
@@ -387,9 +422,24 @@ class NetworkFormation:
         while True:
             await asyncio.sleep(0.05)
             waiting_for_master = self.candidate_of is not None or (self.swarm is not None and self.swarm.number)
-            if waiting_for_master and time.monotonic() > self._deadline:
-                reason = "no result notice" if self.candidate_of else "master silent"
-                await self._leave(reason=reason)
+            if not waiting_for_master or time.monotonic() <= self._deadline:
+                continue
+            try:
+                async with self._member_lock:
+                    await self._give_up()
+            except Exception as err:  # a hub hiccup must not end the robot; the next tick tries again
+                self.log.record("error", where="watch", error=f"{type(err).__name__}: {err}")
+
+    async def _give_up(self) -> None:
+        if self.candidate_of is not None:
+            await self._leave(reason="no result notice")
+            return
+        swarm = self.swarm
+        if swarm is None or not swarm.number or time.monotonic() <= self._deadline:
+            return
+        await self._leave(reason="master silent")
+        # tell the master, in case only its rosters were lost: it must stop counting us
+        await self.rf.send(swarm.master, m.Dispersed(swarm.session), dst_pan=BROADCAST)
 
 
 _MEMBER_HANDLERS = {
@@ -399,6 +449,7 @@ _MEMBER_HANDLERS = {
     m.NotParticipating: NetworkFormation._on_not_participating,
     m.Roster: NetworkFormation._on_roster,
     m.Disperse: NetworkFormation._on_disperse,
+    m.Dispersed: NetworkFormation._on_member_left,
 }
 RESPONSES = (m.ScanReply, m.JoinAvailable, m.JoinUnavailable, m.Joined, m.Dispersed)
 """Messages that only ever answer a master's step; outside a step they are late."""

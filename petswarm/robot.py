@@ -133,10 +133,10 @@ class Robot:
         msg = incoming.message
         if self.mpm.offer(incoming):
             return
-        if isinstance(msg, RESPONSES):
-            self.mpm.count_late()
-        elif msg.session_id is not None:
+        if self.formation.handles(msg):
             self._spawn(self.formation.on_message(incoming))
+        elif isinstance(msg, RESPONSES):
+            self.mpm.count_late()
         elif isinstance(msg, Ping):
             self._spawn(self._answer(incoming.sender, msg.nonce))
         elif isinstance(msg, Pong):
@@ -245,6 +245,9 @@ class Robot:
         }
         if mode not in states or user < 1:
             raise ValueError(f"need user >= 1 and mode one of {sorted(states)}")
+        if self.sequence.state in (RobotState.ORGANIZING, RobotState.MASTER_DRIVING, RobotState.SLAVE_DRIVING):
+            raise ValueError(f"robot is {self.sequence.state.label}: the swarm must disperse before its user changes")
+
         self.formation.user = user
         self.sequence.transition(states[mode], user=user)
         return {"state": self.sequence.state.label, "user": user}

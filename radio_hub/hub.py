@@ -28,7 +28,7 @@ import zenoh
 from radio_hub import wire
 from radio_hub.config import MediumConfig
 from radio_hub.keys import Keys, check_name, reliable_publisher, session_config
-from radio_hub.medium import Medium, Output, RadioNode, Reception, TxReport
+from radio_hub.medium import Medium, Output, RadioNode, Reception, TxReport, TxStatus
 
 _IDLE_WAKE_US = 200_000
 _SPIN_US = 100
@@ -165,6 +165,10 @@ class RadioHub:
             self.counters.malformed += 1
             self._send_down(node_id, wire.Error(reason=f"malformed message: {err}"))
             return
+        if isinstance(msg, wire.Attach) and msg.exclusive and node_id in self.medium.nodes:
+            # a refused claim must not touch the live node's sequence numbering
+            self._send_down(node_id, wire.Error(reason=f"node id {node_id} is taken"))
+            return
         self._check_sequence(node_id, msg)
         if isinstance(msg, wire.Attach):
             self._on_attach(node_id, msg)
@@ -188,9 +192,6 @@ class RadioHub:
         self._up_seq[node_id] = msg.n
 
     def _on_attach(self, node_id: str, msg: wire.Attach) -> None:
-        if msg.exclusive and node_id in self.medium.nodes:
-            self._send_down(node_id, wire.Error(reason=f"node id {node_id} is taken"))
-            return
         self.medium.detach(node_id)  # a node that restarts under the same id starts afresh
         node = RadioNode(node_id, msg.ext_addr, msg.short_addr, msg.pan_id, msg.channel, _pos(msg.position))
         try:
@@ -263,8 +264,10 @@ class RadioHub:
                     submitted_us=out.submitted_us,
                 )
             else:
-                lag.append(now - out.done_us)
+                if out.status != TxStatus.REFUSED:  # refusals are immediate, not scheduled deliveries
+                    lag.append(now - out.done_us)
                 msg = _tx_done(out)
+
             self._send_down(out.node_id, msg)
 
     def _send_down(self, node_id: str, msg: wire.Message) -> None:

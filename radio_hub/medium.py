@@ -284,8 +284,8 @@ class Medium:
         return out + self._drain()
 
     def _refusal(self, node_id: str, token: int, reason: str) -> TxReport:
-        if node_id in self.node_counters:
-            self.node_counters[node_id].refused += 1
+        self._count(node_id, "refused")
+
         return TxReport(node_id, token, TxStatus.REFUSED, 0, 0, self.now_us, self.now_us, reason)
 
     def _drain(self) -> list[Output]:
@@ -361,7 +361,7 @@ class Medium:
             return
         tx = self._put_on_air(self.nodes[job.node_id], job.frame, len(job.psdu), job.submitted_us)
         tx.job, tx.attempt = job, job.retries
-        self._count(job.node_id, "sent", tx.channel)
+        self._count(job.node_id, "sent")
         self._at(tx.end_us, self._on_tx_end, tx)
 
     def _on_tx_end(self, tx: Transmission) -> None:
@@ -481,7 +481,7 @@ class Medium:
             return
         if job.retries < self.config.mac.max_frame_retries:
             job.retries += 1
-            self._count(job.node_id, "mac_retries", self.nodes[job.node_id].channel)
+            self._count(job.node_id, "mac_retries")
             self._start_csma(job)
         else:
             self._count(job.node_id, "no_ack")
@@ -500,13 +500,13 @@ class Medium:
 
     # -- bookkeeping -----------------------------------------------------------------------------
 
-    def _count(self, node_id: str, name: str, channel: int | None = None) -> None:
-        counters = self.node_counters.get(node_id)
-        if counters is not None:
+    def _count(self, node_id: str, name: str) -> None:
+        """Count for the node and for the channel it is on (so per-channel sums match per-node ones)."""
+        node = self.nodes.get(node_id)
+        if node is None:
+            return
+        for counters in (self.node_counters[node_id], self.channel_counters[node.channel]):
             setattr(counters, name, getattr(counters, name) + 1)
-        if channel is not None:
-            cc = self.channel_counters[channel]
-            setattr(cc, name, getattr(cc, name) + 1)
 
     def _prune_air(self) -> None:
         horizon = self.now_us - _AIR_HORIZON_US

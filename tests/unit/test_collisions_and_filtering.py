@@ -138,3 +138,16 @@ def test_transmission_start_is_cca_plus_turnaround_without_csma_it_is_turnaround
     a, b = place(m, 1, 0), place(m, 2, 1)
     [rx] = receptions(run_to_idle(m, m.submit(a, data(1), 1, 0)), b)
     assert rx.start_us == TURNAROUND
+
+
+def test_channel_counters_add_up_to_the_node_counters():
+    m = medium({"mac": {"min_be": 0, "max_be": 0}})
+    a, b = place(m, 1, 0), place(m, 2, 1)
+    m.submit(a, data(1, dst=9), 1, 0)  # nobody answers: retries, then no_ack
+    m.submit(b, data(2, payload=bytes(100)), 2, 0)
+    m.submit(a, bytes(3), 3, 0)  # refused
+    run_to_idle(m)
+    channel = m.channel_counters[11].to_dict()
+    for name, value in channel.items():
+        assert value == m.node_counters[a].to_dict()[name] + m.node_counters[b].to_dict()[name], name
+    assert channel["no_ack"] + channel["channel_access_failures"] >= 1 and channel["refused"] == 1

@@ -79,3 +79,20 @@ def test_impossible_transitions_are_refused():
     with pytest.raises(TransitionError):
         seq.transition(RobotState.MASTER_DRIVING)
     assert not seq.user_connected
+
+
+def test_the_largest_roster_and_query_fit_one_inter_pan_frame():
+    from petswarm.formation import MAX_LISTED, MAX_MEMBERS
+    from petswarm.messages import JoinNotice, JoinQuery, Roster, Scan, ScanReply
+    from radio_hub.mac import max_payload
+
+    worst = 0xFFFD  # short addresses of three msgpack bytes
+    limit = max_payload(pan_compressed=False)
+    assert len(Roster(0xFFFF, (worst,) * MAX_MEMBERS).encode()) <= limit
+    assert len(JoinQuery(0xFFFF, 0xFFFF, -120, 255, (worst,) * MAX_LISTED).encode()) <= limit
+    for msg in (
+        Scan(0xFFFF, 0xFFFF, 255),
+        ScanReply(0xFFFF, 7, 0xFFFF, 0xFFFF),
+        JoinNotice(0xFFFF, 0xFFFF, 33, 32, 255),
+    ):
+        assert len(msg.encode()) <= limit
