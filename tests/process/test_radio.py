@@ -156,6 +156,9 @@ def test_robots_started_with_id_auto_claim_distinct_ids(make_air):
     assert attached == ["robot-1", "robot-2", "robot-3"]
     assert not air.sup.dead()
     assert air.stats()["hub"]["detaches"] == 0  # a refused claim did not knock out the robot that holds the id
+    assert air.cmd(1, "ping", wait=0.3)["tx"]["status"] == "success"
+    assert air.stats()["hub"]["transport_gaps"] == 0  # nor did it disturb robot 1's message numbering
+
 
 
 def test_stats_command_shows_every_node_and_channel(make_air):
