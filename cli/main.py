@@ -169,6 +169,9 @@ def build_parser() -> argparse.ArgumentParser:
     borg.add_argument("--seed", type=seed, default=1, help="seed of the hub and the robots (default %(default)s)")
     borg.add_argument("--out", default="bench-results", help="directory for JSON and plots (default %(default)s)")
     borg.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
+    from cli.bench_ir import add_arguments as add_bench_ir_arguments
+
+    add_bench_ir_arguments(bench_sub.add_parser("ir", help="IR relative-location accuracy per estimator"))
     return parser
 
 
@@ -297,6 +300,10 @@ def _print_stats(stats: dict[str, Any]) -> None:
 
 
 def _bench(args: argparse.Namespace) -> int:
+    if args.bench == "ir":
+        from cli.bench_ir import bench_ir
+
+        return bench_ir(args)
     if args.bench == "organize":
         from cli.bench_organize import bench_organize
 
