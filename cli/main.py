@@ -33,7 +33,9 @@ def build_parser() -> argparse.ArgumentParser:
     hub.add_argument("--listen", default="tcp/127.0.0.1:7447", help="zenoh endpoint to listen on (default %(default)s)")
     _add_world(hub)
     hub.add_argument("--seed", type=seed, default=0, help="seed of every random radio outcome (default %(default)s)")
-    hub.add_argument("--config", help="TOML or JSON file with [mac], [range], [loss], [path_loss], [capture] tables")
+    hub.add_argument(
+        "--config", help="TOML or JSON file with [mac], [range], [loss], [path_loss], [capture] and [ir] tables"
+    )
 
     robot = sub.add_parser("robot", help="run one robot process attached to a hub")
     robot.add_argument(
@@ -81,6 +83,21 @@ def build_parser() -> argparse.ArgumentParser:
         type=bounded(int, 0, 50),
         default=5,
         help="retries of an organizing step before it gives up on the missing (default 5)",
+    )
+    robot.add_argument(
+        "--heading",
+        type=bounded(float, -360, 360),
+        default=0.0,
+        help="heading in degrees, counter-clockwise from +x (default 0); orients the IR receivers",
+    )
+    robot.add_argument(
+        "--ir-estimator",
+        choices=("paper", "lsq"),
+        default="lsq",
+        help="relative location from IR: equations (1)-(3) or the least-squares fit (default lsq)",
+    )
+    robot.add_argument(
+        "--ir-slot", type=bounded(float, 0.02, 5), default=0.1, help="seconds each token holder shines (default 0.1)"
     )
     robot.add_argument(
         "--protocol",
@@ -197,15 +214,14 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _hub(args: argparse.Namespace) -> int:
-    from radio_hub.config import MediumConfig
-    from radio_hub.hub import RadioHub, ready_line
+    from radio_hub.hub import RadioHub, load_config, ready_line
 
     try:
-        config = MediumConfig.from_file(args.config) if args.config else MediumConfig()
+        config, ir = load_config(args.config) if args.config else (None, None)
     except (OSError, ValueError) as err:
         print(f"petswarm hub: bad --config: {err}", file=sys.stderr)
         return 2
-    hub = RadioHub(args.listen, args.world, config, args.seed)
+    hub = RadioHub(args.listen, args.world, config, args.seed, ir)
     try:
         hub.open()
     except Exception as err:  # zenoh reports a busy port or bad endpoint as a generic error
@@ -225,6 +241,7 @@ def _hub(args: argparse.Namespace) -> int:
 def _robot(args: argparse.Namespace) -> int:
     from petswarm.exchange import StepTiming
     from petswarm.formation import FormationConfig
+    from petswarm.relative_location import TokenConfig
     from petswarm.robot import RobotConfig, run_robot
 
     timing = StepTiming(args.step_deadline, args.step_retries)
@@ -240,6 +257,8 @@ def _robot(args: argparse.Namespace) -> int:
         seed=args.seed,
         user=args.user,
         formation=formation,
+        token=TokenConfig(slot_s=args.ir_slot, estimator=args.ir_estimator),
+        heading_deg=args.heading,
     )
     return asyncio.run(run_robot(config))
 

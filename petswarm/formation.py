@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import asyncio
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -109,12 +110,15 @@ class NetworkFormation:
         config: FormationConfig,
         rng: np.random.Generator,
         user: int = 0,
+        on_change: Callable[[Swarm | None], None] = lambda swarm: None,
     ) -> None:
         self.rf, self.sequence, self.mpm, self.log = rf, sequence, mpm, log
         self.config = config
         self.rng = rng
         self.user = user
         self.swarm: Swarm | None = None
+        self.on_change = on_change
+        """Called with the swarm whenever this robot joins one, its members change, or it leaves (None)."""
         self.candidate_of: tuple[int, int] | None = None
         """(session, master) while this robot said 'available' and waits for the result."""
         self.organizations: list[dict[str, Any]] = []
@@ -201,6 +205,7 @@ class NetworkFormation:
         self.swarm = Swarm(session, pan, self.me, 0, members)
         self.sequence.transition(RobotState.MASTER_DRIVING, session=session, members=list(members))
         self.log.record("organized", **figures)
+        self.on_change(self.swarm)
         self._roster_task = asyncio.get_running_loop().create_task(self._announce_roster())
 
     async def _abandon(self, session: int) -> None:
@@ -280,6 +285,7 @@ class NetworkFormation:
             finally:
                 # whatever happened on the air, this robot is no longer a master
                 self.swarm = None
+                self.on_change(None)
                 if self._roster_task is not None:
                     self._roster_task.cancel()
                 restored = self.sequence.restore_driving(session=swarm.session)
@@ -319,6 +325,7 @@ class NetworkFormation:
         if incoming.sender in swarm.members:
             swarm.members = tuple(a for a in swarm.members if a != incoming.sender)
             self.log.record("member_left", session=swarm.session, member=incoming.sender)
+            self.on_change(swarm)
 
     async def _on_scan(self, incoming: Incoming) -> None:
         msg: m.Scan = incoming.message  # type: ignore[assignment]
@@ -362,6 +369,7 @@ class NetworkFormation:
         self._deadline = time.monotonic() + self.config.master_silence_s
         self.sequence.transition(RobotState.SLAVE_DRIVING, session=msg.session, pan_id=msg.pan_id, number=msg.number)
         await self.rf.radio.configure(pan_id=msg.pan_id)
+        self.on_change(self.swarm)
         await self._send_joined(self.swarm, msg.slot_ms)
 
     async def _send_joined(self, swarm: Swarm, slot_ms: int) -> None:
@@ -383,8 +391,11 @@ class NetworkFormation:
         if self.me not in msg.members:
             await self._leave(reason="not in the master's roster")
             return
+        changed = swarm.members != msg.members
         swarm.members = msg.members
         swarm.number = msg.members.index(self.me) + 1
+        if changed:
+            self.on_change(swarm)
         self._deadline = time.monotonic() + self.config.master_silence_s
 
     async def _on_disperse(self, incoming: Incoming) -> None:
@@ -401,6 +412,8 @@ class NetworkFormation:
 
     async def _leave(self, reason: str) -> None:
         session = self.swarm.session if self.swarm else (self.candidate_of or (None,))[0]
+        if self.swarm is not None:
+            self.on_change(None)
         self.swarm = None
         self.candidate_of = None
         self._last_left = session

@@ -36,6 +36,12 @@ class MessageType(enum.IntEnum):
     ROSTER = 18
     DISPERSE = 19
     DISPERSED = 20
+    IR_START = 30
+    IR_START_ACK = 31
+    TOKEN = 32
+    TOKEN_ACK = 33
+    SYNC = 34
+    HEADING = 35
 
 
 @dataclass(frozen=True)
@@ -196,6 +202,62 @@ class Dispersed(SwarmMessage):
     session: int
 
 
+@dataclass(frozen=True)
+class IrStart(SwarmMessage):
+    """Token holder -> swarm: the transmission-start sign of round ``round``; switch to receive."""
+
+    TYPE: ClassVar[MessageType] = MessageType.IR_START
+    session: int
+    round: int
+
+
+@dataclass(frozen=True)
+class IrStartAck(SwarmMessage):
+    """Member -> holder: receiving."""
+
+    TYPE: ClassVar[MessageType] = MessageType.IR_START_ACK
+    session: int
+    round: int
+
+
+@dataclass(frozen=True)
+class Token(SwarmMessage):
+    """Holder -> swarm at its deadline: I have stopped transmitting; ``next`` transmits in the next round."""
+
+    TYPE: ClassVar[MessageType] = MessageType.TOKEN
+    session: int
+    round: int
+    next: int
+
+
+@dataclass(frozen=True)
+class TokenAck(SwarmMessage):
+    """Member -> holder: token heard (and my measurement of you is done)."""
+
+    TYPE: ClassVar[MessageType] = MessageType.TOKEN_ACK
+    session: int
+    round: int
+
+
+@dataclass(frozen=True)
+class Sync(SwarmMessage):
+    """Holder -> swarm after the token exchange: round ``round`` belongs to ``holder`` from now."""
+
+    TYPE: ClassVar[MessageType] = MessageType.SYNC
+    session: int
+    round: int
+    holder: int
+
+
+@dataclass(frozen=True)
+class Heading(SwarmMessage):
+    """Neighbour -> transmitting robot: my heading, in hundredths of a degree."""
+
+    TYPE: ClassVar[MessageType] = MessageType.HEADING
+    session: int
+    centideg: int
+
+
 _BY_TYPE: dict[int, type[SwarmMessage]] = {
     int(c.TYPE): c
     for c in (
@@ -213,6 +275,12 @@ _BY_TYPE: dict[int, type[SwarmMessage]] = {
         Roster,
         Disperse,
         Dispersed,
+        IrStart,
+        IrStartAck,
+        Token,
+        TokenAck,
+        Sync,
+        Heading,
     )
 }
 _FIELD_TYPES: dict[str, type | tuple[type, ...]] = {"int": int, "bytes": bytes, "str": str, "float": (int, float)}

@@ -20,8 +20,9 @@ import zenoh
 
 from petswarm.control import all_robots_key, robot_key
 from petswarm.exchange import MessageProcessingManager
-from petswarm.formation import RESPONSES, FormationConfig, FormationError, NetworkFormation
+from petswarm.formation import RESPONSES, FormationConfig, FormationError, NetworkFormation, Swarm
 from petswarm.messages import Blob, Ping, Pong, SwarmMessage
+from petswarm.relative_location import IrModuleManager, IrTokenSchedule, RelativeLocationManager, TokenConfig
 from petswarm.rf import Incoming, RfCommunicationManager
 from petswarm.sequence import EventLog, RobotState, SequenceManager, TransitionError
 from radio_hub.interface import (
@@ -70,6 +71,9 @@ class RobotConfig:
     user: int = 0
     """The user this robot is connected to at start (0: none, the robot waits)."""
     formation: FormationConfig = field(default_factory=FormationConfig)
+    token: TokenConfig = field(default_factory=TokenConfig)
+    heading_deg: float = 0.0
+    """Until the world model: the robot's fixed heading."""
 
     def identity(self) -> RadioIdentity:
         """The robot's radio at start-up: short address = robot id."""
@@ -77,7 +81,13 @@ class RobotConfig:
             raise ValueError(f"robot id {self.robot_id} must be 1..65533 (it is the 16-bit short address)")
         position = self.position if self.position is not None else default_position(self.robot_id)
         return RadioIdentity(
-            f"robot-{self.robot_id}", EXT_ADDR_BASE + self.robot_id, self.robot_id, self.pan_id, self.channel, position
+            f"robot-{self.robot_id}",
+            EXT_ADDR_BASE + self.robot_id,
+            self.robot_id,
+            self.pan_id,
+            self.channel,
+            position,
+            self.heading_deg,
         )
 
 
@@ -93,7 +103,12 @@ class Robot:
         self.mpm = MessageProcessingManager(self.log)
         formation_config = replace(config.formation, waiting_pan=config.pan_id)
         self.formation = NetworkFormation(
-            self.rf, self.sequence, self.mpm, self.log, formation_config, self.rng, config.user
+            self.rf, self.sequence, self.mpm, self.log, formation_config, self.rng, config.user, self._swarm_changed
+        )
+        self.ir = IrModuleManager(radio)
+        self.locations = RelativeLocationManager()
+        self.schedule = IrTokenSchedule(
+            self.rf, self.mpm, self.ir, self.locations, self.log, config.token, lambda: radio.identity.heading_deg
         )
         self.log.record(
             "start", robot_id=config.robot_id, state=self.sequence.state.label, user=config.user, seed=config.seed
@@ -112,7 +127,10 @@ class Robot:
 
     async def run(self) -> None:
         """Serve until ``stopping`` is set."""
-        workers = [asyncio.create_task(self._receive_loop()), asyncio.create_task(self.formation.watch())]
+        workers = [
+            asyncio.create_task(coro)
+            for coro in (self._receive_loop(), self.formation.watch(), self.ir.run(), self.schedule.watch())
+        ]
         if self.config.ping_interval > 0:
             workers.append(asyncio.create_task(self._ping_loop()))
         stop = asyncio.create_task(self.stopping.wait())
@@ -135,6 +153,8 @@ class Robot:
             return
         if self.formation.handles(msg):
             self._spawn(self.formation.on_message(incoming))
+        elif self.schedule.handles(msg):
+            self._spawn(self.schedule.on_message(incoming))
         elif isinstance(msg, RESPONSES):
             self.mpm.count_late()
         elif isinstance(msg, Ping):
@@ -156,6 +176,18 @@ class Robot:
         while True:
             await self.ping(BROADCAST, wait=0.0)
             await asyncio.sleep(float(self.rng.uniform(0.5, 1.5)) * interval)
+
+    def _swarm_changed(self, swarm: Swarm | None) -> None:
+        """Formation tells us the swarm changed: the IR schedule follows."""
+        if swarm is None:
+            if self.schedule.active:
+                self._spawn(self.schedule.leave())
+            return
+        chain = (swarm.master, *swarm.members)
+        if self.schedule.session != swarm.session:
+            self.schedule.join(swarm.session, chain, swarm.neighbours, swarm.number == 0)
+        else:
+            self.schedule.update_members(chain, swarm.neighbours)
 
     def _spawn(self, coro: Any) -> None:
         task = asyncio.create_task(coro)
@@ -286,6 +318,8 @@ class Robot:
             "retries": self.mpm.retries,
             "duplicates": self.mpm.duplicates,
             "late_responses": self.mpm.late,
+            "ir": self.schedule.status(),
+            "relative_location": self.locations.snapshot(),
         }
 
 

@@ -12,13 +12,16 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import json
+import math
 import os
 import queue
 import sys
 import threading
 import time
+import tomllib
 from collections import deque
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import msgpack
@@ -27,7 +30,9 @@ import zenoh
 
 from radio_hub import wire
 from radio_hub.config import MediumConfig
+from radio_hub.ir_air import IrAir
 from radio_hub.keys import Keys, check_name, reliable_publisher, session_config
+from radio_hub.light import IrConfig
 from radio_hub.medium import Medium, Output, RadioNode, Reception, TxReport, TxStatus
 
 _IDLE_WAKE_US = 200_000
@@ -74,7 +79,9 @@ class RadioHub:
         world: str,
         config: MediumConfig | None = None,
         seed: int = 0,
+        ir_config: IrConfig | None = None,
     ) -> None:
+
         self.endpoint = endpoint
         self.keys = Keys(world)
         self.seed = seed
@@ -85,6 +92,8 @@ class RadioHub:
         self._pubs: dict[str, zenoh.Publisher] = {}
         self._up_seq: dict[str, int] = {}
         self._instances: dict[str, str] = {}
+        self._headings: dict[str, float] = {}
+        self.ir = IrAir(ir_config or IrConfig(), np.random.default_rng([seed, 1]))
         self._down_seq: dict[str, int] = {}
         self._t0_ns = time.perf_counter_ns()
         self._session: zenoh.Session | None = None
@@ -129,7 +138,7 @@ class RadioHub:
         _tight_timer_slack()
         inbox, medium = self._inbox, self.medium
         while not self._stop.is_set():
-            due = medium.next_event_us()
+            due = min((t for t in (medium.next_event_us(), self.ir.next_event_us()) if t is not None), default=None)
             until_due = _IDLE_WAKE_US if due is None else due - self.now_us()
             try:
                 if until_due > _SPIN_US:
@@ -143,6 +152,14 @@ class RadioHub:
                     # a timed wait wakes tens of microseconds late; yield-spin the last stretch instead
                     os.sched_yield()
             self._dispatch(medium.advance(self.now_us()))
+            self._sweep_ir()
+
+    def _sweep_ir(self) -> None:
+        now = self.now_us()
+        nodes = self.medium.nodes
+        poses = {n: (*node.position, self._headings.get(n, 0.0)) for n, node in nodes.items()}
+        for node_id, readings in self.ir.sweep(now, poses).items():
+            self._send_down(node_id, wire.IrSample(readings=readings.astype("<f4").tobytes(), t_us=now))
 
     # -- inputs ----------------------------------------------------------------------------------
 
@@ -179,6 +196,8 @@ class RadioHub:
             self._dispatch(self.medium.submit(node_id, msg.psdu, msg.token, self.now_us()))
         elif isinstance(msg, wire.Configure):
             self._on_configure(node_id, msg)
+        elif isinstance(msg, wire.SetIrMode):
+            self._on_ir_mode(node_id, msg)
         elif isinstance(msg, wire.Detach):
             self._detach(node_id)
         else:
@@ -200,6 +219,7 @@ class RadioHub:
             self.counters.config_errors += 1
             self._send_down(node_id, wire.Error(reason=f"cannot attach: {err}"))
             return
+        self._headings[node_id] = math.radians(msg.heading_deg)
         self.counters.attaches += 1
         self._instances[node_id] = msg.instance
         if node_id not in self._pubs:
@@ -214,6 +234,8 @@ class RadioHub:
         }
         if msg.position is not None:
             changes["position"] = _pos(msg.position)
+        if msg.heading_deg is not None:
+            self._headings[node_id] = math.radians(msg.heading_deg)
         try:
             node = self.medium.update(node_id, **changes)
         except (ValueError, TypeError) as err:
@@ -221,6 +243,15 @@ class RadioHub:
             self._send_down(node_id, wire.Error(token=msg.token, reason=f"cannot configure: {err}"))
             return
         self._send_down(node_id, self._attached(node, msg.token))
+
+    def _on_ir_mode(self, node_id: str, msg: wire.SetIrMode) -> None:
+        try:
+            self.ir.set_mode(node_id, msg.mode, self.now_us())
+        except ValueError:
+            self.counters.config_errors += 1
+            self._send_down(node_id, wire.Error(token=msg.token, reason=f"unknown IR mode {msg.mode!r}"))
+            return
+        self._send_down(node_id, self._attached(self.medium.nodes[node_id], msg.token))
 
     def _attached(self, node: RadioNode, token: int) -> wire.Attached:
         return wire.Attached(
@@ -230,6 +261,7 @@ class RadioHub:
             pan_id=node.pan_id,
             channel=node.channel,
             position=list(node.position),
+            heading_deg=math.degrees(self._headings.get(node.node_id, 0.0)),
             now_us=self.now_us(),
         )
 
@@ -240,6 +272,7 @@ class RadioHub:
 
     def _detach(self, node_id: str) -> None:
         self.medium.detach(node_id)
+        self.ir.remove(node_id, self.now_us())
         self.counters.detaches += 1
         pub = self._pubs.pop(node_id, None)
         if pub is not None:
@@ -318,6 +351,11 @@ class RadioHub:
             "nodes": nodes,
             "channels": channels,
             "hub": self.counters.to_dict(),
+            "ir": {
+                **self.ir.counter.as_dict(self.now_us()),
+                "sweeps": self.ir.sweeps,
+                "config": self.ir.config.to_dict(),
+            },
         }
 
 
@@ -342,6 +380,17 @@ def _tx_done(report: TxReport) -> wire.TxDone:
 
 def _pos(values: list[float]) -> tuple[float, float]:
     return (float(values[0]), float(values[1]))
+
+
+def load_config(path: str | Path) -> tuple[MediumConfig, IrConfig]:
+    """A hub config file (TOML or JSON): the radio's tables plus an optional ``[ir]`` table."""
+    path = Path(path)
+    text = path.read_text()
+    data = tomllib.loads(text) if path.suffix == ".toml" else json.loads(text)
+    if not isinstance(data, dict):
+        raise ValueError("a hub config file holds tables")
+    ir = IrConfig.from_dict(data.pop("ir", {}))
+    return MediumConfig.from_dict(data.get("medium", data)), ir
 
 
 def ready_line(hub: RadioHub) -> str:

@@ -16,11 +16,14 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import msgpack
+import numpy as np
 import zenoh
 
 from radio_hub import wire
 from radio_hub.config import MediumConfig, airtime_us
 from radio_hub.keys import DEFAULT_ENDPOINT, DEFAULT_WORLD, Keys, check_name, reliable_publisher, session_config
+from radio_hub.light import RECEIVERS as IR_RECEIVERS
+from radio_hub.light import IrConfig
 from radio_hub.mac import BROADCAST, MAX_PSDU, Frame, FrameError, FrameType, max_payload
 from radio_hub.medium import TxStatus
 
@@ -33,6 +36,8 @@ __all__ = [
     "FrameError",
     "FrameType",
     "HubUnavailable",
+    "IrConfig",
+    "IrSweep",
     "Keys",
     "MediumConfig",
     "RadioClient",
@@ -66,6 +71,8 @@ class RadioIdentity:
     pan_id: int
     channel: int = 11
     position: tuple[float, float] = (0.0, 0.0)
+    heading_deg: float = 0.0
+    """Until the world model: the robot's fixed heading, which orients its IR receivers."""
 
 
 @dataclass(frozen=True)
@@ -95,6 +102,14 @@ class TxResult:
     def ok(self) -> bool:
         """True when the frame went out (and, for acknowledged unicast, was acknowledged)."""
         return self.status == TxStatus.SUCCESS
+
+
+@dataclass(frozen=True)
+class IrSweep:
+    """One sweep of the 12 phototransistors (ADC counts, receiver 0 on the heading) at model time ``t_us``."""
+
+    readings: np.ndarray
+    t_us: int
 
 
 def open_session(mode: str, endpoint: str) -> zenoh.Session:
@@ -128,6 +143,7 @@ class RadioClient:
         """Close the session with the radio (True when the radio opened it)."""
         self._loop = asyncio.get_running_loop()
         self._rx: asyncio.Queue[RxFrame] = asyncio.Queue()
+        self._ir: asyncio.Queue[IrSweep] = asyncio.Queue()
         self._pending: dict[int, asyncio.Future[Any]] = {}
         self._tokens = itertools.count(1)
         self._up_seq = itertools.count(1)
@@ -166,6 +182,7 @@ class RadioClient:
             pan_id=identity.pan_id,
             channel=identity.channel,
             position=list(identity.position),
+            heading_deg=float(identity.heading_deg),
             instance=client.instance,
             exclusive=exclusive,
         )
@@ -214,6 +231,15 @@ class RadioClient:
     async def receive(self) -> RxFrame:
         """The next received frame."""
         return await self._rx.get()
+
+    async def set_ir_mode(self, mode: str) -> None:
+        """Switch the IR module: ``idle``, ``receive`` or ``transmit``; returns once the hub has it."""
+        token = next(self._tokens)
+        await self._request(token, wire.SetIrMode(token=token, mode=mode))
+
+    async def ir_sample(self) -> IrSweep:
+        """The next sweep of the 12 phototransistors (arrives only while receiving and something shines)."""
+        return await self._ir.get()
 
     def __aiter__(self) -> RadioClient:
         return self
@@ -265,6 +291,7 @@ class RadioClient:
             pan_id=attached.pan_id,
             channel=attached.channel,
             position=(attached.position[0], attached.position[1]),
+            heading_deg=attached.heading_deg,
         )
 
     def _put(self, msg: wire.Message) -> None:
@@ -303,6 +330,8 @@ class RadioClient:
         self._down_seq = max(self._down_seq, msg.n)
         if isinstance(msg, wire.Received):
             self._on_received(msg)
+        elif isinstance(msg, wire.IrSample):
+            self._on_ir(msg)
         elif isinstance(msg, (wire.TxDone, wire.Attached)):
             self._resolve(msg.token, msg)
         elif isinstance(msg, wire.Error):
@@ -320,6 +349,12 @@ class RadioClient:
             self.malformed += 1
             return
         self._rx.put_nowait(RxFrame(frame, msg.rssi_dbm, msg.lqi, msg.start_us, msg.end_us, msg.submitted_us))
+
+    def _on_ir(self, msg: wire.IrSample) -> None:
+        if len(msg.readings) != 4 * IR_RECEIVERS:
+            self.malformed += 1
+            return
+        self._ir.put_nowait(IrSweep(np.frombuffer(msg.readings, dtype="<f4").astype(float), msg.t_us))
 
     def _resolve(self, token: int, msg: wire.Message) -> None:
         fut = self._pending.get(token)

@@ -50,6 +50,7 @@ class Attach(Message):
     pan_id: int = 0
     channel: int = 11
     position: list[float] = field(default_factory=lambda: [0.0, 0.0])
+    heading_deg: float = 0.0
     instance: str = ""
     """The node's liveliness instance: only that token's disappearance detaches this attachment."""
     exclusive: bool = False
@@ -66,6 +67,7 @@ class Configure(Message):
     short_addr: int | None = None
     channel: int | None = None
     position: list[float] | None = None
+    heading_deg: float | None = None
 
 
 @dataclass
@@ -95,6 +97,7 @@ class Attached(Message):
     pan_id: int = 0
     channel: int = 11
     position: list[float] = field(default_factory=lambda: [0.0, 0.0])
+    heading_deg: float = 0.0
     now_us: int = 0
 
 
@@ -134,8 +137,27 @@ class Error(Message):
     reason: str = ""
 
 
+@dataclass
+class SetIrMode(Message):
+    """Node -> hub: switch the IR module to ``idle``, ``receive`` or ``transmit`` (answered by Attached)."""
+
+    TYPE: ClassVar[str] = "set_ir_mode"
+    token: int = 0
+    mode: str = "idle"
+
+
+@dataclass
+class IrSample(Message):
+    """Hub -> node: one sweep of the 12 phototransistors, ADC counts as little-endian float32."""
+
+    TYPE: ClassVar[str] = "ir_sample"
+    readings: bytes = b""
+    t_us: int = 0
+
+
 _TYPES: dict[str, type[Message]] = {
-    cls.TYPE: cls for cls in (Attach, Configure, Transmit, Detach, Attached, Received, TxDone, Error)
+    cls.TYPE: cls
+    for cls in (Attach, Configure, Transmit, Detach, SetIrMode, Attached, Received, TxDone, Error, IrSample)
 }
 
 

@@ -27,7 +27,8 @@ class Air:
         self.keys = Keys(self.world)
         self.endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
         self.sup = Supervisor(tmp / "logs")
-        config_file = tmp / "medium.json"
+        config_file = tmp / "hub.json"
+
         config_file.write_text(json.dumps(config))
         self.sup.spawn(
             "hub",

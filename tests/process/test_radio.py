@@ -160,7 +160,6 @@ def test_robots_started_with_id_auto_claim_distinct_ids(make_air):
     assert air.stats()["hub"]["transport_gaps"] == 0  # nor did it disturb robot 1's message numbering
 
 
-
 def test_stats_command_shows_every_node_and_channel(make_air):
     import json
     import subprocess
