@@ -56,6 +56,16 @@ def bench_ir(args: argparse.Namespace) -> int:
     heading = getattr(args, "heading", 0.0)
     started = time.monotonic()
     results = run_experiment(args.runs, args.seed, heading, IrConfig())
+    if getattr(args, "wire", False):
+        from cli.bench_token import run_wire_benches
+
+        low, high = args.members
+        try:
+            results["over_the_wire"] = run_wire_benches(args.seed, out, args.wire_seconds, range(low, high + 1))
+        except (RuntimeError, KeyboardInterrupt) as err:  # BenchFailed is a RuntimeError
+            print(f"petswarm bench ir: the over-the-wire runs failed: {err}", file=sys.stderr)
+            return 1
+
     results["settings"]["elapsed_s"] = round(time.monotonic() - started, 3)
     write_results(results, out)
     report(results, args.json)
@@ -237,6 +247,11 @@ def table(results: dict[str, Any]) -> list[str]:
     lines.append(f"{'overall':>9}" + "".join(_cells(methods[m]["overall"]) for m in METHODS))
     missed = {m: methods[m]["overall"]["no_signal"] for m in METHODS}
     lines.append("RMSE of distance (cm) and direction (degrees); sweeps without an estimate: " + str(missed))
+    wire = results.get("over_the_wire")
+    if wire:
+        from cli.bench_token import wire_lines
+
+        lines += wire_lines(wire["wire"], wire["token_cycle"])
     return lines
 
 
@@ -265,6 +280,31 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--out", default="bench-results", help="directory for JSON and plots (default %(default)s)")
     parser.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
+    parser.add_argument(
+        "--no-wire",
+        dest="wire",
+        action="store_false",
+        help="skip the runs through real hub and robot processes (over the wire, token cycle)",
+    )
+    parser.add_argument(
+        "--wire-seconds",
+        type=bounded(float, 1, 600),
+        default=6.0,
+        help="seconds each over-the-wire swarm runs (default 6)",
+    )
+    parser.add_argument(
+        "--members", type=_members, default=(2, 10), help="swarm sizes of the token-cycle run, LOW-HIGH (default 2-10)"
+    )
+
+
+def _members(text: str) -> tuple[int, int]:
+    try:
+        low, high = (int(p) for p in text.split("-"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a range LOW-HIGH such as 2-10") from None
+    if not 2 <= low <= high <= 32:
+        raise argparse.ArgumentTypeError("swarm sizes must satisfy 2 <= LOW <= HIGH <= 32")
+    return low, high
 
 
 if __name__ == "__main__":

@@ -23,7 +23,7 @@ import json
 import os
 import signal
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -34,7 +34,7 @@ from cli.processes import Supervisor
 from petswarm import control
 from petswarm.exchange import StepTiming
 from petswarm.formation import PROTOCOLS, FormationConfig
-from radio_hub.interface import HubUnavailable, RadioError
+from radio_hub.interface import HubUnavailable, RadioError, query_hub
 
 MAX_SLAVES = 14
 """Robots 2..15 stand within 6.7 m of the master on the default grid: inside the default -70 dBm region."""
@@ -50,6 +50,9 @@ SETTLE_TIMEOUT_S = 5.0
 """A member that missed the disperse leaves on its own after 2 s without a roster; allow for that."""
 SETTLE_POLL_S = 0.05
 PROGRESS_EVERY = 10
+AIR_MARGIN_S = 0.05
+"""Air log kept for an incomplete or retried organization or dispersal: its command time plus this."""
+MAC_COUNTERS = ("mac_retries", "no_ack", "channel_access_failures", "collided", "lost")
 
 
 def slave_counts(text: str) -> list[int]:
@@ -88,6 +91,8 @@ class Swarm:
     slaves: int
     names: list[str]
     """Child names: the hub first, then the robots."""
+    counters: dict[str, dict[str, int]] = field(default_factory=dict)
+    """The robots' MAC counters at the hub when the current organize or disperse began."""
 
     @property
     def robot_ids(self) -> range:
@@ -100,6 +105,14 @@ class Swarm:
             return control.command(self.hub.session, self.hub.keys, rid, cmd, timeout, **args)
         except HubUnavailable as err:
             return {"error": str(err)}
+
+    def snapshot(self) -> None:
+        """Remember the robots' MAC counters, to tell what one organize or disperse cost."""
+        try:
+            nodes = self.hub.stats()["nodes"]
+        except HubUnavailable:
+            nodes = {}
+        self.counters = {name: {k: node.get(k, 0) for k in MAC_COUNTERS} for name, node in nodes.items()}
 
 
 def robot_argv(rid: int, hub: HubRun, args: argparse.Namespace) -> list[str]:
@@ -162,14 +175,15 @@ def run_series(sup: Supervisor, swarm: Swarm, args: argparse.Namespace) -> list[
 
 
 def so_far(records: list[dict[str, Any]], protocols: tuple[str, ...]) -> str:
-    """Mean organizing time, organizations with retries and failures per protocol, for progress lines."""
+    """Mean organizing time (complete organizations), retried, incomplete and failed, for progress lines."""
     parts = []
     for protocol in protocols:
         mine = [r for r in records if r["protocol"] == protocol]
         ok = [r for r in mine if r["ok"]]
-        mean = sum(r["organize_time_s"] for r in ok) / len(ok) * 1000 if ok else float("nan")
+        times = [r["organize_time_s"] for r in ok if r["complete"]]
+        mean = sum(times) / len(times) * 1000 if times else float("nan")
         retried = sum(1 for r in ok if r["retries"])
-        incomplete = sum(1 for r in ok if not r["complete"])
+        incomplete = len(ok) - len(times)
         parts.append(
             f"{protocol}: mean {mean:.1f} ms, retried {retried}, incomplete {incomplete}, failed {len(mine) - len(ok)}"
         )
@@ -182,6 +196,7 @@ def so_far(records: list[dict[str, Any]], protocols: tuple[str, ...]) -> str:
 def organize_once(swarm: Swarm, protocol: str, index: int) -> dict[str, Any]:
     """Organize a swarm of n, disperse it, wait until every robot is back; one raw record."""
     record: dict[str, Any] = {"slaves": swarm.slaves, "protocol": protocol, "run": index}
+    swarm.snapshot()
     t0 = time.monotonic()
     answer = swarm.command(MASTER, "organize", ORGANIZE_TIMEOUT_S, count=swarm.slaves, protocol=protocol)
     record["command_s"] = round(time.monotonic() - t0, 6)
@@ -189,6 +204,8 @@ def organize_once(swarm: Swarm, protocol: str, index: int) -> dict[str, Any]:
         record.update(ok=False, complete=False, error=answer["error"])
     else:
         record.update(ok=True, complete=len(answer["members"]) == swarm.slaves, **organization_figures(answer))
+        if not record["complete"] or record["retries"]:
+            record["evidence"] = evidence(swarm, record["command_s"] + AIR_MARGIN_S)
     record["dispersal"] = disperse(swarm) if answer.get("members") else None
     time.sleep(PAUSE_S)
     record["settle"] = settle(swarm)
@@ -197,21 +214,40 @@ def organize_once(swarm: Swarm, protocol: str, index: int) -> dict[str, Any]:
 
 def organization_figures(answer: dict[str, Any]) -> dict[str, Any]:
     """The figures the master returns that the bench keeps."""
-    keys = ("session", "organize_time_s", "retries", "step_retries", "members", "missing", "available", "refused")
+    keys = ("session", "organize_time_s", "retries", "step_retries", "candidates", "available", "members")
+    keys += ("missing", "refused")
     return {k: answer.get(k) for k in keys}
 
 
+def evidence(swarm: Swarm, seconds: float) -> dict[str, Any]:
+    """For an odd organize or disperse: the hub's transmissions that ended in the last ``seconds`` of model
+    time, and what each robot's MAC counters gained since ``swarm.snapshot()``."""
+    try:
+        stats = swarm.hub.stats()
+        log = query_hub(swarm.hub.session, swarm.hub.keys.air, timeout=5.0)["transmissions"]
+    except HubUnavailable as err:
+        return {"error": str(err)}
+    gained = {}
+    for name, node in stats["nodes"].items():
+        before = swarm.counters.get(name, {})
+        delta = {k: node.get(k, 0) - before.get(k, 0) for k in MAC_COUNTERS}
+        if any(delta.values()):
+            gained[name] = {k: v for k, v in delta.items() if v}
+    since_us = stats["now_us"] - seconds * 1e6
+    return {"mac": gained, "air": [tx for tx in log if tx["end_us"] >= since_us]}
+
+
 def disperse(swarm: Swarm) -> dict[str, Any]:
-    """End the swarm; its figures or the error."""
+    """End the swarm; its figures or the error (and the air, when it needed a retry)."""
+    swarm.snapshot()
+    t0 = time.monotonic()
     answer = swarm.command(MASTER, "disperse", ORGANIZE_TIMEOUT_S)
     if "error" in answer:
         return {"ok": False, "error": answer["error"]}
-    return {
-        "ok": True,
-        "disperse_time_s": answer["disperse_time_s"],
-        "retries": answer["retries"],
-        "unconfirmed": answer["unconfirmed"],
-    }
+    figures = {k: answer[k] for k in ("disperse_time_s", "retries", "unconfirmed")}
+    if answer["retries"]:
+        figures["evidence"] = evidence(swarm, time.monotonic() - t0 + AIR_MARGIN_S)
+    return {"ok": True, **figures}
 
 
 def settle(swarm: Swarm) -> dict[str, Any]:
@@ -238,15 +274,15 @@ def misplaced(swarm: Swarm, rid: int) -> str:
 
 
 def hub_figures(stats: dict[str, Any]) -> dict[str, Any]:
-    """Channel counters over the whole slave count (every organization and dispersal) and the hub's lag."""
+    """Counters summed over the robots for the whole slave count (every organization and dispersal)."""
     totals: dict[str, int] = {}
-    for channel in stats["channels"].values():
-        for name, value in channel.items():
+    for node in stats["nodes"].values():
+        for name, value in node.items():
             if isinstance(value, int) and not isinstance(value, bool):
                 totals[name] = totals.get(name, 0) + value
     hub = stats["hub"]
     lag = {k: hub[k] for k in ("lag_p50_us", "lag_p99_us", "transport_gaps", "malformed")}
-    return {"channels": totals, "hub": lag}
+    return {"robots": totals, "hub": lag}
 
 
 def save_events(swarm: Swarm, folder: Path) -> None:

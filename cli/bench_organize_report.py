@@ -11,6 +11,9 @@ from typing import Any
 import numpy as np
 
 STEPS = ("scan", "query", "notice")
+BROADCAST = 0xFFFF
+MASTER = 1
+MAX_ODD_LINES = 30
 
 
 # == summary ==========================================================================================
@@ -37,6 +40,7 @@ def summary_row(records: list[dict[str, Any]], protocol: str, slaves: int) -> di
         "runs": len(records),
         "failed": len(records) - len(ok),
         "incomplete": len(ok) - len(complete),
+        "scan_missed": sum(1 for r in ok if len(r["candidates"] or ()) < slaves),
         "time_ms": stats_ms([r["organize_time_s"] * 1000 for r in complete]),
         "min_no_retry_ms": min(no_retry) if no_retry else math.nan,
         "retry_probability": sum(1 for r in ok if r["retries"]) / len(ok) if ok else math.nan,
@@ -160,6 +164,8 @@ def table(results: dict[str, Any]) -> list[str]:
         *_retry_lines(results["summary"], s["protocols"], s["slaves"]),
         "",
         *_hub_lines(results["hub"]),
+        "",
+        *odd_lines(results["runs"]),
         f"wall time {results['elapsed_s']:.0f} s; raw figures of every run in {results['files']['json']}",
     ]
 
@@ -238,16 +244,101 @@ def _retry_lines(summary: list[dict[str, Any]], protocols: list[str], counts: li
 
 
 def _hub_lines(hub: dict[str, Any]) -> list[str]:
-    lines = ["hub counters per slave count (both protocols, organizing and dispersing)"]
+    lines = ["hub counters per slave count, summed over the robots (both protocols, organizing and dispersing)"]
     lines.append(
         f"{'slaves':<7}{'sent':>7}{'delivered':>10}{'collided':>9}{'lost':>6}{'mac rtr':>8}{'no ack':>7}"
         f"{'cca fail':>9}{'lag p50':>9}{'lag p99':>9}{'gaps':>6}"
     )
     for n, h in hub.items():
-        c, lag = h["channels"], h["hub"]
+        c, lag = h["robots"], h["hub"]
         lines.append(
             f"{n:<7}{c.get('sent', 0):>7}{c.get('delivered', 0):>10}{c.get('collided', 0):>9}{c.get('lost', 0):>6}"
             f"{c.get('mac_retries', 0):>8}{c.get('no_ack', 0):>7}{c.get('channel_access_failures', 0):>9}"
             f"{lag['lag_p50_us']:>7.0f}us{lag['lag_p99_us']:>7.0f}us{lag['transport_gaps']:>6}"
         )
     return lines
+
+
+# == odd runs =========================================================================================
+
+
+def odd_lines(records: list[dict[str, Any]]) -> list[str]:
+    """One line per failed, incomplete, retried or unsettled organization, with what the hub saw."""
+    lines = []
+    for r in records:
+        tag = f"{r['protocol']}, {r['slaves']} slave(s), run {r['run']}"
+        if not r["ok"]:
+            lines.append(f"{tag}: failed: {r['error']}")
+        elif not r["complete"]:
+            lines.append(f"{tag}: incomplete, members {r['members']}: {why_incomplete(r)}")
+        elif r["retries"]:
+            steps = ", ".join(f"{k} {v}" for k, v in r["step_retries"].items() if v)
+            lines.append(f"{tag}: retried ({steps}); gave up or lost: {mac_failures(r.get('evidence') or {})}")
+        dispersal = r["dispersal"]
+        if dispersal and not dispersal["ok"]:
+            lines.append(f"{tag}: disperse failed: {dispersal['error']}")
+        elif dispersal and dispersal["retries"]:
+            found = dispersal.get("evidence") or {}
+            lines.append(f"{tag}: disperse retried {dispersal['retries']}x; gave up or lost: {mac_failures(found)}")
+        if not r["settle"]["ok"]:
+            lines.append(f"{tag}: not back after {r['settle']['settle_s']:g} s: {r['settle']['stuck']}")
+    if not lines:
+        return ["odd organizations: none (no failure or retry, every organization complete, every robot back)"]
+    more = [f"... and {len(lines) - MAX_ODD_LINES} more in the JSON"] if len(lines) > MAX_ODD_LINES else []
+    head = "odd organizations (failed, incomplete, retried; dispersals retried; robots not back)"
+    return [head, *lines[:MAX_ODD_LINES], *more]
+
+
+def mac_failures(found: dict[str, Any]) -> str:
+    """Robots whose MAC gave up on a frame (no ACK after every retry, no clear channel) or lost a reception
+    (a lost broadcast is never retried by the MAC)."""
+    parts, collided = [], []
+    for name, gained in sorted(found.get("mac", {}).items()):
+        failed = {k: v for k, v in gained.items() if k in ("no_ack", "channel_access_failures", "lost")}
+        if failed:
+            parts.append(f"{name} " + ", ".join(f"{k} {v}" for k, v in failed.items()))
+        if gained.get("collided"):
+            collided.append(f"{name} {gained['collided']}")
+    if parts:
+        return "; ".join(parts)
+    return "none; receptions collided at " + ", ".join(collided) if collided else "none"
+
+
+def why_incomplete(r: dict[str, Any]) -> str:
+    """Which robots the master lost at which step, and for those it never heard, what the air log shows."""
+    expected = set(range(MASTER + 1, r["slaves"] + 2))
+    candidates, available = set(r["candidates"] or ()), set(r["available"] or ())
+    found = r.get("evidence") or {}
+    parts = [f"robot {rid} {scan_fate(found, rid)}" for rid in sorted(expected - candidates)]
+    if candidates - available:
+        parts.append(f"no join answer from {sorted(candidates - available)} (refused: {r['refused'] or 'none'})")
+    if r["missing"]:
+        parts.append(f"chosen but never confirmed: {r['missing']}")
+    return "; ".join(parts) or "unexplained"
+
+
+def scan_fate(found: dict[str, Any], rid: int) -> str:
+    """What became of the scan broadcast at robot ``rid`` and of its answers, from the hub's air log."""
+    air = found.get("air", [])
+    mac = found.get("mac", {}).get(f"robot-{rid}", {})
+    counted = f" [its MAC over the organization: {', '.join(f'{k} {v}' for k, v in mac.items()) or 'nothing'}]"
+    return _scan_fate(air, rid) + counted
+
+
+def _scan_fate(air: list[dict[str, Any]], rid: int) -> str:
+    sweeps = [tx for tx in air if tx["src"] == MASTER and tx["dst"] == BROADCAST and tx["type"] == "data"]
+    if not sweeps:
+        return "never answered the scan (no air log)"
+    scan = sweeps[0]
+    heard = scan["outcomes"].get(f"robot-{rid}", "out of range")
+    if heard != "delivered":
+        return f"never answered the scan: the scan broadcast (no ACK) was {heard} at it"
+    end = sweeps[1]["start_us"] if len(sweeps) > 1 else math.inf
+    replies = [
+        tx["outcomes"].get(f"robot-{MASTER}", "?")
+        for tx in air
+        if tx["src"] == rid and tx["dst"] == MASTER and scan["end_us"] <= tx["start_us"] < end
+    ]
+    if not replies:
+        return "heard the scan, but no reply of its went on the air before the query"
+    return f"heard the scan; its reply reached the master as {'/'.join(replies)} ({len(replies)} attempts)"

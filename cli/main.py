@@ -97,7 +97,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="relative location from IR: equations (1)-(3) or the least-squares fit (default lsq)",
     )
     robot.add_argument(
-        "--ir-slot", type=bounded(float, 0.02, 5), default=0.1, help="seconds each token holder shines (default 0.1)"
+        "--ir-slot", type=bounded(float, 0.01, 5), default=0.1, help="seconds each token holder shines (default 0.1)"
     )
     robot.add_argument(
         "--protocol",

@@ -32,6 +32,9 @@ PROTOCOLS = ("paper", "slotted")
 MAX_MEMBERS = 32
 """Members of one swarm besides the master: the roster lists them all in one frame."""
 MAX_LISTED = 30
+ANSWER_ATTEMPTS = 3
+"""Sends of one answer when the MAC reports a failure (channel access failure or no ACK)."""
+
 """Robots a joining query can list as pending in one frame."""
 
 _FREE = frozenset(int(s) for s in (RobotState.WAITING, *DRIVING))
@@ -425,7 +428,14 @@ class NetworkFormation:
     async def _answer(self, incoming: Incoming, reply: m.SwarmMessage, delay_s: float) -> None:
         if delay_s:
             await asyncio.sleep(delay_s)
-        await self.rf.send(incoming.sender, reply, dst_pan=incoming.rx.frame.src_pan)
+        for attempt in range(ANSWER_ATTEMPTS):
+            result = await self.rf.send(incoming.sender, reply, dst_pan=incoming.rx.frame.src_pan)
+            if result.ok:
+                return
+            # the MAC gave up (a crowded channel: many answer one broadcast); an open step such as the
+            # scan is not retried by the master for us, so try again a little later, at a random moment
+            self.log.record("answer_retry", type=type(reply).__name__, status=result.status.value, attempt=attempt)
+            await asyncio.sleep(float(self.rng.uniform(0.002, 0.02)))
 
     def _user_now(self) -> int:
         return self.user if self.sequence.user_connected else 0

@@ -303,6 +303,14 @@ class IrTokenSchedule:
             return
         self.locations.record_fix(holder, fix)
         self.fixes += 1
+        self.log.record(
+            "ir_fix",
+            holder=holder,
+            round=self.round,
+            sweeps=sweeps,
+            bearing_deg=round(math.degrees(fix.bearing_rad), 4),
+            distance_m=round(fix.distance_m, 5),
+        )
 
     # -- a lost token -------------------------------------------------------------------------------
 

@@ -309,7 +309,7 @@ def test_lsq_beats_the_paper_in_distance_and_bearing_rmse_under_default_noise():
 def test_bench_ir_prints_the_table_and_writes_json_and_plot(tmp_path, capsys):
     from cli.main import main
 
-    assert main(["bench", "ir", "--runs", "5", "--seed", "3", "--out", str(tmp_path)]) == 0
+    assert main(["bench", "ir", "--runs", "5", "--seed", "3", "--out", str(tmp_path), "--no-wire"]) == 0
     out = capsys.readouterr().out
     assert "overall" in out and "lsq dir deg" in out
     results = json.loads((tmp_path / "bench_ir.json").read_text())
