@@ -9,7 +9,6 @@ step ended) is counted and otherwise ignored, so retries are idempotent.
 from __future__ import annotations
 
 import asyncio
-import contextlib
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 
@@ -24,10 +23,14 @@ class StepTiming:
 
     deadline_s: float = 0.1
     max_retries: int = 5
+    quiet_s: float | None = None
+    """Open steps only (anyone may answer): end early once answers have come and none for this long."""
 
     def __post_init__(self) -> None:
         if self.deadline_s <= 0 or self.max_retries < 0:
             raise ValueError("a step needs a positive deadline and max_retries >= 0")
+        if self.quiet_s is not None and self.quiet_s <= 0:
+            raise ValueError("a quiet gap must be positive")
 
 
 @dataclass
@@ -72,8 +75,8 @@ class MessageProcessingManager:
                     self.duplicates += 1
                 else:
                     col.responses[incoming.sender] = incoming
-                    if col.expected is not None and col.expected <= col.responses.keys():
-                        col.complete.set()
+                    if col.expected is None or col.expected <= col.responses.keys():
+                        col.complete.set()  # an open step takes it as "something arrived"
                 return True
         return False
 
@@ -111,9 +114,7 @@ class MessageProcessingManager:
                     )
                 result.attempts += 1
                 await send(missing)
-                with contextlib.suppress(TimeoutError):
-                    async with asyncio.timeout(timing.deadline_s):
-                        await col.complete.wait()
+                await self._collect(col, timing)
                 if self._step_done(col):
                     break
         finally:
@@ -122,7 +123,28 @@ class MessageProcessingManager:
         return result
 
     @staticmethod
+    async def _collect(col: _Collector, timing: StepTiming) -> None:
+        """Wait for the answers of one attempt: until all expected came, or the deadline; an open step
+        with a quiet gap also ends once answers stop coming."""
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + timing.deadline_s
+        while (remaining := deadline - loop.time()) > 0:
+            quiet = col.expected is None and timing.quiet_s is not None and col.responses
+            if col.expected is None:
+                col.complete.clear()
+            try:
+                async with asyncio.timeout(min(remaining, timing.quiet_s) if quiet else remaining):  # type: ignore[type-var]
+                    await col.complete.wait()
+            except TimeoutError:
+                if quiet:
+                    return
+                continue
+            if col.expected is not None:
+                return
+
+    @staticmethod
     def _step_done(col: _Collector) -> bool:
+
         if col.expected is None:
             return bool(col.responses)
         return col.expected <= col.responses.keys()

@@ -253,11 +253,14 @@ class NetworkFormation:
             await self.rf.send(addr, m.NotParticipating(session), dst_pan=BROADCAST)
 
     def _timing(self, slot: int, responders: int) -> StepTiming:
-        # the slotted protocol's deadline grows with the slots it asked responders to use
+        # the slotted protocol's deadline grows with the slots it asked responders to use; since every
+        # answer has a slot, an open step (the scan) can end once all eight slots and a margin have
+        # passed without a new answer, instead of always waiting out the deadline
         base = self.config.step
         if not slot:
             return base
-        return StepTiming(base.deadline_s + min(responders, 8) * slot / 1000.0, base.max_retries)
+        slots_s = min(responders, 8) * slot / 1000.0
+        return StepTiming(base.deadline_s + slots_s, base.max_retries, quiet_s=8 * slot / 1000.0 + 0.01)
 
     async def _announce_roster(self) -> None:
         while self.swarm is not None and self.sequence.state == RobotState.MASTER_DRIVING:

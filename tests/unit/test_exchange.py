@@ -71,3 +71,18 @@ async def test_open_step_collects_until_the_deadline_and_retries_only_if_nobody_
 
     result = await mpm.step("scan", 1, (Joined,), send, None, TIMING)
     assert calls == [None, None] and set(result.responses) == {5} and result.retries == 1
+
+
+async def test_open_step_with_a_quiet_gap_ends_once_answers_stop():
+    mpm = MessageProcessingManager(EventLog())
+
+    async def send(missing):
+        mpm.offer(_incoming(5, Joined(1, 1)))
+        asyncio.get_running_loop().call_later(0.03, mpm.offer, _incoming(6, Joined(1, 2)))
+
+    loop = asyncio.get_running_loop()
+    started = loop.time()
+    result = await mpm.step("scan", 1, (Joined,), send, None, StepTiming(2.0, 0, quiet_s=0.06))
+    elapsed = loop.time() - started
+    assert set(result.responses) == {5, 6}  # the second answer came inside the gap and was waited for
+    assert 0.08 <= elapsed < 1.0  # ended a quiet gap after the last answer, long before the deadline
