@@ -22,7 +22,6 @@ import contextlib
 import json
 import math
 import os
-import signal
 import sys
 import time
 from collections.abc import Iterator
@@ -46,7 +45,7 @@ from cli.bench_nodes import (
     ping_rounds,
 )
 from cli.bench_report import report, write_results
-from cli.processes import Supervisor, free_tcp_port
+from cli.processes import Supervisor, free_tcp_port, run_supervised
 from radio_hub.config import airtime_us
 from radio_hub.interface import HubUnavailable, Keys, RadioError, open_session, query_hub
 
@@ -379,29 +378,12 @@ def bench_hub(args: argparse.Namespace) -> int:
     """``petswarm bench hub``: run both phases, print the figures, write JSON and a plot."""
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    sup = Supervisor(out / "logs")
-    previous = signal.signal(signal.SIGTERM, _raise_interrupt)
-    started = time.monotonic()
-    try:
-        results = run_phases(sup, args, out)
-    except (BenchFailed, HubUnavailable, RadioError) as err:
-        progress(f"failed: {err}")
-        return 1
-    except KeyboardInterrupt:
-        progress("interrupted; stopping every process")
-        return 130
-    finally:
-        codes = sup.stop_all()
-        signal.signal(signal.SIGTERM, previous)
-        progress(f"stopped {len(codes)} processes in total; logs in {out / 'logs'}")
-    results["elapsed_s"] = time.monotonic() - started
+    results = run_supervised(out, lambda sup: run_phases(sup, args, out), (BenchFailed, HubUnavailable, RadioError))
+    if isinstance(results, int):
+        return results
     write_results(results, out)
     report(results, args.json)
     return 0
-
-
-def _raise_interrupt(signum: int, frame: Any) -> None:
-    raise KeyboardInterrupt
 
 
 def run_phases(sup: Supervisor, args: argparse.Namespace, out: Path) -> dict[str, Any]:

@@ -21,7 +21,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import signal
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,7 +29,7 @@ from typing import Any
 from cli.bench_hub import HubRun, check_alive, progress, start_hub, stopping, wait_attached
 from cli.bench_nodes import BenchFailed
 from cli.bench_organize_report import report, summarise, write_results
-from cli.processes import Supervisor
+from cli.processes import Supervisor, run_supervised
 from petswarm import control
 from petswarm.exchange import StepTiming
 from petswarm.formation import PROTOCOLS, FormationConfig
@@ -354,26 +353,9 @@ def bench_organize(args: argparse.Namespace) -> int:
     """``petswarm bench organize``: measure every slave count, print the table, write JSON and a plot."""
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    sup = Supervisor(out / "logs")
-    previous = signal.signal(signal.SIGTERM, _raise_interrupt)
-    started = time.monotonic()
-    try:
-        results = run_counts(sup, args, out)
-    except (BenchFailed, HubUnavailable, RadioError) as err:
-        progress(f"failed: {err}")
-        return 1
-    except KeyboardInterrupt:
-        progress("interrupted; stopping every process")
-        return 130
-    finally:
-        codes = sup.stop_all()
-        signal.signal(signal.SIGTERM, previous)
-        progress(f"stopped {len(codes)} processes in total; logs in {out / 'logs'}")
-    results["elapsed_s"] = time.monotonic() - started
+    results = run_supervised(out, lambda sup: run_counts(sup, args, out), (BenchFailed, HubUnavailable, RadioError))
+    if isinstance(results, int):
+        return results
     write_results(results, out)
     report(results, args.json)
     return 0
-
-
-def _raise_interrupt(signum: int, frame: Any) -> None:
-    raise KeyboardInterrupt

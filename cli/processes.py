@@ -10,8 +10,9 @@ import socket
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import IO
+from typing import IO, Any
 
 _PR_SET_PDEATHSIG = 1
 
@@ -94,3 +95,39 @@ class Supervisor:
         codes.update(self.stop(robots, timeout))
         codes.update(self.stop([n for n in order if n == "hub"], timeout))
         return codes
+
+
+def raise_interrupt(signum: int, frame: Any) -> None:
+    """A SIGTERM handler that unwinds like Ctrl-C, so ``finally`` blocks stop the children."""
+    raise KeyboardInterrupt
+
+
+def run_supervised(
+    out: Path, body: Callable[[Supervisor], dict[str, Any]], failures: tuple[type[Exception], ...]
+) -> dict[str, Any] | int:
+    """Run a bench's ``body`` with a Supervisor logging to ``out/logs``; every child is stopped at the end.
+
+    Returns the body's results with ``elapsed_s`` added, or an exit code: 1 on one of ``failures``,
+    130 on Ctrl-C or SIGTERM.
+    """
+    sup = Supervisor(out / "logs")
+    previous = signal.signal(signal.SIGTERM, raise_interrupt)
+    started = time.monotonic()
+    try:
+        results = body(sup)
+    except failures as err:
+        _progress(f"failed: {err}")
+        return 1
+    except KeyboardInterrupt:
+        _progress("interrupted; stopping every process")
+        return 130
+    finally:
+        codes = sup.stop_all()
+        signal.signal(signal.SIGTERM, previous)
+        _progress(f"stopped {len(codes)} processes in total; logs in {out / 'logs'}")
+    results["elapsed_s"] = time.monotonic() - started
+    return results
+
+
+def _progress(text: str) -> None:
+    print(f"[bench] {text}", file=sys.stderr, flush=True)

@@ -14,7 +14,7 @@ from typing import Any
 
 import zenoh
 
-from cli.processes import Supervisor, free_tcp_port
+from cli.processes import Supervisor, free_tcp_port, raise_interrupt
 from cli.swarm import describe
 from petswarm import control
 from petswarm.robot import DEFAULT_PAN
@@ -54,7 +54,7 @@ def run(opts: RunOptions) -> int:
     keys = Keys(world)
     log_dir = Path(tempfile.mkdtemp(prefix=f"petswarm-{world}-"))
     sup = Supervisor(log_dir)
-    previous = signal.signal(signal.SIGTERM, _raise_interrupt)
+    previous = signal.signal(signal.SIGTERM, raise_interrupt)
     session: zenoh.Session | None = None
     try:
         progress(f"world {world}, seed {opts.seed}, hub on {endpoint}, logs in {log_dir}")
@@ -90,10 +90,6 @@ def run(opts: RunOptions) -> int:
         progress(f"stopped {len(codes)} processes")
     _print(summary, opts.as_json)
     return 0 if summary["ok"] else 1
-
-
-def _raise_interrupt(signum: int, frame: Any) -> None:
-    raise KeyboardInterrupt
 
 
 def _check_alive(sup: Supervisor) -> None:
