@@ -100,6 +100,19 @@ def build_parser() -> argparse.ArgumentParser:
         "--ir-slot", type=bounded(float, 0.01, 5), default=0.1, help="seconds each token holder shines (default 0.1)"
     )
     robot.add_argument(
+        "--ir-deadline",
+        type=bounded(float, 0.005, 10),
+        default=0.05,
+        help="seconds the token holder waits for the start sign's and the token's answers (default 0.05)",
+    )
+    robot.add_argument(
+        "--ir-retries",
+        type=bounded(int, 0, 50),
+        default=3,
+        help="retries of those two steps before the holder moves on without the missing (default 3)",
+    )
+
+    robot.add_argument(
         "--protocol",
         choices=("paper", "slotted"),
         default="paper",
@@ -257,7 +270,9 @@ def _robot(args: argparse.Namespace) -> int:
         seed=args.seed,
         user=args.user,
         formation=formation,
-        token=TokenConfig(slot_s=args.ir_slot, estimator=args.ir_estimator),
+        token=TokenConfig(
+            slot_s=args.ir_slot, step=StepTiming(args.ir_deadline, args.ir_retries), estimator=args.ir_estimator
+        ),
         heading_deg=args.heading,
     )
     return asyncio.run(run_robot(config))

@@ -126,10 +126,15 @@ class TokenConfig:
     slot_s: float = 0.1
     """How long each holder shines: ten sweeps at the module's 100 Hz."""
     step: StepTiming = field(default_factory=lambda: StepTiming(0.05, 3))
-    regen_timeout_s: float = 1.5
-    """Silence after which the master regenerates a lost token: longer than one whole round with every
-    retry of both steps (0.1 + 2 x 4 x 0.05 = 0.5 s), so a live holder is never overtaken."""
     estimator: str = "lsq"
+
+    @property
+    def regen_timeout_s(self) -> float:
+        """Silence after which the master regenerates a lost token: three times the longest a live
+        holder's round can take (shine, and both steps with every retry): 1.5 s at the defaults."""
+        worst_round = self.slot_s + 2 * (self.step.max_retries + 1) * self.step.deadline_s
+        return 3 * worst_round
+
 
 
 def next_holder(chain: tuple[int, ...], me: int, alive: set[int]) -> int:
