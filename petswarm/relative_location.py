@@ -29,11 +29,15 @@ from typing import Any
 import numpy as np
 
 from petswarm import messages as m
+from petswarm.decisions import reply_delay_s
 from petswarm.exchange import MessageProcessingManager, StepTiming
 from petswarm.ir_estimator import IrEstimate, estimate
 from petswarm.rf import Incoming, RfCommunicationManager
 from petswarm.sequence import EventLog
 from radio_hub.interface import BROADCAST, IrConfig, RadioClient
+
+ANSWER_SLOT_MS = 3
+"""Members answer the holder's start sign and token in slots of this length, in member order."""
 
 
 @dataclass
@@ -134,7 +138,6 @@ class TokenConfig:
         holder's round can take (shine, and both steps with every retry): 1.5 s at the defaults."""
         worst_round = self.slot_s + 2 * (self.step.max_retries + 1) * self.step.deadline_s
         return 3 * worst_round
-
 
 
 def next_holder(chain: tuple[int, ...], me: int, alive: set[int]) -> int:
@@ -289,6 +292,7 @@ class IrTokenSchedule:
             await self.ir.set_mode("receive")
             self.ir.open_window()
             self._window_of = (incoming.sender, msg.round)
+        await asyncio.sleep(self._answer_slot(incoming.sender))
         await self.rf.send(incoming.sender, m.IrStartAck(self.session, msg.round))
         if incoming.sender in self.neighbours:
             centideg = round(self.heading_deg() * 100) % 36000
@@ -297,7 +301,13 @@ class IrTokenSchedule:
     async def _on_token(self, incoming: Incoming, msg: m.Token) -> None:
         if self._window_of == (incoming.sender, msg.round):
             self._measure(incoming.sender)
+        await asyncio.sleep(self._answer_slot(incoming.sender))
         await self.rf.send(incoming.sender, m.TokenAck(self.session, msg.round))
+
+    def _answer_slot(self, holder: int) -> float:
+        # every member answers the holder's broadcast at once otherwise, and their CSMA backoffs collide
+        others = tuple(a for a in self.chain if a != holder)
+        return reply_delay_s(self.me, ANSWER_SLOT_MS, others)
 
     def _measure(self, holder: int) -> None:
         readings, sweeps = self.ir.close_window()
