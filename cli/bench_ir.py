@@ -17,7 +17,6 @@ positions for both estimators, and RMSE against distance) to disk.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 import time
@@ -26,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from cli.bench_output import emit, save
 from petswarm.ir_estimator import METHODS, IrEstimates, estimate_many
 from radio_hub.light import IrConfig, receiver_readings
 
@@ -160,9 +160,7 @@ def _errors(dist_err_cm: np.ndarray, dir_err_deg: np.ndarray, valid: np.ndarray)
 
 def write_results(results: dict[str, Any], out: Path) -> None:
     """``bench_ir.json`` (summary; estimated positions only in the plot) and ``bench_ir.png``."""
-    results["files"] = {"json": str(out / "bench_ir.json"), "png": str(out / "bench_ir.png")}
-    plot(results, out / "bench_ir.png")
-    (out / "bench_ir.json").write_text(json.dumps(_slim(results), indent=2) + "\n")
+    save(results, out, "bench_ir", plot, _slim(results))
 
 
 def _slim(results: dict[str, Any]) -> dict[str, Any]:
@@ -221,11 +219,7 @@ def _plot_rmse(ax: Any, results: dict[str, Any], key: str, label: str) -> None:
 
 def report(results: dict[str, Any], as_json: bool) -> None:
     """The table on stdout; with ``as_json`` the JSON on stdout and the table on stderr."""
-    stream = sys.stderr if as_json else sys.stdout
-    for line in table(results):
-        print(line, file=stream)
-    if as_json:
-        print(json.dumps(_slim(results), indent=2))
+    emit(table(results), _slim(results), as_json)
 
 
 def table(results: dict[str, Any]) -> list[str]:

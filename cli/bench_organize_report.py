@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import json
 import math
-import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from cli.bench_output import emit, save
 
 STEPS = ("scan", "query", "notice")
 BROADCAST = 0xFFFF
@@ -78,9 +78,7 @@ def rows_by(summary: list[dict[str, Any]]) -> dict[tuple[str, int], dict[str, An
 
 def write_results(results: dict[str, Any], out: Path) -> None:
     """``bench_organize.json`` (settings, summary, every run's raw figures) and ``bench_organize.png``."""
-    results["files"] = {"json": str(out / "bench_organize.json"), "png": str(out / "bench_organize.png")}
-    (out / "bench_organize.json").write_text(json.dumps(results, indent=2) + "\n")
-    plot(results, out / "bench_organize.png")
+    save(results, out, "bench_organize", plot)
 
 
 def plot(results: dict[str, Any], path: Path) -> None:
@@ -146,11 +144,7 @@ def _plot_retries(ax: Any, summary: list[dict[str, Any]], protocols: list[str], 
 
 def report(results: dict[str, Any], as_json: bool) -> None:
     """The table on stdout; with ``as_json`` the JSON (without the raw runs) on stdout and the table on stderr."""
-    stream = sys.stderr if as_json else sys.stdout
-    for line in table(results):
-        print(line, file=stream)
-    if as_json:
-        print(json.dumps({k: v for k, v in results.items() if k != "runs"}, indent=2))
+    emit(table(results), {k: v for k, v in results.items() if k != "runs"}, as_json)
 
 
 def table(results: dict[str, Any]) -> list[str]:

@@ -2,21 +2,18 @@
 
 from __future__ import annotations
 
-import json
-import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from cli.bench_output import emit, save
 from radio_hub.config import airtime_us
 
 
 def write_results(results: dict[str, Any], out: Path) -> None:
     """``bench_hub.json`` (with raw samples) and ``bench_hub.png``."""
-    results["files"] = {"json": str(out / "bench_hub.json"), "png": str(out / "bench_hub.png")}
-    (out / "bench_hub.json").write_text(json.dumps(results, indent=2) + "\n")
-    plot(results, out / "bench_hub.png")
+    save(results, out, "bench_hub", plot)
 
 
 def plot(results: dict[str, Any], path: Path) -> None:
@@ -67,12 +64,7 @@ def _plot_throughput(ax: Any, loads: list[dict[str, Any]]) -> None:
 
 def report(results: dict[str, Any], as_json: bool) -> None:
     """The table on stdout; with ``as_json`` the JSON (without raw samples) on stdout and the table on stderr."""
-    stream = sys.stderr if as_json else sys.stdout
-    for line in table(results):
-        print(line, file=stream)
-    if as_json:
-        slim = {**results, "rtt": {k: v for k, v in results["rtt"].items() if k != "samples"}}
-        print(json.dumps(slim, indent=2))
+    emit(table(results), {**results, "rtt": {k: v for k, v in results["rtt"].items() if k != "samples"}}, as_json)
 
 
 def table(results: dict[str, Any]) -> list[str]:
