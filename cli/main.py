@@ -84,6 +84,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=5,
         help="retries of an organizing step before it gives up on the missing (default 5)",
     )
+    robot.add_argument("--record", metavar="FILE", help="append every event to this JSON-lines file as it happens")
     robot.add_argument(
         "--heading",
         type=bounded(float, -360, 360),
@@ -148,6 +149,11 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--world", help="key prefix of the run (default: derived from pid and seed)")
     run.add_argument("--config", help="hub medium config file (see petswarm hub --help)")
     run.add_argument("--json", action="store_true", help="print the summary as JSON on stdout")
+    run.add_argument(
+        "--record",
+        metavar="DIR",
+        help="directory of the run record (default runs/<UTC time>-<seed>): manifest, events, logs, summary",
+    )
     run.add_argument(
         "--organize",
         type=bounded(int, 0, 199),
@@ -274,6 +280,7 @@ def _robot(args: argparse.Namespace) -> int:
             slot_s=args.ir_slot, step=StepTiming(args.ir_deadline, args.ir_retries), estimator=args.ir_estimator
         ),
         heading_deg=args.heading,
+        record=args.record,
     )
     return asyncio.run(run_robot(config))
 
@@ -292,6 +299,7 @@ def _run(args: argparse.Namespace) -> int:
         as_json=args.json,
         organize=args.organize,
         protocol=args.protocol,
+        record_dir=args.record,
     )
     return run(opts)
 

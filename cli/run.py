@@ -6,15 +6,14 @@ import json
 import os
 import signal
 import sys
-import tempfile
 import time
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import zenoh
 
 from cli.processes import Supervisor, free_tcp_port, raise_interrupt
+from cli.records import RunRecord
 from cli.swarm import describe
 from petswarm import control
 from petswarm.robot import DEFAULT_PAN
@@ -36,6 +35,8 @@ class RunOptions:
     organize: int = 0
     """Robot 1 organizes a swarm of this many after the ping phase (0: no swarm)."""
     protocol: str = "paper"
+    record_dir: str | None = None
+    """Where the run record goes (default ``runs/<UTC time>-<seed>``)."""
 
 
 def progress(text: str) -> None:
@@ -52,17 +53,20 @@ def run(opts: RunOptions) -> int:
     world = opts.world or f"run-{os.getpid()}-{opts.seed}"
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     keys = Keys(world)
-    log_dir = Path(tempfile.mkdtemp(prefix=f"petswarm-{world}-"))
-    sup = Supervisor(log_dir)
+    record = RunRecord.create(opts, world, endpoint)
+    sup = Supervisor(record.path / "logs")
     previous = signal.signal(signal.SIGTERM, raise_interrupt)
     session: zenoh.Session | None = None
+    summary: dict[str, Any] = {"ok": False, "problems": ["the run did not finish"], "seed": opts.seed}
     try:
-        progress(f"world {world}, seed {opts.seed}, hub on {endpoint}, logs in {log_dir}")
+        progress(f"world {world}, seed {opts.seed}, hub on {endpoint}, record in {record.path}")
         hub_args = ["hub", "--listen", endpoint, "--world", world, "--seed", str(opts.seed)]
         sup.spawn("hub", hub_args + (["--config", opts.config] if opts.config else []))
         session = _wait_for_hub(sup, endpoint, keys, opts.startup_timeout)
         for rid in range(1, opts.robots + 1):
             robot_args = ["robot", "--id", str(rid), "--hub", endpoint, "--world", world]
+            robot_args += ["--record", str(record.events_of(f"robot-{rid}"))]
+
             if rid == 1 and opts.organize:
                 robot_args += ["--user", "1", "--protocol", opts.protocol]
             sup.spawn(
@@ -77,18 +81,21 @@ def run(opts: RunOptions) -> int:
         summary["ok"] = not summary["problems"]
     except (RunFailed, HubUnavailable) as err:
         progress(f"failed: {err}")
+        summary["problems"] = [f"failed: {err}"]
         return 1
-
     except KeyboardInterrupt:
         progress("interrupted; stopping every process")
+        summary["problems"] = ["interrupted"]
         return 130
     finally:
         if session is not None:
             session.close()
         codes = sup.stop_all()
         signal.signal(signal.SIGTERM, previous)
-        progress(f"stopped {len(codes)} processes")
+        record.finish(summary, codes)
+        progress(f"stopped {len(codes)} processes; record in {record.path}")
     _print(summary, opts.as_json)
+
     return 0 if summary["ok"] else 1
 
 

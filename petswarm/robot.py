@@ -74,6 +74,8 @@ class RobotConfig:
     token: TokenConfig = field(default_factory=TokenConfig)
     heading_deg: float = 0.0
     """Until the world model: the robot's fixed heading."""
+    record: str | None = None
+    """A JSON-lines file that gets every event as it happens (the run record)."""
 
     def identity(self) -> RadioIdentity:
         """The robot's radio at start-up: short address = robot id."""
@@ -98,7 +100,7 @@ class Robot:
         self.config = config
         self.rf = RfCommunicationManager(radio)
         self.rng = np.random.default_rng([config.seed, config.robot_id])
-        self.log = EventLog()
+        self.log = EventLog(sink=open(config.record, "a", encoding="utf-8") if config.record else None)  # noqa: SIM115
         self.sequence = SequenceManager(self.log, RobotState.FOLLOWING if config.user else RobotState.WAITING)
         self.mpm = MessageProcessingManager(self.log)
         formation_config = replace(config.formation, waiting_pan=config.pan_id)
@@ -263,7 +265,7 @@ class Robot:
             if name == "connect":
                 return self._connect_user(int(cmd.get("user", 1)), str(cmd.get("mode", "following")))
             if name == "events":
-                return {"events": self.log.events}
+                return {"events": list(self.log.events)}
         except (FrameError, RadioError, HubUnavailable, FormationError, TransitionError, ValueError, TypeError) as err:
             return {"error": f"{type(err).__name__}: {err}"}
         return {"error": f"unknown command {name!r}; known: {', '.join(COMMANDS)}"}
@@ -422,6 +424,9 @@ async def run_robot(config: RobotConfig) -> int:
         print(f"robot {config.robot_id}: {err}", file=sys.stderr)
         return 3
     finally:
+        robot.log.record("stop")
         control.close()
         await radio.close()
+        if robot.log.sink is not None:
+            robot.log.sink.close()
     return 0

@@ -8,9 +8,11 @@ live in ``petswarm.formation``.
 from __future__ import annotations
 
 import enum
+import json
 import time
+from collections import deque
 from dataclasses import dataclass, field
-from typing import Any
+from typing import IO, Any
 
 
 class RobotState(enum.IntEnum):
@@ -48,16 +50,25 @@ class TransitionError(RuntimeError):
     """A transition the state machine does not allow."""
 
 
+MEMORY_EVENTS = 20_000
+"""Events a robot keeps in memory for its control channel; the record file (if any) keeps them all."""
+
+
 @dataclass
 class EventLog:
-    """Structured events of one robot, in order."""
+    """Structured events of one robot, in order; each also goes to ``sink`` (a JSON-lines file) at once."""
 
-    events: list[dict[str, Any]] = field(default_factory=list)
+    events: deque[dict[str, Any]] = field(default_factory=lambda: deque(maxlen=MEMORY_EVENTS))
+    sink: IO[str] | None = None
 
     def record(self, kind: str, **detail: Any) -> dict[str, Any]:
         """Append an event stamped with wall time and monotonic time (seconds)."""
         event = {"t": round(time.time(), 6), "mono": round(time.monotonic(), 6), "kind": kind, **detail}
         self.events.append(event)
+        if self.sink is not None:
+            # flushed per event: a robot killed outright loses at most the event being written
+            self.sink.write(json.dumps(event, default=str) + "\n")
+            self.sink.flush()
         return event
 
 

@@ -87,3 +87,52 @@ def test_absurd_arguments_get_clear_errors():
     assert bad.returncode == 2 and "position" in bad.stderr
     nohub = subprocess.run(_petswarm("stats", "--hub", "tcp/127.0.0.1:9"), capture_output=True, text=True, timeout=60)
     assert nohub.returncode == 2 and "petswarm stats:" in nohub.stderr
+
+
+def test_a_run_leaves_a_record_with_manifest_events_and_summary(tmp_path):
+    from cli.records import read_events
+
+    record = tmp_path / "rec"
+    proc = subprocess.run(
+        _petswarm("run", "--robots", "3", "--duration", "1", "--organize", "2", "--seed", "9", "--record", str(record)),
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 0, proc.stderr
+    manifest = json.loads((record / "manifest.json").read_text())
+    assert manifest["seed"] == 9 and manifest["options"]["organize"] == 2 and "eclipse-zenoh" in manifest["versions"]
+    summary = json.loads((record / "summary.json").read_text())
+    assert summary["ok"] and set(summary["exit_codes"].values()) == {0}
+    events = read_events(record / "events" / "robot-2.jsonl")
+    kinds = [e["kind"] for e in events]
+    assert kinds[0] == "start" and kinds[-1] == "stop" and "state" in kinds
+    assert [e["t"] for e in events] == sorted(e["t"] for e in events)
+
+
+def test_a_run_killed_outright_still_leaves_a_readable_record(tmp_path):
+    from cli.records import read_events
+
+    record = tmp_path / "killed"
+    proc = subprocess.Popen(
+        _petswarm("run", "--robots", "2", "--duration", "60", "--organize", "1", "--record", str(record)),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        seen = ""
+        deadline = time.monotonic() + 60
+        while "2/2 robots attached" not in seen and time.monotonic() < deadline:
+            seen += proc.stderr.readline()
+        time.sleep(0.5)
+        proc.kill()  # SIGKILL: no finally block runs in the run process
+        proc.wait(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert json.loads((record / "manifest.json").read_text())["options"]["robots"] == 2
+    for rid in (1, 2):
+        events = read_events(record / "events" / f"robot-{rid}.jsonl")
+        assert events and events[0]["kind"] == "start"
+    assert not (record / "summary.json").exists()  # honest: the summary is the one thing a kill loses

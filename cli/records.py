@@ -1,0 +1,85 @@
+"""Run records: every ``petswarm run`` leaves a directory that can be read, reported and replayed.
+
+    runs/<UTC time>-<seed>/
+        manifest.json          seed, versions, command line, options, medium configuration
+        events/robot-N.jsonl   every robot's structured events, one JSON object per line, as they happen
+        logs/*.log             every process's stdout and stderr
+        summary.json           the final summary (also written when the run fails or is interrupted)
+
+Files are written as the run goes (the robots flush every event), so a run that is killed midway
+still leaves a readable record.
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+import sys
+import time
+from dataclasses import asdict, dataclass
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+_PACKAGES = ("petswarm", "eclipse-zenoh", "numpy", "msgpack")
+
+
+@dataclass(frozen=True)
+class RunRecord:
+    """The directory of one run."""
+
+    path: Path
+
+    @classmethod
+    def create(cls, opts: Any, world: str, endpoint: str) -> RunRecord:
+        """Make the directory (``opts.record_dir``, or ``runs/<UTC time>-<seed>``) and write the manifest."""
+        stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
+        path = Path(opts.record_dir or Path("runs") / f"{stamp}-{opts.seed}")
+        (path / "events").mkdir(parents=True, exist_ok=True)
+        manifest = {
+            "seed": opts.seed,
+            "world": world,
+            "endpoint": endpoint,
+            "started": stamp,
+            "command": sys.argv,
+            "options": asdict(opts),
+            "medium_config_file": _read(opts.config),
+            "versions": {"python": platform.python_version(), **{p: _version(p) for p in _PACKAGES}},
+        }
+        record = cls(path)
+        record.write("manifest.json", manifest)
+        return record
+
+    def events_of(self, name: str) -> Path:
+        """Where process ``name`` appends its events."""
+        return self.path / "events" / f"{name}.jsonl"
+
+    def write(self, name: str, body: dict[str, Any]) -> None:
+        """One JSON file of the record."""
+        (self.path / name).write_text(json.dumps(body, indent=2, default=str) + "\n")
+
+    def finish(self, summary: dict[str, Any], exit_codes: dict[str, int]) -> None:
+        """The summary, with every process's exit code."""
+        self.write("summary.json", {**summary, "exit_codes": exit_codes})
+
+
+def read_events(path: Path) -> list[dict[str, Any]]:
+    """A JSON-lines events file; a line cut short by a kill is skipped."""
+    events = []
+    for line in path.read_text().splitlines():
+        try:
+            events.append(json.loads(line))
+        except json.JSONDecodeError:
+            continue
+    return events
+
+
+def _version(package: str) -> str:
+    try:
+        return metadata.version(package)
+    except metadata.PackageNotFoundError:
+        return "unknown"
+
+
+def _read(path: str | None) -> str | None:
+    return Path(path).read_text() if path else None
