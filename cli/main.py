@@ -36,6 +36,11 @@ def build_parser() -> argparse.ArgumentParser:
     hub.add_argument(
         "--config", help="TOML or JSON file with [mac], [range], [loss], [path_loss], [capture] and [ir] tables"
     )
+    hub.add_argument(
+        "--pcap",
+        metavar="FILE",
+        help="write every 802.15.4 frame on the air (data and ACK, with FCS) to this pcap file for Wireshark",
+    )
 
     robot = sub.add_parser("robot", help="run one robot process attached to a hub")
     robot.add_argument(
@@ -148,6 +153,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     run.add_argument("--world", help="key prefix of the run (default: derived from pid and seed)")
     run.add_argument("--config", help="hub medium config file (see petswarm hub --help)")
+    run.add_argument("--pcap", metavar="FILE", help="the hub writes the run's 802.15.4 frames to this pcap file")
     run.add_argument("--json", action="store_true", help="print the summary as JSON on stdout")
     run.add_argument(
         "--record",
@@ -163,6 +169,10 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument(
         "--protocol", choices=("paper", "slotted"), default="paper", help="organizing protocol (default paper)"
     )
+
+    rep = sub.add_parser("report", help="print a run record's summary and render its plots to PNG")
+    rep.add_argument("run", help="a run record directory (runs/<time>-<seed>)")
+    rep.add_argument("--out", help="directory for report.png (default: the run directory)")
 
     stats = sub.add_parser("stats", help="print a running hub's counters")
     _add_hub(stats)
@@ -223,9 +233,8 @@ def _add_hub(p: argparse.ArgumentParser) -> None:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``petswarm`` console script."""
     args = build_parser().parse_args(argv)
-    handler = {"hub": _hub, "robot": _robot, "run": _run, "stats": _stats, "bench": _bench, "swarm": _swarm}[
-        args.command
-    ]
+    commands = {"hub": _hub, "robot": _robot, "run": _run, "stats": _stats, "bench": _bench, "swarm": _swarm}
+    handler = {**commands, "report": _report}[args.command]
     try:
         return handler(args)
     except KeyboardInterrupt:
@@ -240,16 +249,23 @@ def _hub(args: argparse.Namespace) -> int:
     except (OSError, ValueError) as err:
         print(f"petswarm hub: bad --config: {err}", file=sys.stderr)
         return 2
-    hub = RadioHub(args.listen, args.world, config, args.seed, ir)
+    try:
+        hub = RadioHub(args.listen, args.world, config, args.seed, ir, pcap_path=args.pcap)
+    except OSError as err:
+        print(f"petswarm hub: cannot open --pcap file: {err}", file=sys.stderr)
+        return 2
     try:
         hub.open()
     except Exception as err:  # zenoh reports a busy port or bad endpoint as a generic error
+        hub.close()
         print(f"petswarm hub: cannot listen on {args.listen}: {err}", file=sys.stderr)
         return 2
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: hub.stop())
     print(ready_line(hub), flush=True)
     print(f"hub: serving world {args.world!r} on {args.listen}, seed {args.seed}", file=sys.stderr, flush=True)
+    if args.pcap:
+        print(f"hub: writing the air's frames to {args.pcap}", file=sys.stderr, flush=True)
     try:
         hub.serve()
     finally:
@@ -296,6 +312,7 @@ def _run(args: argparse.Namespace) -> int:
         ping_interval=args.ping_interval,
         world=args.world,
         config=args.config,
+        pcap=args.pcap,
         as_json=args.json,
         organize=args.organize,
         protocol=args.protocol,
@@ -304,7 +321,14 @@ def _run(args: argparse.Namespace) -> int:
     return run(opts)
 
 
+def _report(args: argparse.Namespace) -> int:
+    from cli.report import report_command
+
+    return report_command(args)
+
+
 def _swarm(args: argparse.Namespace) -> int:
+
     from cli.swarm import swarm_command
 
     return swarm_command(args)

@@ -108,6 +108,9 @@ def test_a_run_leaves_a_record_with_manifest_events_and_summary(tmp_path):
     kinds = [e["kind"] for e in events]
     assert kinds[0] == "start" and kinds[-1] == "stop" and "state" in kinds
     assert [e["t"] for e in events] == sorted(e["t"] for e in events)
+    report = subprocess.run(_petswarm("report", str(record)), capture_output=True, text=True, timeout=60)
+    assert report.returncode == 0 and "OK" in report.stdout and "slave-driving" in report.stdout
+    assert subprocess.run(_petswarm("report", str(tmp_path)), capture_output=True, timeout=60).returncode == 2
 
 
 def test_a_run_killed_outright_still_leaves_a_readable_record(tmp_path):
@@ -136,3 +139,7 @@ def test_a_run_killed_outright_still_leaves_a_readable_record(tmp_path):
         events = read_events(record / "events" / f"robot-{rid}.jsonl")
         assert events and events[0]["kind"] == "start"
     assert not (record / "summary.json").exists()  # honest: the summary is the one thing a kill loses
+    report = subprocess.run(_petswarm("report", str(record)), capture_output=True, text=True, timeout=60)
+    assert report.returncode == 0, report.stderr
+    assert "killed before it finished" in report.stdout and "robot-2" in report.stdout
+    assert (record / "report.png").stat().st_size > 10_000
