@@ -12,6 +12,7 @@ from typing import Any
 
 import zenoh
 
+from cli.checker import check_record
 from cli.processes import Supervisor, free_tcp_port, raise_interrupt
 from cli.records import RunRecord
 from cli.swarm import describe
@@ -30,6 +31,8 @@ class RunOptions:
     ping_interval: float
     world: str | None = None
     config: str | None = None
+    pcap: str | None = None
+    """The hub writes every frame on the air to this pcap file."""
     as_json: bool = False
     startup_timeout: float = 30.0
     organize: int = 0
@@ -61,6 +64,7 @@ def run(opts: RunOptions) -> int:
     try:
         progress(f"world {world}, seed {opts.seed}, hub on {endpoint}, record in {record.path}")
         hub_args = ["hub", "--listen", endpoint, "--world", world, "--seed", str(opts.seed)]
+        hub_args += ["--pcap", opts.pcap] if opts.pcap else []
         sup.spawn("hub", hub_args + (["--config", opts.config] if opts.config else []))
         session = _wait_for_hub(sup, endpoint, keys, opts.startup_timeout)
         for rid in range(1, opts.robots + 1):
@@ -94,6 +98,12 @@ def run(opts: RunOptions) -> int:
         signal.signal(signal.SIGTERM, previous)
         record.finish(summary, codes)
         progress(f"stopped {len(codes)} processes; record in {record.path}")
+    violations = check_record(record.path)
+    summary["invariants"] = violations or "all hold"
+    if violations:
+        summary["problems"] += [f"invariant violated: {v}" for v in violations]
+        summary["ok"] = False
+    record.finish(summary, codes)
     _print(summary, opts.as_json)
 
     return 0 if summary["ok"] else 1
@@ -229,6 +239,7 @@ def _summarise(session: zenoh.Session, keys: Keys, opts: RunOptions, world: str,
                 k: counters.get(k, 0)
                 for k in (
                     "sent",
+                    "heard",
                     "delivered",
                     "collided",
                     "lost",
@@ -263,6 +274,7 @@ def _summarise(session: zenoh.Session, keys: Keys, opts: RunOptions, world: str,
         "nodes": nodes,
         "channels": stats["channels"],
         "hub": stats["hub"],
+        "ir": stats["ir"],
         "medium": stats["config"],
     }
 
