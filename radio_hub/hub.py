@@ -5,6 +5,9 @@ stamps each with the model clock (microseconds since the hub started), feeds the
 until the next model event with a timed wait. A plain thread is used rather than asyncio because
 epoll's millisecond timeouts would add up to a millisecond of lag to every delivery; a timed queue
 wait overshoots by tens of microseconds.
+
+With ``pcap_path`` the hub also writes every transmission that leaves the air, data frames and ACKs,
+to a pcap file (``radio_hub.pcap``), stamped with the wall-clock time at which it started on the air.
 """
 
 from __future__ import annotations
@@ -33,7 +36,8 @@ from radio_hub.config import MediumConfig
 from radio_hub.ir_air import IrAir
 from radio_hub.keys import Keys, check_name, reliable_publisher, session_config
 from radio_hub.light import IrConfig
-from radio_hub.medium import Medium, Output, RadioNode, Reception, TxReport, TxStatus
+from radio_hub.medium import Medium, Output, RadioNode, Reception, Transmission, TxReport, TxStatus
+from radio_hub.pcap import PcapWriter
 
 _IDLE_WAKE_US = 200_000
 _SPIN_US = 100
@@ -80,12 +84,21 @@ class RadioHub:
         config: MediumConfig | None = None,
         seed: int = 0,
         ir_config: IrConfig | None = None,
+        pcap_path: str | Path | None = None,
     ) -> None:
-
+        """Raises OSError when ``pcap_path`` is given and cannot be opened for writing."""
         self.endpoint = endpoint
         self.keys = Keys(world)
         self.seed = seed
-        self.medium = Medium(config or MediumConfig(), np.random.default_rng(seed))
+        self.pcap_path = None if pcap_path is None else Path(pcap_path)
+        self._pcap = None if self.pcap_path is None else PcapWriter(self.pcap_path)
+        self._pcap_records = 0
+        self._pcap_error = ""
+        self.medium = Medium(
+            config or MediumConfig(),
+            np.random.default_rng(seed),
+            on_air_end=None if self._pcap is None else self._write_pcap,
+        )
         self.counters = HubCounters()
         self._inbox: queue.SimpleQueue[tuple[Any, ...]] = queue.SimpleQueue()
         self._stop = threading.Event()
@@ -96,6 +109,7 @@ class RadioHub:
         self.ir = IrAir(ir_config or IrConfig(), np.random.default_rng([seed, 1]))
         self._down_seq: dict[str, int] = {}
         self._t0_ns = time.perf_counter_ns()
+        self._t0_wall_us = time.time_ns() // 1000
         self._session: zenoh.Session | None = None
         self._decls: list[Any] = []
 
@@ -118,6 +132,7 @@ class RadioHub:
             session.declare_queryable(keys.air, lambda q: put(("air", q))),
         ]
         self._t0_ns = time.perf_counter_ns()
+        self._t0_wall_us = time.time_ns() // 1000
 
     def stop(self) -> None:
         """Ask the job loop to end (safe from any thread or a signal handler)."""
@@ -125,7 +140,10 @@ class RadioHub:
         self._inbox.put(("wake",))
 
     def close(self) -> None:
-        """Undeclare everything and close the session."""
+        """Undeclare everything, close the session and the pcap file."""
+        pcap, self._pcap = self._pcap, None
+        if pcap is not None:
+            pcap.close()
         for decl in self._decls:
             decl.undeclare()
         self._decls = []
@@ -327,6 +345,20 @@ class RadioHub:
             raise RuntimeError("hub session is not open")
         return self._session
 
+    def _write_pcap(self, tx: Transmission) -> None:
+        pcap = self._pcap
+        if pcap is None:
+            return
+        try:
+            pcap.write(tx.psdu, self._t0_wall_us + tx.start_us)
+            self._pcap_records += 1
+        except (OSError, ValueError) as err:  # a full disk must not take the air down: stop recording
+            self._pcap_error = str(err)
+            self._pcap = None
+            print(f"hub: pcap {self.pcap_path}: {err}; no longer recording", file=sys.stderr)
+            with contextlib.suppress(OSError):
+                pcap.close()
+
     # -- introspection ---------------------------------------------------------------------------
 
     def stats(self) -> dict[str, Any]:
@@ -343,7 +375,7 @@ class RadioHub:
                 )
             nodes[node_id] = entry
         channels = {str(ch): c.to_dict() for ch, c in medium.channel_counters.items() if c.sent or c.heard}
-        return {
+        stats: dict[str, Any] = {
             "world": self.keys.world,
             "seed": self.seed,
             "now_us": self.now_us(),
@@ -357,6 +389,9 @@ class RadioHub:
                 "config": self.ir.config.to_dict(),
             },
         }
+        if self.pcap_path is not None:
+            stats["pcap"] = {"path": str(self.pcap_path), "records": self._pcap_records, "error": self._pcap_error}
+        return stats
 
 
 def _tight_timer_slack() -> None:

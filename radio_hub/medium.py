@@ -8,7 +8,8 @@ from the ``numpy.random.Generator`` it is given, so a seed and an arrival order 
 
 The caller owns the clock: it calls ``submit`` when a request arrives and ``advance`` when the time of
 ``next_event_us`` has come. Events are processed strictly in model-time order, so an outcome does not
-depend on how late the caller's timer fires.
+depend on how late the caller's timer fires. A caller that records the traffic (a pcap file) sets
+``on_air_end``: it is handed every transmission, data and ACK, once it has left the air.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from radio_hub.config import CHANNELS, MediumConfig, airtime_us
-from radio_hub.mac import ACK_PSDU_LEN, BROADCAST, MAX_PSDU, Frame, FrameError, FrameType
+from radio_hub.mac import BROADCAST, MAX_PSDU, Frame, FrameError, FrameType
 from radio_hub.propagation import (
     GilbertElliott,
     Position,
@@ -173,6 +174,8 @@ class Transmission:
     psdu_len: int
     position: Position
     submitted_us: int
+    psdu: bytes = b""
+    """The bytes on the air (MAC header, payload, FCS): a data request's PSDU as sent, or the MAC's ACK."""
     left_sender: bool = True
     job: _Job | None = None
     attempt: int = 0
@@ -203,13 +206,22 @@ class Transmission:
 class Medium:
     """The air of every 2.4 GHz channel, shared by the attached nodes."""
 
-    def __init__(self, config: MediumConfig, rng: np.random.Generator, log_size: int = 4096) -> None:
+    def __init__(
+        self,
+        config: MediumConfig,
+        rng: np.random.Generator,
+        log_size: int = 4096,
+        on_air_end: Callable[[Transmission], None] | None = None,
+    ) -> None:
         self.config = config.validate()
         self.rng = rng
         self.nodes: dict[str, RadioNode] = {}
         self.node_counters: dict[str, Counters] = {}
         self.channel_counters: dict[int, Counters] = {ch: Counters() for ch in CHANNELS}
         self.air_log: deque[Transmission] = deque(maxlen=log_size)
+        self.on_air_end = on_air_end
+        """Called with every transmission that has left the air, its outcomes decided, in the order they end.
+        It must not call back into the medium."""
         self.now_us = 0
         self._burst = GilbertElliott(config.loss.gilbert_elliott)
         self._queues: dict[str, deque[_Job]] = {}
@@ -339,17 +351,18 @@ class Medium:
 
     # -- transmissions ---------------------------------------------------------------------------
 
-    def _put_on_air(self, sender: RadioNode, frame: Frame, psdu_len: int, submitted_us: int) -> Transmission:
+    def _put_on_air(self, sender: RadioNode, frame: Frame, psdu: bytes, submitted_us: int) -> Transmission:
         tx = Transmission(
             tx_id=next(self._tx_ids),
             sender=sender.node_id,
             channel=sender.channel,
             start_us=self.now_us,
-            end_us=self.now_us + airtime_us(psdu_len),
+            end_us=self.now_us + airtime_us(len(psdu)),
             frame=frame,
-            psdu_len=psdu_len,
+            psdu_len=len(psdu),
             position=sender.position,
             submitted_us=submitted_us,
+            psdu=psdu,
         )
         ratio = self.config.range.success_ratio_tx
         tx.left_sender = ratio >= 1.0 or self.rng.random() < ratio
@@ -359,7 +372,7 @@ class Medium:
     def _on_tx_start(self, job: _Job) -> None:
         if job.done:
             return
-        tx = self._put_on_air(self.nodes[job.node_id], job.frame, len(job.psdu), job.submitted_us)
+        tx = self._put_on_air(self.nodes[job.node_id], job.frame, job.psdu, job.submitted_us)
         tx.job, tx.attempt = job, job.retries
         self._count(job.node_id, "sent")
         self._at(tx.end_us, self._on_tx_end, tx)
@@ -377,7 +390,7 @@ class Medium:
                 self._deliver(tx, node, job.psdu)
                 if job.wants_ack and node.short_addr == tx.frame.dst:
                     self._at(self.now_us + self.config.mac.turnaround_us, self._on_ack_start, tx, node)
-        self.air_log.append(tx)
+        self._left_air(tx)
         if job.done:
             return
         if job.wants_ack:
@@ -456,7 +469,8 @@ class Medium:
     def _on_ack_start(self, data: Transmission, responder: RadioNode) -> None:
         if responder.node_id not in self.nodes:
             return
-        ack = self._put_on_air(responder, Frame(FrameType.ACK, data.frame.seq), ACK_PSDU_LEN, self.now_us)
+        frame = Frame(FrameType.ACK, data.frame.seq)
+        ack = self._put_on_air(responder, frame, frame.encode(), self.now_us)
         ack.job, ack.attempt = data.job, data.attempt
         self._count(responder.node_id, "acks_sent")
         self._at(ack.end_us, self._on_ack_end, ack)
@@ -464,7 +478,10 @@ class Medium:
     def _on_ack_end(self, ack: Transmission) -> None:
         job = ack.job
         assert job is not None
-        self.air_log.append(ack)
+        self._judge_ack(ack, job)
+        self._left_air(ack)
+
+    def _judge_ack(self, ack: Transmission, job: _Job) -> None:
         sender = self.nodes.get(job.node_id)
         if job.done or sender is None or job.retries != ack.attempt:
             return
@@ -499,6 +516,11 @@ class Medium:
                 self._start_csma(queue[0])
 
     # -- bookkeeping -----------------------------------------------------------------------------
+
+    def _left_air(self, tx: Transmission) -> None:
+        self.air_log.append(tx)
+        if self.on_air_end is not None:
+            self.on_air_end(tx)
 
     def _count(self, node_id: str, name: str) -> None:
         """Count for the node and for the channel it is on (so per-channel sums match per-node ones)."""

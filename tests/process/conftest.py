@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import time
 import uuid
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +22,7 @@ LOSSLESS = {"range": {"success_ratio_rx": 1.0}, "path_loss": {"shadowing_sigma_d
 class Air:
     """A hub process with robots attached to it, and a client session to drive them."""
 
-    def __init__(self, tmp: Path, config: dict[str, Any], seed: int = 1) -> None:
+    def __init__(self, tmp: Path, config: dict[str, Any], seed: int = 1, hub_args: Sequence[str] = ()) -> None:
         self.world = f"t{uuid.uuid4().hex[:10]}"
         self.keys = Keys(self.world)
         self.endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
@@ -42,6 +42,7 @@ class Air:
                 str(seed),
                 "--config",
                 str(config_file),
+                *hub_args,
             ],
         )
         self.session = self._connect()
@@ -108,11 +109,12 @@ class Air:
 
 @pytest.fixture
 def make_air(tmp_path: Path) -> Iterator[Any]:
-    """``make_air(config=None, seed=1)`` starts a hub process; everything is stopped after the test."""
+    """``make_air(config=None, seed=1, hub_args=())`` starts a hub process (``hub_args``: more ``petswarm hub``
+    arguments); everything is stopped after the test."""
     started: list[Air] = []
 
-    def factory(config: dict[str, Any] | None = None, seed: int = 1) -> Air:
-        air = Air(tmp_path / f"air{len(started)}", LOSSLESS if config is None else config, seed)
+    def factory(config: dict[str, Any] | None = None, seed: int = 1, hub_args: Sequence[str] = ()) -> Air:
+        air = Air(tmp_path / f"air{len(started)}", LOSSLESS if config is None else config, seed, hub_args)
         started.append(air)
         return air
 
