@@ -101,8 +101,10 @@ class IrModuleManager:
     async def set_mode(self, mode: str) -> None:
         """Switch the module (a no-op when it is already in ``mode``)."""
         if mode != self.mode:
-            await self.radio.set_ir_mode(mode)
+            # noted before the await: the request is on its way, and the hub applies one node's requests
+            # in order, so a later switch (say to idle after a cancellation) is never skipped
             self.mode = mode
+            await self.radio.set_ir_mode(mode)
 
     def open_window(self) -> None:
         """Start collecting sweeps."""
@@ -143,7 +145,7 @@ class TokenConfig:
 def next_holder(chain: tuple[int, ...], me: int, alive: set[int]) -> int:
     """The next robot after ``me`` in member order that answered this round (``me`` if nobody did)."""
     if me not in chain:
-        return me
+        return chain[0] if chain else me  # a member that has not had a roster yet hands back to the master
     start = chain.index(me)
     for step in range(1, len(chain)):
         candidate = chain[(start + step) % len(chain)]
@@ -210,6 +212,7 @@ class IrTokenSchedule:
         if self._holding is not None:
             self._holding.cancel()
         self.ir.close_window()
+        self._window_of = None
         self.locations.clear()
         await self.ir.set_mode("idle")
 
@@ -238,6 +241,11 @@ class IrTokenSchedule:
         if self.round != round_ or not self.active:
             return  # overtaken by a higher round while we waited
         alive = set(begun.responses)
+        if others and not alive:
+            # nobody heard us: we may be the deaf one while the others pass the token; never shine blind
+            self.log.record("ir_unheard", round=round_)
+            self.last_activity = time.monotonic()
+            return
         try:
             await self.ir.set_mode("transmit")
             await asyncio.sleep(self.config.slot_s)
@@ -284,14 +292,19 @@ class IrTokenSchedule:
     async def _on_start(self, incoming: Incoming, msg: m.IrStart) -> None:
         if msg.round < self.round and self._window_of != (incoming.sender, msg.round):
             return  # a stale start sign
-        if self._holding is not None and not self._holding.done() and incoming.sender != self.me:
-            self._holding.cancel()  # someone holds a higher round: never shine together
+        holding = self._holding is not None and not self._holding.done()
+        if holding and (msg.round, incoming.sender) > (self.round, self.me):
+            self._holding.cancel()  # type: ignore[union-attr]  # a higher round holds: never shine together
             self.log.record("ir_overtaken", round=msg.round, by=incoming.sender)
+        elif holding:
+            return  # the same round with a lower address yields to us: ties go to the higher address
         self.round = max(self.round, msg.round)
         if self._window_of != (incoming.sender, msg.round):
-            await self.ir.set_mode("receive")
-            self.ir.open_window()
             self._window_of = (incoming.sender, msg.round)
+            self.ir.open_window()
+            await self.ir.set_mode("receive")
+            if not self.active:
+                return
         await asyncio.sleep(self._answer_slot(incoming.sender))
         await self.rf.send(incoming.sender, m.IrStartAck(self.session, msg.round))
         if incoming.sender in self.neighbours:
@@ -301,8 +314,22 @@ class IrTokenSchedule:
     async def _on_token(self, incoming: Incoming, msg: m.Token) -> None:
         if self._window_of == (incoming.sender, msg.round):
             self._measure(incoming.sender)
+        if msg.next == self.me and msg.round >= self.round:
+            self._expect_sync(msg.round + 1)
         await asyncio.sleep(self._answer_slot(incoming.sender))
         await self.rf.send(incoming.sender, m.TokenAck(self.session, msg.round))
+
+    def _expect_sync(self, round_: int) -> None:
+        """Named next: if the sync is lost, start our round anyway once the holder's token step is surely
+        over (it has stopped shining before it sent the token, so this never overlaps it)."""
+        wait = (self.config.step.max_retries + 2) * self.config.step.deadline_s
+
+        def fallback() -> None:
+            if self.active and self.round < round_:
+                self.log.record("sync_missed", round=round_)
+                self._hold(round_)
+
+        asyncio.get_running_loop().call_later(wait, fallback)
 
     def _answer_slot(self, holder: int) -> float:
         # every member answers the holder's broadcast at once otherwise, and their CSMA backoffs collide

@@ -67,8 +67,12 @@ class EventLog:
         self.events.append(event)
         if self.sink is not None:
             # flushed per event: a robot killed outright loses at most the event being written
-            self.sink.write(json.dumps(event, default=str) + "\n")
-            self.sink.flush()
+            try:
+                self.sink.write(json.dumps(event, default=str) + "\n")
+                self.sink.flush()
+            except OSError as err:  # a full disk must not stop the robot: keep running, stop recording
+                self.sink = None
+                self.events.append({**event, "kind": "record_lost", "error": str(err)})
         return event
 
 

@@ -229,7 +229,9 @@ class RadioHub:
         self._up_seq[node_id] = msg.n
 
     def _on_attach(self, node_id: str, msg: wire.Attach) -> None:
-        self.medium.detach(node_id)  # a node that restarts under the same id starts afresh
+        self.medium.detach(node_id)
+        self.ir.remove(node_id, self.now_us())  # a restarted node's module starts dark, as the node believes
+        # a node that restarts under the same id starts afresh
         node = RadioNode(node_id, msg.ext_addr, msg.short_addr, msg.pan_id, msg.channel, _pos(msg.position))
         try:
             self.medium.attach(node)
