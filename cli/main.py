@@ -16,8 +16,15 @@ EPILOG = """examples:
   petswarm run --robots 5 --duration 5          a hub and 5 robots pinging each other; prints a summary
   petswarm hub --listen tcp/127.0.0.1:7447      serve the emulated air (Ctrl-C stops it)
   petswarm robot --id 3 --pos 1.5,0             one robot attached to that hub
+  petswarm swarm organize --master 1 --count 3 --user 1    the user asks robot 1 for a swarm of 3
+  petswarm swarm status --robot 2               one robot's state, swarm and IR fixes of its neighbours
   petswarm stats                                the hub's counters per node and per channel
-  petswarm bench hub                            hub overhead, throughput and delivery lag
+  petswarm report runs/<time>-<seed>            a recorded run's summary and plots
+  petswarm bench hub|organize|ir                the benchmarks (figures, JSON and plots)
+
+start the hub before its robots (they wait up to 15 s for it); every process of one swarm uses the
+same --world and --hub endpoint.
+
   petswarm bench organize --slaves 1-5          swarm organizing time vs slaves, paper vs slotted protocol
 """
 
@@ -64,7 +71,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=0.0,
         help="broadcast a ping every this many seconds (default 0: never)",
     )
-    robot.add_argument("--seed", type=seed, default=0, help="seed of the robot's own random choices")
+    robot.add_argument("--seed", type=seed, default=0, help="seed of the robot's own random choices (default 0)")
     robot.add_argument(
         "--user",
         type=bounded(int, 0, 65535),
@@ -129,7 +136,13 @@ def build_parser() -> argparse.ArgumentParser:
     swarm_sub = swarm.add_subparsers(dest="action", required=True, metavar="ACTION")
     org = swarm_sub.add_parser("organize", help="the user asks the robot connected to them for a swarm of N")
     org.add_argument("--master", type=robot_id, required=True, help="id of the user-connected robot")
-    org.add_argument("--count", type=bounded(int, 1, 200), required=True, help="robots wanted besides the master")
+    org.add_argument(
+        "--count",
+        type=bounded(int, 1, 32),
+        required=True,
+        help="robots wanted besides the master, 1-32 (a roster lists them in one frame)",
+    )
+
     org.add_argument("--protocol", choices=("paper", "slotted"), help="override the robot's organizing protocol")
     org.add_argument(
         "--user", type=bounded(int, 1, 65535), help="connect the robot to this user first (until the wearables exist)"
@@ -138,6 +151,9 @@ def build_parser() -> argparse.ArgumentParser:
     dis = swarm_sub.add_parser("disperse", help="the user ends the swarm")
     dis.add_argument("--master", type=robot_id, required=True, help="id of the master robot")
     _add_hub(dis)
+    sts = swarm_sub.add_parser("status", help="one robot's state, radio, swarm, token schedule and IR fixes")
+    sts.add_argument("--robot", type=robot_id, required=True, help="id of the robot")
+    _add_hub(sts)
     for p in (org, dis):
         p.add_argument("--json", action="store_true", help="print the answer as JSON")
 
@@ -188,7 +204,7 @@ def build_parser() -> argparse.ArgumentParser:
     bhub.add_argument(
         "--load-seconds", type=bounded(float, 1, 600), default=5.0, help="length of the load test (default 5)"
     )
-    bhub.add_argument("--seed", type=seed, default=1)
+    bhub.add_argument("--seed", type=seed, default=1, help="seed of the hubs and the load (default %(default)s)")
     bhub.add_argument("--out", default="bench-results", help="directory for JSON and plots (default %(default)s)")
     bhub.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
     borg = bench_sub.add_parser("organize", help="swarm organizing time vs number of slaves, per protocol")
@@ -355,8 +371,9 @@ def _stats(args: argparse.Namespace) -> int:
 
 def _print_stats(stats: dict[str, Any]) -> None:
     cols = ("sent", "delivered", "collided", "lost", "filtered", "mac_retries", "channel_access_failures", "no_ack")
+    labels = ("sent", "delivered", "collided", "lost", "filtered", "retries", "cca fail", "no ack")
     print(f"world {stats['world']}  seed {stats['seed']}  model time {stats['now_us'] / 1e6:.3f} s")
-    print(f"{'node':<14}{'PAN':>7}{'ch':>4}" + "".join(f"{c[:9]:>10}" for c in cols))
+    print(f"{'node':<14}{'PAN':>7}{'ch':>4}" + "".join(f"{c:>10}" for c in labels))
     for name, n in sorted(stats["nodes"].items()):
         pan = f"{n['pan_id']:#06x}" if n["attached"] else "gone"
         print(f"{name:<14}{pan:>7}{n.get('channel', ''):>4}" + "".join(f"{n[c]:>10}" for c in cols))

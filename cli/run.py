@@ -190,7 +190,13 @@ def organize_and_disperse(session: zenoh.Session, keys: Keys, opts: RunOptions) 
     )
     time.sleep(1.0)
     problems = check_swarm(session, keys, opts.robots, organized)
+    expected = min(opts.organize, opts.robots - 1)
+    if len(organized["members"]) < expected:
+        problems.append(f"only {len(organized['members'])} of the {expected} robots available joined the swarm")
+    if not organized["members"]:
+        return {"organization": organized, "problems": problems}
     dispersed = control.command(session, keys, 1, "disperse", 60.0)
+
     progress(f"dispersed in {dispersed.get('disperse_time_s', 0) * 1000:.1f} ms")
     time.sleep(0.3)
     problems += check_swarm(session, keys, opts.robots, None)

@@ -29,13 +29,21 @@ def swarm_command(args: argparse.Namespace) -> int:
     finally:
         session.close()
     if "error" in answer:
-        print(f"petswarm swarm {args.action}: robot {args.master} refused: {answer['error']}", file=sys.stderr)
+        reason = answer["error"].split(": ", 1)[-1]  # the robot's exception class means nothing to a user
+        print(
+            f"petswarm swarm {args.action}: robot {getattr(args, 'master', None) or args.robot} refused: {reason}",
+            file=sys.stderr,
+        )
         return 1
-    print(json.dumps(answer, indent=2) if args.json else describe(args.action, answer))
+    as_json = args.action == "status" or args.json
+    print(json.dumps(answer, indent=2) if as_json else describe(args.action, answer))
+
     return 0
 
 
 def _request(session: Any, keys: Keys, args: argparse.Namespace) -> dict[str, Any]:
+    if args.action == "status":
+        return control.command(session, keys, args.robot, "status")
     if args.action == "disperse":
         return control.command(session, keys, args.master, "disperse", _ORGANIZE_TIMEOUT_S)
     if args.user:
@@ -54,9 +62,11 @@ def describe(action: str, answer: dict[str, Any]) -> str:
             f"({answer['retries']} retries); master back to {answer['restored']}; "
             f"unconfirmed: {answer['unconfirmed'] or 'none'}"
         )
+    refused = ", ".join(f"{why.replace('_', ' ')}: {robots}" for why, robots in answer["refused"].items()) or "none"
+    steps = ", ".join(f"{step} {n}" for step, n in answer["step_retries"].items())
     return (
-        f"swarm on PAN {answer['pan_id']:#06x}: members {answer['members'] or 'none'} of {answer['requested']} "
-        f"requested ({len(answer['available'])} available, refused {answer['refused'] or 'none'})\n"
-        f"organized in {answer['organize_time_s'] * 1000:.1f} ms with {answer['retries']} retries "
-        f"{answer['step_retries']} [{answer['protocol']} protocol]"
+        f"swarm on PAN {answer['pan_id']:#06x}: members {answer['members'] or 'none'} (closest first) of "
+        f"{answer['requested']} requested; {len(answer['available'])} available; refused: {refused}\n"
+        f"organized in {answer['organize_time_s'] * 1000:.1f} ms with {answer['retries']} retries ({steps}) "
+        f"[{answer['protocol']} protocol]"
     )

@@ -147,6 +147,8 @@ class NetworkFormation:
         if self._busy.locked():
             raise FormationError("already organizing or dispersing")
         async with self._busy:
+            if self.sequence.state == RobotState.MASTER_DRIVING:
+                raise FormationError("this robot already leads a swarm: disperse it first")
             if self.sequence.state not in DRIVING:
                 raise FormationError(
                     f"robot is {self.sequence.state.label}: only a robot driving with its user can organize"

@@ -76,6 +76,8 @@ class RobotConfig:
     """Until the world model: the robot's fixed heading."""
     record: str | None = None
     """A JSON-lines file that gets every event as it happens (the run record)."""
+    attach_timeout: float = 15.0
+    """How long a robot waits for its hub at start (a hub started at the same moment needs a second)."""
 
     def identity(self) -> RadioIdentity:
         """The robot's radio at start-up: short address = robot id."""
@@ -380,19 +382,44 @@ class ControlServer:
 
 
 async def attach(config: RobotConfig) -> tuple[RobotConfig, RadioClient]:
-    """Put the robot's radio on the air; with ``AUTO_ID`` claim ids 1, 2, ... until one is free."""
+    """Put the robot on the air, waiting up to ``attach_timeout`` for a hub that is still starting."""
+    deadline = time.monotonic() + config.attach_timeout
+    told = False
+    while True:
+        try:
+            return await _attach_once(config)
+        except HubUnavailable:
+            if time.monotonic() >= deadline:
+                raise
+            if not told:
+                print(
+                    f"robot {config.robot_id or 'auto'}: waiting for a hub of world {config.world!r} at "
+                    f"{config.endpoint} (up to {config.attach_timeout:g} s)",
+                    file=sys.stderr,
+                    flush=True,
+                )
+                told = True
+            await asyncio.sleep(0.5)
+
+
+async def _attach_once(config: RobotConfig) -> tuple[RobotConfig, RadioClient]:
+    """One attempt; with ``AUTO_ID`` claim ids 1, 2, ... until one is free."""
     if config.robot_id != AUTO_ID:
-        return config, await RadioClient.connect(config.identity(), config.endpoint, config.world)
+        return config, await RadioClient.connect(config.identity(), config.endpoint, config.world, timeout=1.0)
     session = await asyncio.to_thread(open_session, "client", config.endpoint)
     for candidate in range(1, 0xFFFE):
         claimed = replace(config, robot_id=candidate)
         try:
             radio = await RadioClient.connect(
-                claimed.identity(), config.endpoint, config.world, session=session, exclusive=True
+                claimed.identity(), config.endpoint, config.world, session=session, exclusive=True, timeout=1.0
             )
         except RadioError as err:
             if "is taken" in str(err):
                 continue
+            session.close()
+            raise
+        except HubUnavailable:
+            session.close()
             raise
         radio.owns_session = True
         return claimed, radio

@@ -176,12 +176,13 @@ class MediumConfig:
 
 
 def _build(cls: type, data: dict[str, Any], where: str) -> Any:
+    table = f"[{where.rstrip('.')}]" if where else "the top level"
     if not isinstance(data, dict):
-        raise ValueError(f"{where or 'config'}: expected a table, got {type(data).__name__}")
+        raise ValueError(f"{table}: expected a table, got {type(data).__name__}")
     fields = {f.name: f for f in dataclasses.fields(cls)}
     unknown = sorted(set(data) - set(fields))
     if unknown:
-        raise ValueError(f"{where or 'config'}: unknown keys {unknown}; known: {sorted(fields)}")
+        raise ValueError(f"{table}: unknown keys {unknown}; known: {sorted(fields)}")
     kwargs = {}
     for name, value in data.items():
         default = getattr(cls(), name)
@@ -190,7 +191,11 @@ def _build(cls: type, data: dict[str, Any], where: str) -> Any:
         elif isinstance(default, bool) and not isinstance(value, bool):
             raise ValueError(f"{where}{name}: expected true or false")
         else:
-            kwargs[name] = type(default)(value)
+            try:
+                kwargs[name] = type(default)(value)
+            except (TypeError, ValueError):
+                raise ValueError(f"{where}{name}: expected {type(default).__name__}, got {value!r}") from None
+
     return cls(**kwargs)
 
 

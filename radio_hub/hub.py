@@ -427,7 +427,10 @@ def load_config(path: str | Path) -> tuple[MediumConfig, IrConfig]:
     if not isinstance(data, dict):
         raise ValueError("a hub config file holds tables")
     ir = IrConfig.from_dict(data.pop("ir", {}))
-    return MediumConfig.from_dict(data.get("medium", data)), ir
+    try:
+        return MediumConfig.from_dict(data.get("medium", data)), ir
+    except ValueError as err:
+        raise ValueError(f"{err} (and [ir] for the IR module)" if "the top level" in str(err) else str(err)) from None
 
 
 def ready_line(hub: RadioHub) -> str:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import itertools
+import re
 import secrets
 from dataclasses import dataclass, replace
 from typing import Any
@@ -112,12 +113,21 @@ class IrSweep:
     t_us: int
 
 
+REQUEST_TIMEOUT_S = 5.0
+"""How long a node waits for the hub's answer to a request once attached."""
+_ENDPOINT = re.compile(r"^(tcp|udp|tls|quic)/(\[[0-9a-fA-F:.]+\]|[A-Za-z0-9_.-]+):\d{1,5}$")
+
+
 def open_session(mode: str, endpoint: str) -> zenoh.Session:
     """Open a zenoh session, turning zenoh's error into HubUnavailable with the endpoint in it."""
+    if not _ENDPOINT.match(endpoint):
+        raise HubUnavailable(f"{endpoint!r} is not a zenoh endpoint such as tcp/127.0.0.1:7447")
     try:
         return zenoh.open(session_config(mode, endpoint))
     except zenoh.ZError as err:
-        raise HubUnavailable(f"cannot open a zenoh {mode} session on {endpoint}: {err}") from None
+        reason = str(err).split(" at /")[0].strip()  # zenoh appends the Rust source location
+        hint = " (is `petswarm hub` running there?)" if mode == "client" else ""
+        raise HubUnavailable(f"cannot reach {endpoint}{hint}: {reason}") from None
 
 
 def query_hub(session: zenoh.Session, key: str, timeout: float = 2.0) -> dict[str, Any]:
@@ -192,6 +202,7 @@ class RadioClient:
             await client.close(detach=False)
             raise
         client._adopt(attached)
+        client.request_timeout = max(timeout, REQUEST_TIMEOUT_S)
         return client
 
     @property
