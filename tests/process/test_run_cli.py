@@ -20,6 +20,23 @@ def _petswarm(*args: str) -> list[str]:
     return [sys.executable, "-m", "cli", *args]
 
 
+def _started_run(robots: int, *args: str) -> subprocess.Popen[str]:
+    """``petswarm run`` in the background, returned once its robots are attached (it runs for 60 s)."""
+    proc = subprocess.Popen(
+        _petswarm("run", "--robots", str(robots), "--duration", "60", *args),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    seen, deadline = "", time.monotonic() + 60
+    while f"{robots}/{robots} robots attached" not in seen and time.monotonic() < deadline:
+        seen += proc.stderr.readline()
+    if f"{robots}/{robots} robots attached" not in seen:
+        proc.kill()
+        raise AssertionError(seen)
+    return proc
+
+
 def _processes_mentioning(tag: str) -> list[int]:
     pids = []
     for entry in Path("/proc").iterdir():
@@ -54,18 +71,8 @@ def test_run_five_robots_exchanges_frames_among_all_and_reports_json():
 
 def test_ctrl_c_stops_every_process_of_the_run():
     world = f"orphan{uuid.uuid4().hex[:8]}"
-    proc = subprocess.Popen(
-        _petswarm("run", "--robots", "3", "--duration", "60", "--world", world),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
+    proc = _started_run(3, "--world", world)
     try:
-        seen = ""
-        deadline = time.monotonic() + 60
-        while "3/3 robots attached" not in seen and time.monotonic() < deadline:
-            seen += proc.stderr.readline()
-        assert "3/3 robots attached" in seen, seen
         assert len(_processes_mentioning(world)) >= 4  # the run, its hub and three robots
         proc.send_signal(signal.SIGINT)
         assert proc.wait(timeout=30) == 130
@@ -117,17 +124,8 @@ def test_a_run_killed_outright_still_leaves_a_readable_record(tmp_path):
     from cli.records import read_events
 
     record = tmp_path / "killed"
-    proc = subprocess.Popen(
-        _petswarm("run", "--robots", "2", "--duration", "60", "--organize", "1", "--record", str(record)),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
+    proc = _started_run(2, "--organize", "1", "--record", str(record))
     try:
-        seen = ""
-        deadline = time.monotonic() + 60
-        while "2/2 robots attached" not in seen and time.monotonic() < deadline:
-            seen += proc.stderr.readline()
         time.sleep(0.5)
         proc.kill()  # SIGKILL: no finally block runs in the run process
         proc.wait(timeout=10)
