@@ -5,12 +5,14 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import time
 from typing import Any
 
 from petswarm import control
 from radio_hub.interface import HubUnavailable, Keys, open_session
 
 _ORGANIZE_TIMEOUT_S = 60.0
+_ROBOT_WAIT_S = 5.0
 
 
 def swarm_command(args: argparse.Namespace) -> int:
@@ -22,6 +24,7 @@ def swarm_command(args: argparse.Namespace) -> int:
         print(f"petswarm swarm: {err}", file=sys.stderr)
         return 2
     try:
+        _wait_for_robot(session, keys, getattr(args, "master", None) or args.robot)
         answer = _request(session, keys, args)
     except HubUnavailable as err:
         print(f"petswarm swarm: {err}", file=sys.stderr)
@@ -39,6 +42,19 @@ def swarm_command(args: argparse.Namespace) -> int:
     print(json.dumps(answer, indent=2) if as_json else describe(args.action, answer))
 
     return 0
+
+
+def _wait_for_robot(session: Any, keys: Keys, robot: int) -> None:
+    """A robot started a moment ago is still attaching: give it a few seconds before giving up."""
+    deadline = time.monotonic() + _ROBOT_WAIT_S
+    while True:
+        try:
+            control.command(session, keys, robot, "status", 1.0)
+            return
+        except HubUnavailable:
+            if time.monotonic() >= deadline:
+                raise
+            time.sleep(0.2)
 
 
 def _request(session: Any, keys: Keys, args: argparse.Namespace) -> dict[str, Any]:
