@@ -186,6 +186,10 @@ def build_parser() -> argparse.ArgumentParser:
         "--protocol", choices=("paper", "slotted"), default="paper", help="organizing protocol (default paper)"
     )
 
+    from cli.chaos import add_arguments as add_chaos_arguments
+
+    add_chaos_arguments(sub, _add_hub, robot_id, bounded)
+
     rep = sub.add_parser("report", help="print a run record's summary and render its plots to PNG")
     rep.add_argument("run", help="a run record directory (runs/<time>-<seed>)")
     rep.add_argument("--out", help="directory for report.png (default: the run directory)")
@@ -250,7 +254,7 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``petswarm`` console script."""
     args = build_parser().parse_args(argv)
     commands = {"hub": _hub, "robot": _robot, "run": _run, "stats": _stats, "bench": _bench, "swarm": _swarm}
-    handler = {**commands, "report": _report}[args.command]
+    handler = {**commands, "report": _report, "chaos": _chaos}[args.command]
     try:
         return handler(args)
     except KeyboardInterrupt:
@@ -337,7 +341,14 @@ def _run(args: argparse.Namespace) -> int:
     return run(opts)
 
 
+def _chaos(args: argparse.Namespace) -> int:
+    from cli.chaos import chaos_command
+
+    return chaos_command(args)
+
+
 def _report(args: argparse.Namespace) -> int:
+
     from cli.report import report_command
 
     return report_command(args)

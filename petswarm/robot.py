@@ -7,6 +7,7 @@ exercised end to end; the swarm managers build on the same RF communication mana
 from __future__ import annotations
 
 import asyncio
+import os
 import signal
 import sys
 import time
@@ -305,6 +306,7 @@ class Robot:
         radio = self.rf.radio
         return {
             "robot_id": self.config.robot_id,
+            "pid": os.getpid(),
             "radio": _identity_dict(radio.identity),
             "uptime_s": round(time.monotonic() - self.started, 3),
             "pings_sent": self.pings_sent,

@@ -130,6 +130,7 @@ class RadioHub:
             ),
             session.declare_queryable(keys.stats, lambda q: put(("stats", q))),
             session.declare_queryable(keys.air, lambda q: put(("air", q))),
+            session.declare_queryable(keys.chaos, lambda q: put(("chaos", q))),
         ]
         self._t0_ns = time.perf_counter_ns()
         self._t0_wall_us = time.time_ns() // 1000
@@ -191,6 +192,8 @@ class RadioHub:
             self._reply(item[1], self.stats())
         elif kind == "air":
             self._reply(item[1], {"transmissions": [tx.to_dict() for tx in self.medium.air_log]})
+        elif kind == "chaos":
+            self._reply(item[1], self._on_chaos(item[1]))
 
     def _on_up(self, node_id: str, data: bytes) -> None:
         try:
@@ -272,6 +275,26 @@ class RadioHub:
             self._send_down(node_id, wire.Error(token=msg.token, reason=f"unknown IR mode {msg.mode!r}"))
             return
         self._send_down(node_id, self._attached(self.medium.nodes[node_id], msg.token))
+
+    def _on_chaos(self, query: zenoh.Query) -> dict[str, Any]:
+        """Add, clear or list faults; every change is logged with model and wall time."""
+        chaos = self.medium.chaos
+        try:
+            request = msgpack.unpackb(query.payload.to_bytes(), raw=False) if query.payload else {}
+            if not isinstance(request, dict):
+                raise ValueError("a chaos request is a map")
+            op = request.get("op", "list")
+            if op == "add":
+                fault = chaos.add(request["fault"], self.now_us(), time.time())
+                print(f"hub: chaos {fault.to_dict()} at model {self.now_us()} us", file=sys.stderr, flush=True)
+            elif op == "clear":
+                ended = chaos.clear(request.get("id"), self.now_us(), time.time())
+                print(f"hub: chaos cleared {ended} at model {self.now_us()} us", file=sys.stderr, flush=True)
+            elif op != "list":
+                raise ValueError(f"op must be add, clear or list, not {op!r}")
+        except Exception as err:  # a bad request must not hurt the hub
+            return {"error": f"{type(err).__name__}: {err}"}
+        return {"faults": [f.to_dict() for f in chaos.faults.values()], "log": chaos.log}
 
     def _attached(self, node: RadioNode, token: int) -> wire.Attached:
         return wire.Attached(
@@ -385,6 +408,7 @@ class RadioHub:
             "nodes": nodes,
             "channels": channels,
             "hub": self.counters.to_dict(),
+            "chaos": [f.to_dict() for f in medium.chaos.faults.values()],
             "ir": {
                 **self.ir.counter.as_dict(self.now_us()),
                 "sweeps": self.ir.sweeps,

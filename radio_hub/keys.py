@@ -62,6 +62,11 @@ class Keys:
         return f"{self.prefix}/hub/stats"
 
     @property
+    def chaos(self) -> str:
+        """The hub's fault injection (queryable: add, clear, list)."""
+        return f"{self.prefix}/hub/chaos"
+
+    @property
     def air(self) -> str:
         """The hub's recent frame log (queryable)."""
         return f"{self.prefix}/hub/air"

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from radio_hub.chaos import Chaos
 from radio_hub.config import CHANNELS, MediumConfig, airtime_us
 from radio_hub.mac import BROADCAST, MAX_PSDU, Frame, FrameError, FrameType
 from radio_hub.propagation import (
@@ -99,6 +100,12 @@ class Counters:
     lost: int = 0
     filtered: int = 0
     acks_lost: int = 0
+    chaos_lost: int = 0
+    """Of ``lost``: receptions an injected loss fault took."""
+    corrupted: int = 0
+    """Of ``lost``: receptions an injected corruption spoiled (bad FCS, dropped by the MAC)."""
+    duplicated: int = 0
+    """Deliveries handed up twice by an injected duplication (not counted again in ``delivered``)."""
 
     def count(self, outcome: RxOutcome) -> None:
         """Count one arrival and its outcome."""
@@ -224,6 +231,7 @@ class Medium:
         It must not call back into the medium."""
         self.now_us = 0
         self._burst = GilbertElliott(config.loss.gilbert_elliott)
+        self.chaos = Chaos()
         self._queues: dict[str, deque[_Job]] = {}
         self._air: list[Transmission] = []
         self._events: list[tuple[int, int, Callable[..., None], tuple[Any, ...]]] = []
@@ -346,6 +354,7 @@ class Medium:
             and tx.sender != node.node_id
             and tx.overlaps(start_us, end_us)
             and distance(tx.position, node.position) <= reach
+            and not self.chaos.separated(tx.sender, node.node_id)
             for tx in self._air
         )
 
@@ -403,7 +412,10 @@ class Medium:
         return [
             n
             for n in self.nodes.values()
-            if n.channel == tx.channel and n.node_id != tx.sender and distance(tx.position, n.position) <= reach
+            if n.channel == tx.channel
+            and n.node_id != tx.sender
+            and distance(tx.position, n.position) <= reach
+            and not self.chaos.separated(tx.sender, n.node_id)
         ]
 
     def _judge(self, tx: Transmission, node: RadioNode, filtered: bool) -> RxOutcome:
@@ -424,7 +436,11 @@ class Medium:
                 continue
             if other.sender == node.node_id:
                 return True  # half duplex: a node that is transmitting receives nothing
-            if other.sender != tx.sender and distance(other.position, node.position) <= reach:
+            if (
+                other.sender != tx.sender
+                and distance(other.position, node.position) <= reach
+                and not self.chaos.separated(other.sender, node.node_id)
+            ):
                 interferers.append(other)
         if not interferers:
             return False
@@ -443,26 +459,41 @@ class Medium:
         base = self.config.loss.base
         if base > 0.0 and rng.random() < base:
             return True
-        return self._burst.lost((tx.sender, node.node_id), rng)
+        if self._burst.lost((tx.sender, node.node_id), rng):
+            return True
+        if not self.chaos.faults:
+            return False
+        # injected faults: a fade (loss) or a bad FCS the receiving MAC drops (corrupt)
+        for kind in ("loss", "corrupt"):
+            for p in self.chaos.probabilities(kind, tx.sender, node.node_id, node.pan_id, tx.channel):
+                if rng.random() < p:
+                    self._count(node.node_id, "corrupted" if kind == "corrupt" else "chaos_lost")
+                    return True
+        return False
 
     def _deliver(self, tx: Transmission, node: RadioNode, psdu: bytes) -> None:
         pl = self.config.path_loss
         rssi = mean_rssi_dbm(pl, distance(tx.position, node.position))
         if pl.shadowing_sigma_db > 0:
             rssi += float(self.rng.normal(0.0, pl.shadowing_sigma_db))
-        self._out.append(
-            Reception(
-                node.node_id,
-                tx.sender,
-                psdu,
-                tx.frame,
-                round(rssi, 1),
-                lqi_from_rssi(pl, rssi),
-                tx.start_us,
-                tx.end_us,
-                tx.submitted_us,
-            )
+        copies = 1
+        if self.chaos.faults:
+            for p in self.chaos.probabilities("duplicate", tx.sender, node.node_id, node.pan_id, tx.channel):
+                if self.rng.random() < p:
+                    copies = 2
+                    self._count(node.node_id, "duplicated")
+        reception = Reception(
+            node.node_id,
+            tx.sender,
+            psdu,
+            tx.frame,
+            round(rssi, 1),
+            lqi_from_rssi(pl, rssi),
+            tx.start_us,
+            tx.end_us,
+            tx.submitted_us,
         )
+        self._out.extend([reception] * copies)
 
     # -- acknowledgements ------------------------------------------------------------------------
 
@@ -486,6 +517,8 @@ class Medium:
         if job.done or sender is None or job.retries != ack.attempt:
             return
         in_range = distance(ack.position, sender.position) <= self.config.range.tx_range_m
+        in_range = in_range and not self.chaos.separated(ack.sender, sender.node_id)
+
         outcome = self._judge(ack, sender, filtered=False) if in_range else RxOutcome.LOST
         ack.outcomes[sender.node_id] = outcome
         if outcome == RxOutcome.DELIVERED:

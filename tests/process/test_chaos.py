@@ -1,0 +1,66 @@
+"""Faults injected with ``petswarm chaos`` into a running hub, and what the robots then see."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+
+import pytest
+
+pytestmark = pytest.mark.process
+
+
+def _chaos(air, *args: str) -> subprocess.CompletedProcess[str]:
+    argv = [sys.executable, "-m", "cli", "chaos", *args, "--hub", air.endpoint, "--world", air.world]
+    return subprocess.run(argv, capture_output=True, text=True, timeout=60)
+
+
+def _senders(reply: dict) -> set[int]:
+    return {r["from"] for r in reply["replies"]}
+
+
+def test_partition_and_heal(make_air):
+    air = make_air()
+    for rid, x in ((1, 0.0), (2, 1.0), (3, 2.0)):
+        air.robot(rid, (x, 0.0))
+    cut = _chaos(air, "partition", "--group", "robot-3")
+    assert cut.returncode == 0, cut.stderr
+    assert json.loads(cut.stdout)[0]["kind"] == "partition"
+    assert _senders(air.cmd(1, "ping", wait=0.4)) == {2}
+    assert air.node(3)["heard"] == 0
+    healed = _chaos(air, "clear")
+    assert healed.returncode == 0 and json.loads(healed.stdout) == []
+    assert _senders(air.cmd(1, "ping", wait=0.4)) == {2, 3}
+    log = json.loads(_chaos(air, "list").stdout or "[]")
+    assert log == []
+    assert air.stats()["chaos"] == []
+
+
+def test_loss_on_a_node_makes_unicast_fail_and_a_bad_fault_is_refused(make_air):
+    air = make_air()
+    air.robot(1, (0.0, 0.0))
+    air.robot(2, (1.0, 0.0))
+    assert _chaos(air, "loss", "--node", "robot-2", "--p", "1").returncode == 0
+    answer = air.cmd(1, "ping", dst=2, wait=0.2)
+    assert answer["tx"]["status"] == "no_ack" and _senders(answer) == set()
+    assert air.node(2)["chaos_lost"] >= 4
+    bad = _chaos(air, "partition", "--group", "")
+    assert bad.returncode == 1 and "needs a group" in bad.stderr
+
+
+def test_pause_resume_and_kill_a_robot(make_air):
+    air = make_air()
+    air.robot(1, (0.0, 0.0))
+    air.robot(2, (1.0, 0.0))
+    assert _chaos(air, "pause", "--robot", "2").returncode == 0
+    assert _senders(air.cmd(1, "ping", wait=0.5)) == set()  # a stopped process answers nothing
+    assert _chaos(air, "resume", "--robot", "2").returncode == 0
+    time.sleep(0.3)
+    assert 2 in _senders(air.cmd(1, "ping", wait=0.5))
+    assert _chaos(air, "kill", "--robot", "2").returncode == 0
+    deadline = time.monotonic() + 10
+    while air.node(2)["attached"] and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not air.node(2)["attached"] and air.sup.children["robot-2"].poll() is not None
