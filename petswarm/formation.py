@@ -32,7 +32,10 @@ PROTOCOLS = ("paper", "slotted")
 MAX_MEMBERS = 32
 """Members of one swarm besides the master: the roster lists them all in one frame."""
 MAX_LISTED = 30
+MEMBER_MISSES = 3
+"""Rounds of the master in a row a member may leave its start sign unanswered before it is dropped."""
 ANSWER_ATTEMPTS = 3
+
 """Sends of one answer when the MAC reports a failure (channel access failure or no ACK)."""
 
 """Robots a joining query can list as pending in one frame."""
@@ -130,6 +133,7 @@ class NetworkFormation:
         self._roster_task: asyncio.Task[None] | None = None
         self._busy = asyncio.Lock()
         self._member_lock = asyncio.Lock()
+        self._misses: dict[int, int] = {}
 
     @property
     def me(self) -> int:
@@ -208,6 +212,8 @@ class NetworkFormation:
             return
 
         self.swarm = Swarm(session, pan, self.me, 0, members)
+        self._misses = {}
+
         self.sequence.transition(RobotState.MASTER_DRIVING, session=session, members=list(members))
         self.log.record("organized", **figures)
         self.on_change(self.swarm)
@@ -330,10 +336,29 @@ class NetworkFormation:
         swarm = self.swarm
         if swarm is None or swarm.number or swarm.session != incoming.message.session_id:
             return
-        if incoming.sender in swarm.members:
-            swarm.members = tuple(a for a in swarm.members if a != incoming.sender)
-            self.log.record("member_left", session=swarm.session, member=incoming.sender)
-            self.on_change(swarm)
+        self._drop_member(incoming.sender, "member_left")
+
+    def note_answers(self, answered: set[int], silent: set[int]) -> None:
+        """Master side: who answered our IR start sign. A member silent for ``MEMBER_MISSES`` of our
+        rounds in a row is gone (dead, or out of reach): the roster drops it and the token skips it."""
+        swarm = self.swarm
+        if swarm is None or swarm.number:
+            return
+        for addr in answered:
+            self._misses.pop(addr, None)
+        for addr in silent & set(swarm.members):
+            self._misses[addr] = self._misses.get(addr, 0) + 1
+            if self._misses[addr] >= MEMBER_MISSES:
+                self._drop_member(addr, "member_lost")
+
+    def _drop_member(self, addr: int, why: str) -> None:
+        swarm = self.swarm
+        if swarm is None or addr not in swarm.members:
+            return
+        swarm.members = tuple(a for a in swarm.members if a != addr)
+        self._misses.pop(addr, None)
+        self.log.record(why, session=swarm.session, member=addr)
+        self.on_change(swarm)
 
     async def _on_scan(self, incoming: Incoming) -> None:
         msg: m.Scan = incoming.message  # type: ignore[assignment]

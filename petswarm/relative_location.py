@@ -166,10 +166,13 @@ class IrTokenSchedule:
         log: EventLog,
         config: TokenConfig,
         heading_deg: Callable[[], float],
+        on_answers: Callable[[set[int], set[int]], None] = lambda answered, silent: None,
     ) -> None:
         self.rf, self.mpm, self.ir, self.locations, self.log = rf, mpm, ir, locations, log
         self.config = config
         self.heading_deg = heading_deg
+        self.on_answers = on_answers
+        """Told, after each start sign this robot sent, who answered and who stayed silent."""
         self.ir_config = IrConfig()  # the module's calibration (its datasheet), not the hub's truth
         self.session = 0
         self.chain: tuple[int, ...] = ()
@@ -241,6 +244,7 @@ class IrTokenSchedule:
         if self.round != round_ or not self.active:
             return  # overtaken by a higher round while we waited
         alive = set(begun.responses)
+        self.on_answers(alive, others - alive)
         if others and not alive:
             # nobody heard us: we may be the deaf one while the others pass the token; never shine blind
             self.log.record("ir_unheard", round=round_)

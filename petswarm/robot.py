@@ -113,8 +113,16 @@ class Robot:
         self.ir = IrModuleManager(radio)
         self.locations = RelativeLocationManager()
         self.schedule = IrTokenSchedule(
-            self.rf, self.mpm, self.ir, self.locations, self.log, config.token, lambda: radio.identity.heading_deg
+            self.rf,
+            self.mpm,
+            self.ir,
+            self.locations,
+            self.log,
+            config.token,
+            lambda: radio.identity.heading_deg,
+            self.formation.note_answers,
         )
+
         self.log.record(
             "start", robot_id=config.robot_id, state=self.sequence.state.label, user=config.user, seed=config.seed
         )

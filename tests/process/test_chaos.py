@@ -64,3 +64,46 @@ def test_pause_resume_and_kill_a_robot(make_air):
     while air.node(2)["attached"] and time.monotonic() < deadline:
         time.sleep(0.1)
     assert not air.node(2)["attached"] and air.sup.children["robot-2"].poll() is not None
+
+
+def _swarm_of_four(air) -> None:
+    air.robot(1, (0.0, 0.0), 0x1000, 11, "--user", "1")
+    for rid, x in ((2, 1.0), (3, 1.5), (4, 2.0)):
+        air.robot(rid, (x, 0.5))
+    assert air.cmd(1, "organize", timeout=30, count=3)["members"] == [2, 3, 4]
+
+
+def test_a_slave_dies_the_master_drops_it_and_the_token_skips_it(make_air):
+    air = make_air()
+    _swarm_of_four(air)
+    time.sleep(1.0)
+    assert _chaos(air, "kill", "--robot", "3").returncode == 0
+    deadline = time.monotonic() + 15
+    while 3 in (air.cmd(1, "status")["swarm"] or {}).get("members", [3]) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    master = air.cmd(1, "status")
+    assert master["swarm"]["members"] == [2, 4], master["swarm"]
+    assert master["state"] == "master-driving"
+    held = {rid: air.cmd(rid, "status")["ir"]["rounds_held"] for rid in (1, 2, 4)}
+    time.sleep(2.0)
+    for rid in (1, 2, 4):  # the token still goes round the survivors
+        s = air.cmd(rid, "status")
+        assert s["ir"]["rounds_held"] > held[rid] and 3 not in s["ir"]["chain"], s["ir"]
+    assert air.stats()["ir"]["overlap_episodes"] == 0
+
+
+def test_the_master_dies_and_the_slaves_return_to_waiting(make_air):
+    air = make_air()
+    _swarm_of_four(air)
+    assert _chaos(air, "kill", "--robot", "1").returncode == 0
+    killed = time.monotonic()
+    deadline = killed + 10
+    states = {}
+    while time.monotonic() < deadline:
+        states = {rid: air.cmd(rid, "status") for rid in (2, 3, 4)}
+        if all(s["state"] == "waiting" for s in states.values()):
+            break
+        time.sleep(0.2)
+    assert all(s["state"] == "waiting" and s["radio"]["pan_id"] == 0x1000 for s in states.values()), states
+    assert time.monotonic() - killed < 2.0 + 3.0  # the members' master-silence timeout, plus margin
+    assert all(s["ir"]["ir_mode"] == "idle" for s in states.values())  # nobody left shining
