@@ -16,8 +16,9 @@ from typing import Any
 
 import msgpack
 
+from cli.hub_session import with_hub
 from petswarm import control
-from radio_hub.interface import HubUnavailable, Keys, open_session
+from radio_hub.interface import HubUnavailable, Keys
 
 SIGNALS = {"kill": signal.SIGKILL, "pause": signal.SIGSTOP, "resume": signal.SIGCONT}
 
@@ -55,21 +56,13 @@ def add_arguments(sub: argparse._SubParsersAction, add_hub: Any, robot_id: Any, 
 
 def chaos_command(args: argparse.Namespace) -> int:
     """Carry out one chaos action; 2 when the hub or robot cannot be reached, 1 when refused."""
-    keys = Keys(args.world)
-    try:
-        session = open_session("client", args.hub)
-    except HubUnavailable as err:
-        print(f"petswarm chaos: {err}", file=sys.stderr)
-        return 2
-    try:
-        if args.action in SIGNALS:
-            return _signal_robot(session, keys, args)
-        answer = _ask_hub(session, keys, _request(args))
-    except HubUnavailable as err:
-        print(f"petswarm chaos: {err}", file=sys.stderr)
-        return 2
-    finally:
-        session.close()
+    return with_hub("chaos", args.hub, lambda session: _act(session, Keys(args.world), args))
+
+
+def _act(session: Any, keys: Keys, args: argparse.Namespace) -> int:
+    if args.action in SIGNALS:
+        return _signal_robot(session, keys, args)
+    answer = _ask_hub(session, keys, _request(args))
     if "error" in answer:
         print(f"petswarm chaos: the hub refused: {answer['error']}", file=sys.stderr)
         return 1

@@ -362,22 +362,18 @@ def _swarm(args: argparse.Namespace) -> int:
 
 
 def _stats(args: argparse.Namespace) -> int:
-    from radio_hub.interface import HubUnavailable, Keys, open_session, query_hub
+    from cli.hub_session import with_hub
+    from radio_hub.interface import Keys, query_hub
 
-    try:
-        session = open_session("client", args.hub)
-        try:
-            stats = query_hub(session, Keys(args.world).stats)
-        finally:
-            session.close()
-    except HubUnavailable as err:
-        print(f"petswarm stats: {err}", file=sys.stderr)
-        return 2
-    if args.json:
-        print(json.dumps(stats, indent=2))
-    else:
-        _print_stats(stats)
-    return 0
+    def show(session: Any) -> int:
+        stats = query_hub(session, Keys(args.world).stats)
+        if args.json:
+            print(json.dumps(stats, indent=2))
+        else:
+            _print_stats(stats)
+        return 0
+
+    return with_hub("stats", args.hub, show)
 
 
 def _print_stats(stats: dict[str, Any]) -> None:

@@ -8,8 +8,9 @@ import sys
 import time
 from typing import Any
 
+from cli.hub_session import with_hub
 from petswarm import control
-from radio_hub.interface import HubUnavailable, Keys, open_session
+from radio_hub.interface import HubUnavailable, Keys
 
 _ORGANIZE_TIMEOUT_S = 60.0
 _ROBOT_WAIT_S = 5.0
@@ -17,20 +18,12 @@ _ROBOT_WAIT_S = 5.0
 
 def swarm_command(args: argparse.Namespace) -> int:
     """Send the request, print the robot's answer; exit 1 when the robot refused, 2 when unreachable."""
-    keys = Keys(args.world)
-    try:
-        session = open_session("client", args.hub)
-    except HubUnavailable as err:
-        print(f"petswarm swarm: {err}", file=sys.stderr)
-        return 2
-    try:
-        _wait_for_robot(session, keys, getattr(args, "master", None) or args.robot)
-        answer = _request(session, keys, args)
-    except HubUnavailable as err:
-        print(f"petswarm swarm: {err}", file=sys.stderr)
-        return 2
-    finally:
-        session.close()
+    return with_hub("swarm", args.hub, lambda session: _ask(session, Keys(args.world), args))
+
+
+def _ask(session: Any, keys: Keys, args: argparse.Namespace) -> int:
+    _wait_for_robot(session, keys, getattr(args, "master", None) or args.robot)
+    answer = _request(session, keys, args)
     if "error" in answer:
         reason = answer["error"].split(": ", 1)[-1]  # the robot's exception class means nothing to a user
         print(
