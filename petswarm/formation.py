@@ -358,7 +358,21 @@ class NetworkFormation:
         swarm.members = tuple(a for a in swarm.members if a != addr)
         self._misses.pop(addr, None)
         self.log.record(why, session=swarm.session, member=addr)
-        self.on_change(swarm)
+        if swarm.members:
+            self.on_change(swarm)
+        else:  # the last member is gone: the swarm is over, the master drives with its user again
+            asyncio.get_running_loop().create_task(self._dissolve(swarm))
+
+    async def _dissolve(self, swarm: Swarm) -> None:
+        async with self._busy:
+            if self.swarm is not swarm:
+                return
+            self.swarm = None
+            self.on_change(None)
+            if self._roster_task is not None:
+                self._roster_task.cancel()
+            self.sequence.restore_driving(session=swarm.session, reason="every member is gone")
+            await self.rf.radio.configure(pan_id=self.config.waiting_pan)
 
     async def _on_scan(self, incoming: Incoming) -> None:
         msg: m.Scan = incoming.message  # type: ignore[assignment]
@@ -475,8 +489,13 @@ class NetworkFormation:
         while True:
             await asyncio.sleep(0.05)
             waiting_for_master = self.candidate_of is not None or (self.swarm is not None and self.swarm.number)
+            if not self.rf.radio.hub_present:
+                # no air at all (the hub died or restarts): the master's silence means nothing yet
+                self._deadline = max(self._deadline, time.monotonic() + self.config.master_silence_s)
+                continue
             if not waiting_for_master or time.monotonic() <= self._deadline:
                 continue
+
             try:
                 async with self._member_lock:
                     await self._give_up()

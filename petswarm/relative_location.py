@@ -364,7 +364,11 @@ class IrTokenSchedule:
         """The master regenerates the token after ``regen_timeout_s`` of silence."""
         while True:
             await asyncio.sleep(0.05)
+            if not self.rf.radio.hub_present:
+                self.last_activity = time.monotonic()  # no air, no token to lose
+                continue
             silent = time.monotonic() - self.last_activity > self.config.regen_timeout_s
+
             if self.active and self.is_master and silent:
                 self.regenerations += 1
                 self.log.record("token_regenerated", round=self.round + 1)

@@ -123,9 +123,11 @@ class Robot:
             self.formation.note_answers,
         )
 
+        radio.on_reattach.append(self._reattached)
         self.log.record(
             "start", robot_id=config.robot_id, state=self.sequence.state.label, user=config.user, seed=config.seed
         )
+
         self.started = time.monotonic()
         self.pings_sent = 0
         self.pings_answered = 0
@@ -187,8 +189,17 @@ class Robot:
         interval = self.config.ping_interval
         await asyncio.sleep(float(self.rng.uniform(0, interval)))
         while True:
-            await self.ping(BROADCAST, wait=0.0)
+            try:
+                await self.ping(BROADCAST, wait=0.0)
+            except (HubUnavailable, RadioError) as err:  # the hub may be restarting: keep pinging
+                self.log.record("error", where="ping", error=str(err))
             await asyncio.sleep(float(self.rng.uniform(0.5, 1.5)) * interval)
+
+    def _reattached(self) -> None:
+        """The radio attached again to a restarted hub: tell it the IR module's mode too."""
+        self.log.record("reattached", pan_id=self.rf.radio.identity.pan_id, ir_mode=self.ir.mode)
+        if self.ir.mode != "idle":
+            self._spawn(self.rf.radio.set_ir_mode(self.ir.mode))
 
     def _swarm_changed(self, swarm: Swarm | None) -> None:
         """Formation tells us the swarm changed: the IR schedule follows."""

@@ -131,6 +131,7 @@ class RadioHub:
             session.declare_queryable(keys.stats, lambda q: put(("stats", q))),
             session.declare_queryable(keys.air, lambda q: put(("air", q))),
             session.declare_queryable(keys.chaos, lambda q: put(("chaos", q))),
+            session.liveliness().declare_token(keys.hub_alive),
         ]
         self._t0_ns = time.perf_counter_ns()
         self._t0_wall_us = time.time_ns() // 1000
@@ -212,7 +213,7 @@ class RadioHub:
             self._on_attach(node_id, msg)
         elif node_id not in self.medium.nodes:
             self.counters.unattached += 1
-            self._send_down(node_id, wire.Error(token=getattr(msg, "token", 0), reason="node is not attached"))
+            self._send_down(node_id, wire.Error(token=getattr(msg, "token", 0), reason=wire.NOT_ATTACHED))
         elif isinstance(msg, wire.Transmit):
             self._dispatch(self.medium.submit(node_id, msg.psdu, msg.token, self.now_us()))
         elif isinstance(msg, wire.Configure):
@@ -226,7 +227,8 @@ class RadioHub:
             self._send_down(node_id, wire.Error(reason=f"{msg.TYPE} is not a node-to-hub message"))
 
     def _check_sequence(self, node_id: str, msg: wire.Message) -> None:
-        last = 0 if isinstance(msg, wire.Attach) else self._up_seq.get(node_id, msg.n - 1)
+        # an attach starts a node's numbering (a node re-attaching after a hub restart goes on counting)
+        last = msg.n - 1 if isinstance(msg, wire.Attach) else self._up_seq.get(node_id, msg.n - 1)
         if msg.n > last + 1:
             self.counters.transport_gaps += msg.n - last - 1
         self._up_seq[node_id] = msg.n

@@ -13,6 +13,7 @@ import contextlib
 import itertools
 import re
 import secrets
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -114,6 +115,7 @@ class IrSweep:
 
 
 REQUEST_TIMEOUT_S = 5.0
+
 """How long a node waits for the hub's answer to a request once attached."""
 _ENDPOINT = re.compile(r"^(tcp|udp|tls|quic)/(\[[0-9a-fA-F:.]+\]|[A-Za-z0-9_.-]+):\d{1,5}$")
 
@@ -163,6 +165,15 @@ class RadioClient:
         self.instance = secrets.token_hex(8)
         self._token = session.liveliness().declare_token(keys.alive(node_id, self.instance))
         self._sub = session.declare_subscriber(keys.down(node_id), self._from_zenoh)
+        self.reattaches = 0
+        self.hub_present = True
+        """False while the hub's liveliness token is gone (the hub died or restarts): silence means nothing."""
+
+        self.on_reattach: list[Callable[[], None]] = []
+        """Called after the radio attached again to a restarted hub (the hub forgot IR modes and the like)."""
+        self._attached_once = False
+        self._reattaching: asyncio.Task[None] | None = None
+        self._hub_watch = session.liveliness().declare_subscriber(keys.hub_alive, self._on_hub_alive)
         self._pub = reliable_publisher(session, keys.up(node_id))
 
     @classmethod
@@ -202,6 +213,7 @@ class RadioClient:
             await client.close(detach=False)
             raise
         client._adopt(attached)
+        client._attached_once = True
         client.request_timeout = max(timeout, REQUEST_TIMEOUT_S)
         return client
 
@@ -233,8 +245,15 @@ class RadioClient:
     async def send(self, frame: Frame) -> TxResult:
         """Hand a frame to the MAC and wait for its result. FrameError if it cannot be encoded."""
         psdu = frame.encode()
-        token = next(self._tokens)
-        done: wire.TxDone = await self._request(token, wire.Transmit(token=token, psdu=psdu))
+        for attempt in range(2):
+            token = next(self._tokens)
+            try:
+                done: wire.TxDone = await self._request(token, wire.Transmit(token=token, psdu=psdu))
+                break
+            except RadioError as err:
+                if str(err) != wire.NOT_ATTACHED or attempt:
+                    raise
+                await self._reattached()  # a restarted hub: attach again, then send once more
         return TxResult(
             TxStatus(done.status), done.retries, done.backoffs, done.submitted_us, done.done_us, done.reason
         )
@@ -275,7 +294,21 @@ class RadioClient:
             channel=channel,
             position=None if position is None else list(position),
         )
-        self._adopt(await self._request(token, msg))
+        wanted = {
+            k: v
+            for k, v in (("pan_id", pan_id), ("short_addr", short_addr), ("channel", channel), ("position", position))
+            if v is not None
+        }
+        before = self.identity
+        # what we want is our identity from now on: an attach to a restarted hub in the meantime applies it
+        self.identity = replace(before, **wanted)
+        try:
+            self._adopt(await self._request(token, msg))
+        except RadioError as err:
+            if str(err) != wire.NOT_ATTACHED:
+                self.identity = before  # refused: the radio stays as it was
+                raise
+            await self._reattached()
         return self.identity
 
     async def close(self, detach: bool = True) -> None:
@@ -283,7 +316,7 @@ class RadioClient:
         if detach:
             with contextlib.suppress(zenoh.ZError):
                 self._put(wire.Detach())
-        for decl in (self._sub, self._token, self._pub):
+        for decl in (self._sub, self._token, self._pub, self._hub_watch):
             with contextlib.suppress(zenoh.ZError):
                 decl.undeclare()
         for fut in self._pending.values():
@@ -350,6 +383,8 @@ class RadioClient:
             fut = self._pending.get(msg.token)
             if fut is not None and not fut.done():
                 fut.set_exception(RadioError(msg.reason))
+            if msg.reason == wire.NOT_ATTACHED:
+                self._start_reattach()  # the hub restarted and forgot us
         else:
             self.malformed += 1
 
@@ -367,7 +402,43 @@ class RadioClient:
             return
         self._ir.put_nowait(IrSweep(np.frombuffer(msg.readings, dtype="<f4").astype(float), msg.t_us))
 
+    def _on_hub_alive(self, sample: zenoh.Sample) -> None:
+        # zenoh's thread: a hub appeared (again; a restarted hub knows nothing of us) or went away
+        present = sample.kind == zenoh.SampleKind.PUT
+        self._loop.call_soon_threadsafe(self._hub_seen, present)
+
+    def _hub_seen(self, present: bool) -> None:
+        self.hub_present = present
+        if present and self._attached_once:
+            self._start_reattach()
+
+    def _start_reattach(self) -> None:
+        if self._reattaching is None or self._reattaching.done():
+            self._reattaching = self._loop.create_task(self._reattach())
+
+    async def _reattached(self) -> None:
+        self._start_reattach()
+        assert self._reattaching is not None
+        await asyncio.shield(self._reattaching)
+
+    async def _reattach(self) -> None:
+        me = self.identity
+        attach = wire.Attach(
+            ext_addr=me.ext_addr,
+            short_addr=me.short_addr,
+            pan_id=me.pan_id,
+            channel=me.channel,
+            position=list(me.position),
+            heading_deg=float(me.heading_deg),
+            instance=self.instance,
+        )
+        self._adopt(await self._request(0, attach))
+        self.reattaches += 1
+        for callback in self.on_reattach:
+            callback()
+
     def _resolve(self, token: int, msg: wire.Message) -> None:
+
         fut = self._pending.get(token)
         if fut is not None and not fut.done():
             fut.set_result(msg)

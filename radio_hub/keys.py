@@ -62,6 +62,11 @@ class Keys:
         return f"{self.prefix}/hub/stats"
 
     @property
+    def hub_alive(self) -> str:
+        """The hub's liveliness token: nodes re-attach when a (restarted) hub appears."""
+        return f"{self.prefix}/hub/alive"
+
+    @property
     def chaos(self) -> str:
         """The hub's fault injection (queryable: add, clear, list)."""
         return f"{self.prefix}/hub/chaos"

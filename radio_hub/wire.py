@@ -14,6 +14,8 @@ from typing import Any, ClassVar
 import msgpack
 
 WIRE_VERSION = 1
+NOT_ATTACHED = "node is not attached"
+"""The hub's error for a node it does not know; after a hub restart the node attaches again on it."""
 
 
 class WireError(ValueError):

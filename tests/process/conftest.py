@@ -28,23 +28,19 @@ class Air:
         self.endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
         self.sup = Supervisor(tmp / "logs")
         config_file = tmp / "hub.json"
-
         config_file.write_text(json.dumps(config))
-        self.sup.spawn(
-            "hub",
-            [
-                "hub",
-                "--listen",
-                self.endpoint,
-                "--world",
-                self.world,
-                "--seed",
-                str(seed),
-                "--config",
-                str(config_file),
-                *hub_args,
-            ],
-        )
+        where = ["--listen", self.endpoint, "--world", self.world, "--seed", str(seed)]
+        self.hub_argv = ["hub", *where, "--config", str(config_file), *hub_args]
+        self.sup.spawn("hub", self.hub_argv)
+        self.session = self._connect()
+
+    def restart_hub(self, down_s: float = 1.0) -> None:
+        """Kill the hub outright and start a new one on the same endpoint after ``down_s``."""
+        self.sup.children["hub"].kill()
+        self.sup.stop(["hub"])
+        self.session.close()
+        time.sleep(down_s)
+        self.sup.spawn("hub", self.hub_argv)
         self.session = self._connect()
 
     def _connect(self) -> zenoh.Session:

@@ -107,3 +107,35 @@ def test_the_master_dies_and_the_slaves_return_to_waiting(make_air):
     assert all(s["state"] == "waiting" and s["radio"]["pan_id"] == 0x1000 for s in states.values()), states
     assert time.monotonic() - killed < 2.0 + 3.0  # the members' master-silence timeout, plus margin
     assert all(s["ir"]["ir_mode"] == "idle" for s in states.values())  # nobody left shining
+
+
+def _consistent(air) -> bool:
+    """Either the swarm goes on whole, or it is over for everyone (members home on the waiting PAN)."""
+    master = air.cmd(1, "status")
+    others = [air.cmd(rid, "status") for rid in (2, 3, 4)]
+    if master["state"] == "master-driving":
+        members = master["swarm"]["members"]
+        return members == [2, 3, 4] and all(s["state"] == "slave-driving" for s in others)
+    home = all(s["state"] == "waiting" and s["radio"]["pan_id"] == 0x1000 for s in others)
+    return master["state"] == "following" and master["radio"]["pan_id"] == 0x1000 and home
+
+
+def test_the_hub_restarts_and_the_robots_reattach_and_carry_on_or_reorganize(make_air):
+    air = make_air()
+    _swarm_of_four(air)
+    air.restart_hub()
+    deadline = time.monotonic() + 20
+    while time.monotonic() < deadline:
+        nodes = air.stats()["nodes"]
+        attached = all(nodes.get(f"robot-{rid}", {}).get("attached") for rid in (1, 2, 3, 4))
+        if attached and _consistent(air):
+            break
+        time.sleep(0.3)
+    assert attached, nodes  # every robot attached itself to the new hub
+    assert _consistent(air), [air.cmd(rid, "status")["state"] for rid in (1, 2, 3, 4)]
+    if air.cmd(1, "status")["state"] == "master-driving":
+        air.cmd(1, "disperse", timeout=30)
+        time.sleep(0.3)
+    again = air.cmd(1, "organize", timeout=30, count=3)  # the user can form the swarm again
+    assert sorted(again["members"]) == [2, 3, 4], again
+    assert air.stats()["hub"]["transport_gaps"] == 0
