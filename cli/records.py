@@ -4,6 +4,8 @@
         manifest.json          seed, versions, command line, options, medium configuration
         events/robot-N.jsonl   every robot's structured events, one JSON object per line, as they happen
         logs/*.log             every process's stdout and stderr
+        air.pcap               the hub's frame log: every 802.15.4 frame on the air (Wireshark, tshark)
+
         summary.json           the final summary (also written when the run fails or is interrupted)
 
 Files are written as the run goes (the robots flush every event), so a run that is killed midway

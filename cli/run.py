@@ -64,7 +64,9 @@ def run(opts: RunOptions) -> int:
     try:
         progress(f"world {world}, seed {opts.seed}, hub on {endpoint}, record in {record.path}")
         hub_args = ["hub", "--listen", endpoint, "--world", world, "--seed", str(opts.seed)]
-        hub_args += ["--pcap", opts.pcap] if opts.pcap else []
+        # the air's frame log belongs to the record unless the user wants the capture elsewhere
+        hub_args += ["--pcap", opts.pcap or str(record.path / "air.pcap")]
+
         sup.spawn("hub", hub_args + (["--config", opts.config] if opts.config else []))
         session = _wait_for_hub(sup, endpoint, keys, opts.startup_timeout)
         for rid in range(1, opts.robots + 1):
