@@ -18,7 +18,7 @@ import msgpack
 
 from cli.hub_session import with_hub
 from petswarm import control
-from radio_hub.interface import HubUnavailable, Keys
+from radio_hub.interface import HubUnavailable, Keys, query_hub
 
 SIGNALS = {"kill": signal.SIGKILL, "pause": signal.SIGSTOP, "resume": signal.SIGCONT}
 
@@ -90,11 +90,7 @@ def _request(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _ask_hub(session: Any, keys: Keys, request: dict[str, Any]) -> dict[str, Any]:
-    payload = msgpack.packb(request, use_bin_type=True)
-    for reply in session.get(keys.chaos, payload=payload, timeout=5.0):
-        if reply.ok is not None:
-            return msgpack.unpackb(reply.ok.payload.to_bytes(), raw=False, strict_map_key=False)
-    raise HubUnavailable(f"no hub of world {keys.world!r} answered")
+    return query_hub(session, keys.chaos, 5.0, msgpack.packb(request, use_bin_type=True))
 
 
 def _signal_robot(session: Any, keys: Keys, args: argparse.Namespace) -> int:

@@ -190,6 +190,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_chaos_arguments(sub, _add_hub, robot_id, bounded)
 
+    exp = sub.add_parser("experiment", help="run an experiment file: a run, a fault timeline, repetitions, seeds")
+    exp.add_argument("file", help="a TOML experiment file (see examples/experiment-loss.toml)")
+    exp.add_argument("--out", help="directory for the records and results (default runs/experiment-<time>)")
+
     rep = sub.add_parser("report", help="print a run record's summary and render its plots to PNG")
     rep.add_argument("run", help="a run record directory (runs/<time>-<seed>)")
     rep.add_argument("--out", help="directory for report.png (default: the run directory)")
@@ -254,7 +258,7 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``petswarm`` console script."""
     args = build_parser().parse_args(argv)
     commands = {"hub": _hub, "robot": _robot, "run": _run, "stats": _stats, "bench": _bench, "swarm": _swarm}
-    handler = {**commands, "report": _report, "chaos": _chaos}[args.command]
+    handler = {**commands, "report": _report, "chaos": _chaos, "experiment": _experiment}[args.command]
     try:
         return handler(args)
     except KeyboardInterrupt:
@@ -344,7 +348,14 @@ def _run(args: argparse.Namespace) -> int:
     return run(opts)
 
 
+def _experiment(args: argparse.Namespace) -> int:
+    from cli.experiment import experiment_command
+
+    return experiment_command(args)
+
+
 def _chaos(args: argparse.Namespace) -> int:
+
     from cli.chaos import chaos_command
 
     return chaos_command(args)

@@ -10,6 +10,7 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
+import msgpack
 import zenoh
 
 from cli.checker import check_record
@@ -40,6 +41,9 @@ class RunOptions:
     protocol: str = "paper"
     record_dir: str | None = None
     """Where the run record goes (default ``runs/<UTC time>-<seed>``)."""
+    faults: tuple[dict[str, Any], ...] = ()
+    """Chaos requests with ``at`` (seconds into the traffic phase); those later than the phase act just
+    before the swarm is organized. ``{"at": 1, "kind": "loss", "p": 0.3}``, ``{"at": 2, "clear": true}``."""
 
 
 def progress(text: str) -> None:
@@ -79,12 +83,16 @@ def run(opts: RunOptions) -> int:
                 f"robot-{rid}", [*robot_args, "--ping-interval", str(opts.ping_interval), "--seed", str(opts.seed)]
             )
         _wait_for_robots(sup, session, keys, opts.robots, opts.startup_timeout)
-        _exercise(sup, session, keys, opts.duration)
+        timeline = FaultTimeline(list(opts.faults))
+        _exercise(sup, session, keys, opts.duration, timeline)
+        timeline.apply_due(session, keys, float("inf"))  # what is left acts on the swarm phase
         swarm = organize_and_disperse(session, keys, opts) if opts.organize else {}
         summary = _summarise(session, keys, opts, world, endpoint)
-        summary.update(swarm)
-        summary["problems"] += swarm.get("problems", [])
-        summary["ok"] = not summary["problems"]
+        summary["faults"] = timeline.applied
+
+        problems = summary["problems"] + swarm.pop("problems", [])
+        summary.update(swarm, problems=problems, ok=not problems)
+
     except (RunFailed, HubUnavailable) as err:
         progress(f"failed: {err}")
         summary["problems"] = [f"failed: {err}"]
@@ -156,11 +164,12 @@ def _wait_for_robots(sup: Supervisor, session: zenoh.Session, keys: Keys, count:
     raise RunFailed(f"only {seen}/{count} robots attached within {timeout} s")
 
 
-def _exercise(sup: Supervisor, session: zenoh.Session, keys: Keys, duration: float) -> None:
+def _exercise(sup: Supervisor, session: zenoh.Session, keys: Keys, duration: float, timeline: FaultTimeline) -> None:
     start = time.monotonic()
     next_report = start
     while (elapsed := time.monotonic() - start) < duration:
         _check_alive(sup)
+        timeline.apply_due(session, keys, elapsed)
         if time.monotonic() >= next_report:
             totals = _totals(query_hub(session, keys.stats))
             progress(
@@ -169,6 +178,28 @@ def _exercise(sup: Supervisor, session: zenoh.Session, keys: Keys, duration: flo
             )
             next_report += 1.0
         time.sleep(min(0.1, max(duration - elapsed, 0)))
+
+
+class FaultTimeline:
+    """Faults of a run, applied through the hub's chaos queryable when their time comes."""
+
+    def __init__(self, faults: list[dict[str, Any]]) -> None:
+        self.pending = sorted(faults, key=lambda f: float(f.get("at", 0.0)))
+        self.applied: list[dict[str, Any]] = []
+
+    def apply_due(self, session: zenoh.Session, keys: Keys, elapsed: float) -> None:
+        """Send every fault whose time has come; a refused one fails the run with the hub's reason."""
+        while self.pending and float(self.pending[0].get("at", 0.0)) <= elapsed:
+            fault = dict(self.pending.pop(0))
+            at = fault.pop("at", 0.0)
+            request = (
+                {"op": "clear", "id": fault.get("id")} if fault.pop("clear", False) else {"op": "add", "fault": fault}
+            )
+            answer = query_hub(session, keys.chaos, payload=msgpack.packb(request, use_bin_type=True))
+            if "error" in answer:
+                raise RunFailed(f"fault at {at} s refused by the hub: {answer['error']}")
+            progress(f"fault at {at:g} s: {request}")
+            self.applied.append({"at": at, **request})
 
 
 def _totals(stats: dict[str, Any]) -> dict[str, int]:
@@ -256,6 +287,7 @@ def _summarise(session: zenoh.Session, keys: Keys, opts: RunOptions, world: str,
                     "channel_access_failures",
                     "no_ack",
                     "acks_sent",
+                    "chaos_lost",
                 )
             },
             "heard_from": sorted(status.get("heard_from", {})),

@@ -132,9 +132,9 @@ def open_session(mode: str, endpoint: str) -> zenoh.Session:
         raise HubUnavailable(f"cannot reach {endpoint}{hint}: {reason}") from None
 
 
-def query_hub(session: zenoh.Session, key: str, timeout: float = 2.0) -> dict[str, Any]:
+def query_hub(session: zenoh.Session, key: str, timeout: float = 2.0, payload: bytes | None = None) -> dict[str, Any]:
     """Ask one of the hub's queryables (blocking); raises HubUnavailable when nobody answers."""
-    for reply in session.get(key, timeout=timeout):
+    for reply in session.get(key, timeout=timeout, payload=payload):
         if reply.ok is not None:
             return msgpack.unpackb(reply.ok.payload.to_bytes(), raw=False, strict_map_key=False)
     raise HubUnavailable(f"no hub answered {key} within {timeout} s")

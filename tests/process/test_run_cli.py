@@ -141,3 +141,29 @@ def test_a_run_killed_outright_still_leaves_a_readable_record(tmp_path):
     assert report.returncode == 0, report.stderr
     assert "killed before it finished" in report.stdout and "robot-2" in report.stdout
     assert (record / "report.png").stat().st_size > 10_000
+
+
+def test_an_experiment_file_runs_every_seed_with_its_fault_timeline(tmp_path):
+    spec = tmp_path / "exp.toml"
+    spec.write_text(
+        'name = "robot 3 fades"\nseeds = [4, 5]\n[run]\nrobots = 3\nduration = 2\n'
+        '[[faults]]\nat = 0.2\nkind = "loss"\nnode = "robot-3"\n'
+    )
+    out = tmp_path / "out"
+    proc = subprocess.run(
+        _petswarm("experiment", str(spec), "--out", str(out)), capture_output=True, text=True, timeout=180
+    )
+    assert proc.returncode in (0, 1), proc.stderr
+    results = json.loads((out / "results.json").read_text())
+    assert [r["seed"] for r in results["runs"]] == [4, 5]
+    for i, seed in enumerate((4, 5), start=1):
+        summary = json.loads((out / f"run-{i}-seed-{seed}" / "summary.json").read_text())
+        assert (
+            summary["faults"][0]["fault"] == {"kind": "loss", "node": "robot-3"} and summary["faults"][0]["at"] == 0.2
+        )
+        assert sum(n["chaos_lost"] for n in summary["nodes"].values()) > 0  # the fade took frames
+    assert "2/2 runs" in proc.stderr and (out / "results.png").stat().st_size > 10_000
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[run]\nrobotz = 3\n")
+    refused = subprocess.run(_petswarm("experiment", str(bad)), capture_output=True, text=True, timeout=60)
+    assert refused.returncode == 2 and "robotz" in refused.stderr

@@ -31,6 +31,13 @@ def test_ci_runs_exactly_the_test_command_of_the_readme():
 def test_example_configs_load():
     from radio_hub.config import MediumConfig
 
-    for path in (ROOT / "examples").glob("*.toml"):
+    for path in (ROOT / "examples").glob("medium-*.toml"):
         config = MediumConfig.from_file(path)
         assert config != MediumConfig(), f"{path.name} changes nothing"
+
+
+def test_example_experiments_load():
+    from cli.experiment import load
+
+    for path in (ROOT / "examples").glob("experiment-*.toml"):
+        assert load(path)["seeds"]

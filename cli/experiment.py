@@ -1,0 +1,179 @@
+"""``petswarm experiment FILE``: one file names a run, a fault timeline, repetitions and seeds.
+
+    name = "organizing under loss"
+    repetitions = 5            # runs, with seeds seed, seed + 1, ... unless `seeds` lists them
+    seed = 1
+    [run]                      # any `petswarm run` option: robots, duration, organize, protocol, config
+    robots = 5
+    duration = 2
+    organize = 3
+    [[faults]]                 # `petswarm chaos` requests, `at` seconds into the traffic phase
+    at = 0.5
+    kind = "loss"
+    p = 0.3
+    [[faults]]
+    at = 1.5
+    clear = true
+
+Each repetition is a full `petswarm run` with its own record under the experiment's directory; the
+results (a table per repetition and the aggregates) go to stdout, ``results.json`` and ``results.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import sys
+import time
+import tomllib
+from contextlib import redirect_stdout
+from dataclasses import fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cli.bench_output import save
+from cli.run import RunOptions, run
+
+_RUN_KEYS = {"robots", "duration", "ping_interval", "organize", "protocol", "config"}
+
+
+def load(path: Path) -> dict[str, Any]:
+    """The experiment file, checked; ValueError naming what is wrong."""
+    data = tomllib.loads(path.read_text())
+    unknown = set(data) - {"name", "repetitions", "seed", "seeds", "run", "faults"}
+    if unknown:
+        raise ValueError(f"unknown keys {sorted(unknown)}")
+    bad = set(data.get("run", {})) - _RUN_KEYS
+    if bad:
+        raise ValueError(f"[run] takes {sorted(_RUN_KEYS)}, not {sorted(bad)}")
+    seeds = data.get("seeds") or [int(data.get("seed", 1)) + i for i in range(int(data.get("repetitions", 1)))]
+    if not seeds or not all(isinstance(s, int) and s >= 0 for s in seeds):
+        raise ValueError("seeds must be non-negative integers (or give repetitions and seed)")
+    for fault in data.get("faults", []):
+        if "at" not in fault:
+            raise ValueError(f"fault {fault} has no 'at' (seconds into the traffic phase)")
+    return {**data, "seeds": seeds}
+
+
+def experiment_command(args: argparse.Namespace) -> int:
+    """Run every repetition with a progress bar; 0 when every run was OK."""
+    try:
+        spec = load(Path(args.file))
+    except (OSError, ValueError, tomllib.TOMLDecodeError) as err:
+        print(f"petswarm experiment: {args.file}: {err}", file=sys.stderr)
+        return 2
+    out = Path(args.out or Path("runs") / f"experiment-{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}")
+    out.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for i, seed in enumerate(spec["seeds"]):
+        _bar(i, len(spec["seeds"]), spec.get("name", args.file))
+        rows.append(_one_run(spec, seed, out / f"run-{i + 1}-seed-{seed}"))
+    _bar(len(rows), len(rows), spec.get("name", args.file))
+    results = {
+        "name": spec.get("name"),
+        "file": str(args.file),
+        "spec": spec,
+        "runs": rows,
+        "aggregate": _aggregate(rows),
+    }
+    save(results, out, "results", _plot)
+    for line in table(results):
+        print(line)
+    print(f"records and results in {out}")
+    return 0 if all(r["ok"] for r in rows) else 1
+
+
+def _one_run(spec: dict[str, Any], seed: int, record: Path) -> dict[str, Any]:
+    options = {f.name for f in fields(RunOptions)}
+    opts = RunOptions(
+        **{k: v for k, v in spec.get("run", {}).items() if k in options}
+        | {
+            "robots": spec.get("run", {}).get("robots", 5),
+            "seed": seed,
+            "duration": float(spec.get("run", {}).get("duration", 2.0)),
+            "ping_interval": float(spec.get("run", {}).get("ping_interval", 0.5)),
+            "as_json": True,
+            "record_dir": str(record),
+            "faults": tuple(spec.get("faults", [])),
+        }
+    )
+    with redirect_stdout(io.StringIO()) as captured:
+        code = run(opts)
+    summary = json.loads(captured.getvalue()) if code in (0, 1) and captured.getvalue().strip() else {}
+    organization = summary.get("organization") or {}
+    nodes = summary.get("nodes", {}).values()
+    return {
+        "seed": seed,
+        "exit_code": code,
+        "ok": code == 0,
+        "record": str(record),
+        "problems": summary.get("problems", []),
+        "members": len(organization.get("members", [])),
+        "organize_ms": round(organization["organize_time_s"] * 1000, 1) if "organize_time_s" in organization else None,
+        "retries": organization.get("retries"),
+        **{k: sum(n[k] for n in nodes) for k in ("sent", "delivered", "collided", "lost", "mac_retries")},
+    }
+
+
+def _aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    times = [r["organize_ms"] for r in rows if r["organize_ms"] is not None]
+    return {
+        "runs": len(rows),
+        "ok": sum(r["ok"] for r in rows),
+        "organize_ms_mean": round(float(np.mean(times)), 1) if times else None,
+        "organize_ms_max": max(times) if times else None,
+        "retry_probability": round(sum(1 for r in rows if r["retries"]) / len(rows), 3) if rows else None,
+        "lost_fraction": round(sum(r["lost"] for r in rows) / max(sum(r["delivered"] + r["lost"] for r in rows), 1), 4),
+    }
+
+
+def table(results: dict[str, Any]) -> list[str]:
+    """One line per run, then the aggregates."""
+    lines = [
+        f"experiment {results['name'] or results['file']}: {len(results['runs'])} runs",
+        f"{'seed':>6}{'ok':>5}{'members':>9}{'org ms':>9}{'retries':>9}{'sent':>7}{'delivered':>11}"
+        f"{'collided':>10}{'lost':>7}",
+    ]
+    for r in results["runs"]:
+        org = "-" if r["organize_ms"] is None else f"{r['organize_ms']:.1f}"
+        lines.append(
+            f"{r['seed']:>6}{'yes' if r['ok'] else 'NO':>5}{r['members']:>9}{org:>9}{r['retries']!s:>9}"
+            f"{r['sent']:>7}{r['delivered']:>11}{r['collided']:>10}{r['lost']:>7}"
+        )
+        lines += [f"        problem: {p}" for p in r["problems"]]
+    lines.append("aggregate: " + ", ".join(f"{k} {v}" for k, v in results["aggregate"].items()))
+    return lines
+
+
+def _plot(results: dict[str, Any], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    runs = results["runs"]
+    fig, (org, radio) = plt.subplots(1, 2, figsize=(12, 4.2))
+    org.bar([str(r["seed"]) for r in runs], [r["organize_ms"] or 0 for r in runs], color="#4c72b0")
+    org.set(xlabel="seed", ylabel="organizing time (ms)", title="organizing time per run")
+    for i, key in enumerate(("delivered", "collided", "lost")):
+        radio.bar([j + i * 0.27 for j in range(len(runs))], [r[key] for r in runs], 0.27, label=key)
+    radio.set_xticks([j + 0.27 for j in range(len(runs))], [str(r["seed"]) for r in runs])
+    radio.set(xlabel="seed", ylabel="receptions", title="radio per run")
+    radio.legend(fontsize=8)
+    fig.suptitle(results["name"] or results["file"])
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _bar(done: int, total: int, name: str) -> None:
+    filled = int(30 * done / total) if total else 30
+    print(
+        f"\r[experiment] {name}: [{'#' * filled}{'.' * (30 - filled)}] {done}/{total} runs",
+        end="\n" if done == total else "",
+        file=sys.stderr,
+        flush=True,
+    )
