@@ -157,6 +157,8 @@ class RadioClient:
         self._rx: asyncio.Queue[RxFrame] = asyncio.Queue()
         self._ir: asyncio.Queue[IrSweep] = asyncio.Queue()
         self._pending: dict[int, asyncio.Future[Any]] = {}
+        self._pending_types: dict[int, str] = {}
+
         self._tokens = itertools.count(1)
         self._up_seq = itertools.count(1)
         self._down_seq = 0
@@ -345,6 +347,7 @@ class RadioClient:
     async def _request(self, token: int, msg: wire.Message) -> Any:
         fut: asyncio.Future[Any] = self._loop.create_future()
         self._pending[token] = fut
+        self._pending_types[token] = msg.TYPE
         try:
             self._put(msg)
             # asyncio.timeout, not wait_for: on 3.11 wait_for can swallow a cancellation that races the answer
@@ -356,6 +359,7 @@ class RadioClient:
             ) from None
         finally:
             self._pending.pop(token, None)
+            self._pending_types.pop(token, None)
 
     def _from_zenoh(self, sample: zenoh.Sample) -> None:
         # zenoh's thread: hand over and return at once
@@ -432,10 +436,23 @@ class RadioClient:
             heading_deg=float(me.heading_deg),
             instance=self.instance,
         )
-        self._adopt(await self._request(0, attach))
+        attached = await self._request(0, attach)
+        self._adopt(attached)
         self.reattaches += 1
+        self._settle_orphans(attached)
         for callback in self.on_reattach:
             callback()
+
+    def _settle_orphans(self, attached: wire.Attached) -> None:
+        """Requests the dead hub took with it: the attach carried our configuration (and the IR mode is
+        sent again), so those are done; a frame is lost, as in any crash."""
+        for token, fut in list(self._pending.items()):
+            if token == 0 or fut.done():
+                continue
+            if self._pending_types.get(token) in (wire.Configure.TYPE, wire.SetIrMode.TYPE):
+                fut.set_result(attached)
+            else:
+                fut.set_exception(HubUnavailable("the hub restarted before it answered"))
 
     def _resolve(self, token: int, msg: wire.Message) -> None:
 

@@ -117,7 +117,8 @@ def _consistent(air) -> bool:
         members = master["swarm"]["members"]
         return members == [2, 3, 4] and all(s["state"] == "slave-driving" for s in others)
     home = all(s["state"] == "waiting" and s["radio"]["pan_id"] == 0x1000 for s in others)
-    return master["state"] == "following" and master["radio"]["pan_id"] == 0x1000 and home
+    hub_home = all(n["pan_id"] == 0x1000 for n in air.stats()["nodes"].values() if n["attached"])
+    return master["state"] == "following" and master["radio"]["pan_id"] == 0x1000 and home and hub_home
 
 
 def test_the_hub_restarts_and_the_robots_reattach_and_carry_on_or_reorganize(make_air):
@@ -137,5 +138,6 @@ def test_the_hub_restarts_and_the_robots_reattach_and_carry_on_or_reorganize(mak
         air.cmd(1, "disperse", timeout=30)
         time.sleep(0.3)
     again = air.cmd(1, "organize", timeout=30, count=3)  # the user can form the swarm again
-    assert sorted(again["members"]) == [2, 3, 4], again
+    views = {rid: (air.cmd(rid, "status")["state"], air.node(rid)["pan_id"]) for rid in (1, 2, 3, 4)}
+    assert sorted(again["members"]) == [2, 3, 4], (again, views)
     assert air.stats()["hub"]["transport_gaps"] == 0
