@@ -40,6 +40,13 @@ def add_arguments(sub: argparse._SubParsersAction, add_hub: Any, robot_id: Any, 
         where.add_argument("--pan", type=lambda t: int(t, 0), help="receivers on this PAN ID")
         where.add_argument("--channel", type=bounded(int, 11, 26), help="this channel")
         add_hub(p)
+    blind = actions.add_parser("ir-blind", help="an IR module reads full scale on every receiver (a lamp)")
+    blind.add_argument("--node", help="the receiving robot (default: every one)")
+    add_hub(blind)
+    noise = actions.add_parser("ir-noise", help="extra Gaussian noise on an IR module's readings")
+    noise.add_argument("--node", help="the receiving robot (default: every one)")
+    noise.add_argument("--sigma", type=bounded(float, 0, 1023), default=20.0, help="counts (default 20)")
+    add_hub(noise)
     part = actions.add_parser("partition", help="two sets of nodes that cannot hear each other")
     part.add_argument("--group", required=True, help="node ids on one side, comma-separated")
     part.add_argument("--others", help="node ids on the other side (default: everyone else)")
@@ -80,7 +87,12 @@ def _request(args: argparse.Namespace) -> dict[str, Any]:
         if args.others:
             fault["others"] = args.others.split(",")
         return {"op": "add", "fault": fault}
+    if args.action in ("ir-blind", "ir-noise"):
+        fault = {"kind": args.action.replace("-", "_")}
+        fault.update({k: getattr(args, k) for k in ("node", "sigma") if getattr(args, k, None) is not None})
+        return {"op": "add", "fault": fault}
     fault = {"kind": args.action, "p": args.p}
+
     for name in ("node", "pan", "channel"):
         if getattr(args, name) is not None:
             fault[name] = getattr(args, name)

@@ -7,7 +7,9 @@ A fault is a small rule the medium consults at every reception:
   (counted as lost, like any frame the MAC could not use);
 - ``duplicate``: a delivered frame is handed up twice with probability ``p`` (counted ``duplicated``);
 - ``partition``: the nodes of ``group`` and those of ``others`` (everyone else when empty) cannot hear
-  each other at all: no reception, no interference, no carrier sense.
+  each other at all: no reception, no interference, no carrier sense;
+- ``ir_blind``: a receiving IR module (``node``, or every one) reads full scale on all 12 receivers, as
+  under a lamp; ``ir_noise``: extra Gaussian noise of ``sigma`` counts on its readings.
 
 Loss, corruption and duplication apply to the receptions selected by ``node`` (frames sent or
 received by it), ``link`` (from one node to another), ``pan`` (receivers on that PAN) or ``channel``;
@@ -20,7 +22,7 @@ import itertools
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-KINDS = ("loss", "corrupt", "duplicate", "partition")
+KINDS = ("loss", "corrupt", "duplicate", "partition", "ir_blind", "ir_noise")
 
 
 @dataclass(frozen=True)
@@ -36,6 +38,8 @@ class Fault:
     channel: int | None = None
     group: tuple[str, ...] = ()
     others: tuple[str, ...] = ()
+    sigma: float = 0.0
+    """ir_noise: standard deviation of the extra noise, in ADC counts."""
 
     def selects(self, sender: str, receiver: str, receiver_pan: int, channel: int) -> bool:
         """True when this (loss, corrupt or duplicate) fault applies to the reception."""
@@ -71,7 +75,11 @@ def parse_fault(fault_id: int, spec: dict[str, Any]) -> Fault:
     kind = spec.pop("kind", None)
     if kind not in KINDS:
         raise ValueError(f"kind must be one of {KINDS}, not {kind!r}")
-    allowed = {"p", "node", "link", "pan", "channel"} if kind != "partition" else {"group", "others"}
+    allowed = {
+        "partition": {"group", "others"},
+        "ir_blind": {"node"},
+        "ir_noise": {"node", "sigma"},
+    }.get(kind, {"p", "node", "link", "pan", "channel"})
     unknown = set(spec) - allowed
     if unknown:
         raise ValueError(f"a {kind} fault takes {sorted(allowed)}, not {sorted(unknown)}")
@@ -91,7 +99,10 @@ def parse_fault(fault_id: int, spec: dict[str, Any]) -> Fault:
         spec.get("channel"),
         tuple(spec.get("group", ())),
         tuple(spec.get("others", ())),
+        float(spec.get("sigma", 0.0)),
     )
+    if fault.sigma < 0:
+        raise ValueError(f"sigma must be >= 0, got {fault.sigma}")
     if kind == "partition" and not (fault.group and all(fault.group)):
         raise ValueError("a partition needs a group of node ids")
 
@@ -124,6 +135,10 @@ class Chaos:
     def separated(self, a: str, b: str) -> bool:
         """True when a partition keeps ``a`` and ``b`` from hearing each other."""
         return any(f.kind == "partition" and f.separates(a, b) for f in self.faults.values())
+
+    def ir_faults(self, receiver: str) -> list[Fault]:
+        """IR blinding and noise faults that reach this receiving module (all of them without a node)."""
+        return [f for f in self.faults.values() if f.kind in ("ir_blind", "ir_noise") and f.node in (None, receiver)]
 
     def probabilities(self, kind: str, sender: str, receiver: str, receiver_pan: int, channel: int) -> list[float]:
         """The ``p`` of every active fault of ``kind`` that applies to this reception."""

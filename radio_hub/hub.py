@@ -178,7 +178,7 @@ class RadioHub:
         now = self.now_us()
         nodes = self.medium.nodes
         poses = {n: (*node.position, self._headings.get(n, 0.0)) for n, node in nodes.items()}
-        for node_id, readings in self.ir.sweep(now, poses).items():
+        for node_id, readings in self.ir.sweep(now, poses, self.medium.chaos).items():
             self._send_down(node_id, wire.IrSample(readings=readings.astype("<f4").tobytes(), t_us=now))
 
     # -- inputs ----------------------------------------------------------------------------------

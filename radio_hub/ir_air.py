@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from radio_hub.chaos import Chaos
 from radio_hub.light import IrConfig, IrMode, OverlapCounter, receiver_readings
 
 Pose = tuple[float, float, float]
@@ -41,8 +42,9 @@ class IrAir:
         """When the next sweep is due (None while nothing transmits)."""
         return self._next_us
 
-    def sweep(self, now_us: int, poses: dict[str, Pose]) -> dict[str, np.ndarray]:
-        """Readings (12 ADC counts) of every receiving module with a known pose, if a sweep is due."""
+    def sweep(self, now_us: int, poses: dict[str, Pose], chaos: Chaos | None = None) -> dict[str, np.ndarray]:
+        """Readings (12 ADC counts) of every receiving module with a known pose, if a sweep is due;
+        ``chaos`` may blind receivers (every reading at full scale) or add noise to them."""
         if self._next_us is None or now_us < self._next_us:
             return {}
         self._next_us += self.period_us
@@ -53,8 +55,20 @@ class IrAir:
             return {}
         self.sweeps += 1
         readings = receiver_readings(np.array(sources), np.array([poses[n] for n in receivers]), self.config, self.rng)
+        if chaos is not None and chaos.faults:
+            readings = self._disturb(readings, receivers, chaos)
         # quantisation is part of the model's noise floor, so readings travel unrounded
         return dict(zip(receivers, readings.astype(np.float32), strict=True))
+
+    def _disturb(self, readings: np.ndarray, receivers: list[str], chaos: Chaos) -> np.ndarray:
+        for row, node in enumerate(receivers):
+            for fault in chaos.ir_faults(node):
+                if fault.kind == "ir_blind":
+                    readings[row] = self.config.saturation_counts  # a lamp straight into the module
+                else:
+                    noisy = readings[row] + self.rng.normal(0.0, fault.sigma, size=readings.shape[1])
+                    readings[row] = np.clip(noisy, 0.0, self.config.saturation_counts)
+        return readings
 
     def _schedule(self, now_us: int) -> None:
         if not self.counter.transmitters:

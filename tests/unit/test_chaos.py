@@ -63,3 +63,28 @@ def test_a_partition_blocks_reception_interference_and_carrier_sense():
 def test_bad_fault_specs_are_refused_with_a_reason(spec, reason):
     with pytest.raises(ValueError, match=reason):
         parse_fault(1, spec)
+
+
+def test_ir_blinding_and_noise_reach_only_the_chosen_receiver():
+    import numpy as np
+
+    from radio_hub.chaos import Chaos
+    from radio_hub.ir_air import IrAir
+    from radio_hub.light import IrConfig
+
+    config = IrConfig().noise_free()
+    air = IrAir(config, np.random.default_rng(1))
+    poses = {"tx": (0.0, 0.0, 0.0), "a": (1.0, 0.0, 0.0), "b": (0.0, 1.0, 0.0)}
+    air.set_mode("tx", "transmit", 0)
+    air.set_mode("a", "receive", 0)
+    air.set_mode("b", "receive", 0)
+    chaos = Chaos()
+    clean = air.sweep(air.next_event_us(), poses, chaos)
+    chaos.add({"kind": "ir_blind", "node": "a"}, 0, 0.0)
+    blinded = air.sweep(air.next_event_us(), poses, chaos)
+    assert np.all(blinded["a"] == config.saturation_counts)
+    np.testing.assert_allclose(blinded["b"], clean["b"])  # noise free: b sees exactly what it saw
+    chaos.clear(None, 0, 0.0)
+    chaos.add({"kind": "ir_noise", "sigma": 25.0}, 0, 0.0)
+    noisy = air.sweep(air.next_event_us(), poses, chaos)
+    assert np.std(noisy["b"] - clean["b"]) > 5.0 and not np.allclose(noisy["a"], clean["a"])
