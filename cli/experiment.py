@@ -53,8 +53,9 @@ def load(path: Path) -> dict[str, Any]:
     if not seeds or not all(isinstance(s, int) and s >= 0 for s in seeds):
         raise ValueError("seeds must be non-negative integers (or give repetitions and seed)")
     for fault in data.get("faults", []):
-        if "at" not in fault:
-            raise ValueError(f"fault {fault} has no 'at' (seconds into the traffic phase)")
+        at = fault.get("at")
+        if not isinstance(at, (int, float)) or isinstance(at, bool) or at < 0:
+            raise ValueError(f"fault {fault} needs 'at', seconds (a number >= 0) into the traffic phase")
     return {**data, "seeds": seeds}
 
 
@@ -103,6 +104,10 @@ def _one_run(spec: dict[str, Any], seed: int, record: Path) -> dict[str, Any]:
     with redirect_stdout(io.StringIO()) as captured:
         code = run(opts)
     summary = json.loads(captured.getvalue()) if code in (0, 1) and captured.getvalue().strip() else {}
+    if not summary:  # the run failed before its summary: the record still says why
+        summary_file = record / "summary.json"
+        summary = json.loads(summary_file.read_text()) if summary_file.exists() else {"problems": ["run failed"]}
+
     organization = summary.get("organization") or {}
     nodes = summary.get("nodes", {}).values()
     return {

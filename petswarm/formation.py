@@ -134,6 +134,7 @@ class NetworkFormation:
         self._busy = asyncio.Lock()
         self._member_lock = asyncio.Lock()
         self._misses: dict[int, int] = {}
+        self._dissolving: asyncio.Task[None] | None = None
 
     @property
     def me(self) -> int:
@@ -361,7 +362,7 @@ class NetworkFormation:
         if swarm.members:
             self.on_change(swarm)
         else:  # the last member is gone: the swarm is over, the master drives with its user again
-            asyncio.get_running_loop().create_task(self._dissolve(swarm))
+            self._dissolving = asyncio.get_running_loop().create_task(self._dissolve(swarm))
 
     async def _dissolve(self, swarm: Swarm) -> None:
         async with self._busy:
@@ -372,7 +373,10 @@ class NetworkFormation:
             if self._roster_task is not None:
                 self._roster_task.cancel()
             self.sequence.restore_driving(session=swarm.session, reason="every member is gone")
-            await self.rf.radio.configure(pan_id=self.config.waiting_pan)
+            try:
+                await self.rf.radio.configure(pan_id=self.config.waiting_pan)
+            except Exception as err:  # the hub may be away; the wanted PAN applies when it is back
+                self.log.record("error", where="dissolve", error=f"{type(err).__name__}: {err}")
 
     async def _on_scan(self, incoming: Incoming) -> None:
         msg: m.Scan = incoming.message  # type: ignore[assignment]

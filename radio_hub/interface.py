@@ -310,7 +310,11 @@ class RadioClient:
             if str(err) != wire.NOT_ATTACHED:
                 self.identity = before  # refused: the radio stays as it was
                 raise
-            await self._reattached()
+            try:
+                await self._reattached()
+            except RadioError:
+                self.identity = before  # the new hub refused what we wanted: keep what worked
+                raise
         return self.identity
 
     async def close(self, detach: bool = True) -> None:
@@ -436,18 +440,21 @@ class RadioClient:
             heading_deg=float(me.heading_deg),
             instance=self.instance,
         )
+        orphans = [token for token in self._pending if token]  # sent before this attach: to the dead hub
         attached = await self._request(0, attach)
         self._adopt(attached)
         self.reattaches += 1
-        self._settle_orphans(attached)
+        self._settle_orphans(orphans, attached)
         for callback in self.on_reattach:
             callback()
 
-    def _settle_orphans(self, attached: wire.Attached) -> None:
+    def _settle_orphans(self, orphans: list[int], attached: wire.Attached) -> None:
         """Requests the dead hub took with it: the attach carried our configuration (and the IR mode is
-        sent again), so those are done; a frame is lost, as in any crash."""
-        for token, fut in list(self._pending.items()):
-            if token == 0 or fut.done():
+        sent again), so those are done; a frame is lost, as in any crash. Requests sent after the attach
+        went to the new hub, which answers them itself."""
+        for token in orphans:
+            fut = self._pending.get(token)
+            if fut is None or fut.done():
                 continue
             if self._pending_types.get(token) in (wire.Configure.TYPE, wire.SetIrMode.TYPE):
                 fut.set_result(attached)
