@@ -199,18 +199,8 @@ class RadioClient:
             session = await asyncio.to_thread(open_session, "client", endpoint)
         client = cls(session, Keys(world), identity, owns)
         client.request_timeout = timeout
-        attach = wire.Attach(
-            ext_addr=identity.ext_addr,
-            short_addr=identity.short_addr,
-            pan_id=identity.pan_id,
-            channel=identity.channel,
-            position=list(identity.position),
-            heading_deg=float(identity.heading_deg),
-            instance=client.instance,
-            exclusive=exclusive,
-        )
         try:
-            attached = await client._request(0, attach)
+            attached = await client._request(0, client._attach_message(exclusive))
         except (HubUnavailable, RadioError):
             await client.close(detach=False)
             raise
@@ -429,9 +419,10 @@ class RadioClient:
         assert self._reattaching is not None
         await asyncio.shield(self._reattaching)
 
-    async def _reattach(self) -> None:
+    def _attach_message(self, exclusive: bool = False) -> wire.Attach:
+        """Attach with the radio as this node wants it now."""
         me = self.identity
-        attach = wire.Attach(
+        return wire.Attach(
             ext_addr=me.ext_addr,
             short_addr=me.short_addr,
             pan_id=me.pan_id,
@@ -439,9 +430,13 @@ class RadioClient:
             position=list(me.position),
             heading_deg=float(me.heading_deg),
             instance=self.instance,
+            exclusive=exclusive,
         )
+
+    async def _reattach(self) -> None:
         orphans = [token for token in self._pending if token]  # sent before this attach: to the dead hub
-        attached = await self._request(0, attach)
+        attached = await self._request(0, self._attach_message())
+
         self._adopt(attached)
         self.reattaches += 1
         self._settle_orphans(orphans, attached)
