@@ -191,50 +191,46 @@ def _block_header(protocols: list[str], width: int) -> str:
     return (f"{'':<7}" + "".join(f" | {p:^{width}}" for p in protocols)).rstrip()
 
 
-def _time_lines(summary: list[dict[str, Any]], protocols: list[str], counts: list[int]) -> list[str]:
+def _protocol_table(
+    title: str, head: str, cell: Any, summary: list[dict[str, Any]], protocols: list[str], counts: list[int]
+) -> list[str]:
+    """A table with one block of ``head`` columns per protocol and one line per slave count."""
     rows = rows_by(summary)
-    head = f"{'mean':>7}{'min':>7}{'p50':>7}{'max':>7}{'P(retry)':>9}{'retries':>8}"
-    lines = [
-        "organizing time (ms, over complete organizations) and retries (per organization that answered)",
-        _block_header(protocols, len(head)),
-        f"{'slaves':<7}" + "".join(f" | {head}" for _ in protocols),
-    ]
+    lines = [title, _block_header(protocols, len(head)), f"{'slaves':<7}" + "".join(f" | {head}" for _ in protocols)]
     for n in counts:
-        cells = []
-        for p in protocols:
-            r = rows[(p, n)]
-            t = r["time_ms"]
-            cells.append(
-                f"{t['mean']:>7.1f}{t['min']:>7.1f}{t['p50']:>7.1f}{t['max']:>7.1f}"
-                f"{r['retry_probability']:>9.2f}{r['mean_retries']:>8.2f}"
-            )
-        lines.append(f"{n:<7}" + "".join(f" | {c}" for c in cells))
+        lines.append(f"{n:<7}" + "".join(f" | {cell(rows[(p, n)])}" for p in protocols))
     return lines
+
+
+def _time_cell(r: dict[str, Any]) -> str:
+    t = r["time_ms"]
+    return (
+        f"{t['mean']:>7.1f}{t['min']:>7.1f}{t['p50']:>7.1f}{t['max']:>7.1f}"
+        f"{r['retry_probability']:>9.2f}{r['mean_retries']:>8.2f}"
+    )
+
+
+def _retry_cell(r: dict[str, Any]) -> str:
+    by_step = "/".join(str(r["retries_by_step"][s]) for s in STEPS)
+    orgs = "/".join(str(r["organizations_retried_by_step"][s]) for s in STEPS)
+    return f"{by_step:>14}{orgs:>12}{r['incomplete']:>8}{r['failed']:>7}{r['unsettled']:>10}{r['disperse_retries']:>9}"
+
+
+def _time_lines(summary: list[dict[str, Any]], protocols: list[str], counts: list[int]) -> list[str]:
+    head = f"{'mean':>7}{'min':>7}{'p50':>7}{'max':>7}{'P(retry)':>9}{'retries':>8}"
+    title = "organizing time (ms, over complete organizations) and retries (per organization that answered)"
+    return _protocol_table(title, head, _time_cell, summary, protocols, counts)
 
 
 def _retry_lines(summary: list[dict[str, Any]], protocols: list[str], counts: list[int]) -> list[str]:
-    rows = rows_by(summary)
     head = f"{'retries s/q/n':>14}{'orgs s/q/n':>12}{'incompl':>8}{'failed':>7}{'unsettled':>10}{'disp rtr':>9}"
-    lines = [
+    title = (
         "where the retries were (scan/query/notice: retries in total, organizations with one), incomplete "
-        "organizations, failed commands, robots not back in 5 s, dispersal retries",
-        _block_header(protocols, len(head)),
-        f"{'slaves':<7}" + "".join(f" | {head}" for _ in protocols),
-    ]
-    for n in counts:
-        cells = []
-        for p in protocols:
-            r = rows[(p, n)]
-            by_step = "/".join(str(r["retries_by_step"][s]) for s in STEPS)
-            orgs = "/".join(str(r["organizations_retried_by_step"][s]) for s in STEPS)
-            cells.append(
-                f"{by_step:>14}{orgs:>12}{r['incomplete']:>8}{r['failed']:>7}{r['unsettled']:>10}"
-                f"{r['disperse_retries']:>9}"
-            )
-        lines.append(f"{n:<7}" + "".join(f" | {c}" for c in cells))
+        "organizations, failed commands, robots not back in 5 s, dispersal retries"
+    )
+    lines = _protocol_table(title, head, _retry_cell, summary, protocols, counts)
     errors = sorted({e for r in summary for e in r["errors"]})
-    lines += [f"error: {e}" for e in errors]
-    return lines
+    return lines + [f"error: {e}" for e in errors]
 
 
 def _hub_lines(hub: dict[str, Any]) -> list[str]:
