@@ -272,12 +272,12 @@ def _hub(args: argparse.Namespace) -> int:
     from radio_hub.hub import RadioHub, load_config, ready_line
 
     try:
-        config, ir = load_config(args.config) if args.config else (None, None)
+        environment = load_config(args.config) if args.config else None
     except (OSError, ValueError) as err:
         print(f"petswarm hub: bad --config: {err}", file=sys.stderr)
         return 2
     try:
-        hub = RadioHub(args.listen, args.world, config, args.seed, ir, pcap_path=args.pcap)
+        hub = RadioHub(args.listen, args.world, seed=args.seed, pcap_path=args.pcap, environment=environment)
     except OSError as err:
         print(f"petswarm hub: cannot open --pcap file: {err}", file=sys.stderr)
         return 2

@@ -250,6 +250,20 @@ class BleReceived(Message):
     t_us: int = 0
 
 
+@dataclass
+class Telemetry(Message):
+    """Robot -> hub: what the robot believes about its role, for viewers and run metrics (never for
+    other robots: they learn only through the air). ``slot`` is its formation reference in the
+    master's frame; not answered."""
+
+    TYPE: ClassVar[str] = "telemetry"
+    state: str = ""
+    role: str = ""
+    master: str = ""
+    slot: list[float] | None = None
+    mode: str = ""
+
+
 _TYPES: dict[str, type[Message]] = {
     cls.TYPE: cls
     for cls in (
@@ -271,6 +285,7 @@ _TYPES: dict[str, type[Message]] = {
         LfHeard,
         BleSend,
         BleReceived,
+        Telemetry,
     )
 }
 
@@ -305,7 +320,7 @@ _SCALARS: dict[str, tuple[type, ...]] = {
 }
 
 
-_LIST_LENGTHS = {"position": (2,), "odometry": (3,)}
+_LIST_LENGTHS = {"position": (2,), "slot": (2,), "odometry": (3,)}
 """Lengths of the fixed-size number lists; any other number list holds at most 64 values."""
 
 
