@@ -36,7 +36,8 @@ _GRAVITY = np.array([0.0, 0.0, GRAVITY_MPS2])
 TEMPLATE_SAMPLES = 40
 """Points a segment is resampled to: 10 per quarter of a circle, ample for one-period strokes."""
 MIN_MOTION_MPS2 = 0.8
-"""Smoothed acceleration magnitude a gesture must exceed: 4 x the noise, below the weakest stroke's ~1.2."""
+"""Smoothed acceleration magnitude a gesture must exceed: 2.5 x that of the noise (~0.32), under half the weakest
+stroke's ~2 peak."""
 MIN_CORRELATION = 0.75
 """Correlation with the best template needed to accept; white noise of any level scores below ~0.3."""
 SMOOTHING_S = 0.1
