@@ -39,7 +39,7 @@ MIN_MOTION_MPS2 = 0.8
 """Smoothed acceleration magnitude a gesture must exceed: 2.5 x that of the noise (~0.32), under half the weakest
 stroke's ~2 peak."""
 MIN_CORRELATION = 0.75
-"""Correlation with the best template needed to accept; white noise of any level scores below ~0.3."""
+"""Correlation with the best template needed to accept; white noise of any level scores at most ~0.35."""
 SMOOTHING_S = 0.1
 """Window of the magnitude's moving average used to find the active segment."""
 SEGMENT_MARGIN_S = 0.06
