@@ -42,7 +42,7 @@ MAX_DELAY_MS = 10_000.0
 """Longest extra delay (and jitter) a delay fault takes. A frame ten seconds late is, for every timeout in
 the middleware, a lost frame: use a loss fault for that. The bound catches a value typed in microseconds."""
 _SELECTORS = {"node", "link", "pan", "channel"}
-_BURST_DEFAULTS = {"p_gb": 0.05, "p_bg": 0.25, "loss_good": 0.0, "loss_bad": 1.0}
+BURST_DEFAULTS = {"p_gb": 0.05, "p_bg": 0.25, "loss_good": 0.0, "loss_bad": 1.0}
 """A burst fault's defaults: one reception in twenty starts a burst, a burst lasts 4 receptions on
 average and loses them all (about 17 % of the frames lost in all); chosen to be seen in a few seconds of
 pings, not taken from a measurement."""
@@ -130,7 +130,7 @@ def parse_fault(fault_id: int, spec: dict[str, Any]) -> Fault:
         "ir_blind": {"node"},
         "ir_noise": {"node", "sigma"},
         "delay": {"ms", "jitter_ms", "jitter", *_SELECTORS},
-        "burst": {*_BURST_DEFAULTS, *_SELECTORS},
+        "burst": {*BURST_DEFAULTS, *_SELECTORS},
     }.get(kind, {"p", *_SELECTORS})
     unknown = set(spec) - allowed
     if unknown:
@@ -190,7 +190,7 @@ def _delay_fields(spec: dict[str, Any]) -> dict[str, Any]:
 
 
 def _burst_fields(spec: dict[str, Any]) -> dict[str, Any]:
-    fields = {name: _probability(name, spec.get(name, default)) for name, default in _BURST_DEFAULTS.items()}
+    fields = {name: _probability(name, spec.get(name, default)) for name, default in BURST_DEFAULTS.items()}
     if fields["p_bg"] == 0 and fields["p_gb"] > 0:
         raise ValueError("p_bg must be > 0: with 0 the first burst never ends (use a loss fault for a dead link)")
     if not GilbertElliottConfig(*fields.values()).enabled:
