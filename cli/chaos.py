@@ -158,8 +158,8 @@ def _add_burst(actions: argparse._SubParsersAction, add_hub: Any, bounded: Any) 
 
 
 def chaos_command(args: argparse.Namespace) -> int:
-    """Carry out one chaos action; 2 when the fault is malformed or the hub or robot cannot be reached, 1 when
-    the hub refuses it."""
+    """Carry out one chaos action; 2 when the hub or robot cannot be reached, 1 when the fault is refused
+    (malformed: refused here before the hub is asked; or by the hub)."""
     keys = Keys(args.world)
     if args.action in SIGNALS:
         return with_hub("chaos", args.hub, lambda session: _signal_robot(session, keys, args))
@@ -168,8 +168,8 @@ def chaos_command(args: argparse.Namespace) -> int:
         try:  # the hub checks again; checking here tells a typo apart from an unreachable hub
             parse_fault(0, request["fault"])
         except ValueError as err:
-            print(f"petswarm chaos {args.action}: {err}", file=sys.stderr)
-            return 2
+            print(f"petswarm chaos {args.action}: refused: {err}", file=sys.stderr)
+            return 1
     return with_hub("chaos", args.hub, lambda session: _act(session, keys, request))
 
 
