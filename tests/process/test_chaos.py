@@ -12,6 +12,9 @@ import pytest
 
 from radio_hub.interface import query_hub
 
+from . import test_relative_location as rl
+from .conftest import LOSSLESS
+
 pytestmark = pytest.mark.process
 
 
@@ -225,3 +228,49 @@ def test_burst_losses_come_in_runs(make_air):
     # independent loss at this rate has mean runs of 1 / (1 - rate), about 1.5; these bursts average 1 / 0.2
     assert sum(runs) / len(runs) >= 2.5 and max(runs) >= 5, runs
     assert air.node(2)["chaos_lost"] >= judged.count("lost")
+
+
+def _fix_errors(status: dict) -> list[tuple[float, float]]:
+    """(distance error in m, bearing error in degrees) of each of a robot's neighbour fixes."""
+    me = status["robot_id"]
+    errors = []
+    for neighbour in status["swarm"]["neighbours"]:
+        fix = status["relative_location"][str(neighbour)]
+        bearing, distance = rl._truth(me, neighbour)
+        errors.append((abs(fix["distance_m"] - distance), rl._angle_gap(fix["bearing_deg"], bearing)))
+    return errors
+
+
+def _after_rounds(air, rounds: int) -> dict[int, dict]:
+    """Statuses once every robot has held the token ``rounds`` more times: every fix is that fresh."""
+    held = {rid: air.cmd(rid, "status")["ir"]["rounds_held"] for rid in rl.POSES}
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline:
+        statuses = {rid: air.cmd(rid, "status") for rid in rl.POSES}
+        if all(s["ir"]["rounds_held"] >= held[rid] + rounds for rid, s in statuses.items()):
+            return statuses
+        time.sleep(0.1)
+    raise AssertionError({rid: s["ir"] for rid, s in statuses.items()})
+
+
+def _good(errors: list[tuple[float, float]]) -> bool:
+    return all(d <= 0.01 and b <= 1.0 for d, b in errors)  # noise-free IR: within 1 cm and 1 degree
+
+
+def test_ir_blinding_and_noise_spoil_the_fixes_until_cleared(make_air):
+    air = make_air({**LOSSLESS, "ir": rl.NOISE_FREE_IR})
+    rl._swarm_of_four(air)
+    assert all(_good(_fix_errors(s)) for s in rl._wait_for_rounds(air, 2).values())
+    assert _chaos(air, "ir-blind", "--node", "robot-2").returncode == 0
+    statuses = _after_rounds(air, 2)
+    # saturated on every receiver, robot 2 reads each neighbour as if it touched it, bearing unknown
+    assert all(d > 0.5 for d, _ in _fix_errors(statuses[2])), _fix_errors(statuses[2])
+    assert all(_good(_fix_errors(statuses[rid])) for rid in (1, 3, 4))
+    assert _chaos(air, "clear").returncode == 0
+    statuses = _after_rounds(air, 2)
+    assert _good(_fix_errors(statuses[2]))  # recovered
+    assert _chaos(air, "ir-noise", "--node", "robot-3", "--sigma", "150").returncode == 0
+    statuses = _after_rounds(air, 2)
+    assert max(max(d * 100, b) for d, b in _fix_errors(statuses[3])) > 10  # off by over 10 cm or 10 degrees
+    assert all(_good(_fix_errors(statuses[rid])) for rid in (1, 2, 4))
+    assert air.stats()["ir"]["overlap_episodes"] == 0
