@@ -174,8 +174,8 @@ def test_duplication_hands_robot_2_each_frame_twice(make_air):
     assert air.node(2)["duplicated"] == 1 and air.node(2)["delivered"] == 1
 
 
-def _best_rtt_ms(air, rounds: int = 3) -> float:
-    answers = [air.cmd(1, "ping", dst=2, wait=0.3) for _ in range(rounds)]
+def _best_rtt_ms(air, rounds: int = 2) -> float:
+    answers = [air.cmd(1, "ping", dst=2, wait=0.25) for _ in range(rounds)]
     assert all(a["tx"]["status"] == "success" for a in answers)  # the ACK keeps the air's timing
     return min(r["rtt_ms"] for a in answers for r in a["replies"])
 
