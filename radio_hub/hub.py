@@ -557,7 +557,7 @@ class RadioHub:
         lag = self.counters.lag_us
         for out in outputs:
             if isinstance(out, Reception):
-                lag.append(now - out.end_us)
+                lag.append(now - out.handed_up_us)  # a chaos delay is model time, not hub lag
                 msg: wire.Message = wire.Received(
                     psdu=out.psdu,
                     rssi_dbm=out.rssi_dbm,
