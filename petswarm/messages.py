@@ -42,6 +42,7 @@ class MessageType(enum.IntEnum):
     TOKEN_ACK = 33
     SYNC = 34
     HEADING = 35
+    DRIVE_STATE = 40
 
 
 @dataclass(frozen=True)
@@ -258,6 +259,31 @@ class Heading(SwarmMessage):
     centideg: int
 
 
+@dataclass(frozen=True)
+class DriveState(SwarmMessage):
+    """Master -> all members, every 100 ms while driving (paper 3.5): the master's speed and the user's
+    activity, so slaves react to the user at once; plus what the formation needs (mode, shape, spacing,
+    the master's AHRS yaw and where the user is in the master's frame). Speeds in m/s and rad/s."""
+
+    TYPE: ClassVar[MessageType] = MessageType.DRIVE_STATE
+    session: int
+    seq: int
+    vx: float
+    vy: float
+    omega: float
+    yaw: float
+    movement: int
+    user_rate: float
+    """The belt's yaw rate while the user rotates, else 0."""
+    mode: str
+    shape: str
+    spacing: float
+    user_x: float
+    user_y: float
+    mirrored: int
+    """1 when Table 3's No-change column put the slots on the master's other side."""
+
+
 _BY_TYPE: dict[int, type[SwarmMessage]] = {
     int(c.TYPE): c
     for c in (
@@ -281,6 +307,7 @@ _BY_TYPE: dict[int, type[SwarmMessage]] = {
         TokenAck,
         Sync,
         Heading,
+        DriveState,
     )
 }
 _FIELD_TYPES: dict[str, type | tuple[type, ...]] = {"int": int, "bytes": bytes, "str": str, "float": (int, float)}

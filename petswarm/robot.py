@@ -7,6 +7,7 @@ exercised end to end; the swarm managers build on the same RF communication mana
 from __future__ import annotations
 
 import asyncio
+import math
 import os
 import signal
 import sys
@@ -20,12 +21,14 @@ import numpy as np
 import zenoh
 
 from petswarm.control import all_robots_key, robot_key
+from petswarm.driving import Driver
 from petswarm.exchange import MessageProcessingManager
 from petswarm.formation import RESPONSES, FormationConfig, FormationError, NetworkFormation, Swarm
 from petswarm.messages import Blob, Ping, Pong, SwarmMessage
 from petswarm.relative_location import IrModuleManager, IrTokenSchedule, RelativeLocationManager, TokenConfig
 from petswarm.rf import Incoming, RfCommunicationManager
 from petswarm.sequence import EventLog, RobotState, SequenceManager, TransitionError
+from petswarm.user_link import robot_node
 from radio_hub.interface import (
     BROADCAST,
     DEFAULT_ENDPOINT,
@@ -86,7 +89,7 @@ class RobotConfig:
             raise ValueError(f"robot id {self.robot_id} must be 1..65533 (it is the 16-bit short address)")
         position = self.position if self.position is not None else default_position(self.robot_id)
         return RadioIdentity(
-            f"robot-{self.robot_id}",
+            robot_node(self.robot_id),
             EXT_ADDR_BASE + self.robot_id,
             self.robot_id,
             self.pan_id,
@@ -119,10 +122,11 @@ class Robot:
             self.locations,
             self.log,
             config.token,
-            lambda: radio.identity.heading_deg,
+            self._heading_deg,
             self.formation.note_answers,
         )
 
+        self.driver = Driver(config.robot_id, self.rf, self.sequence, self.formation, self.locations, self.log)
         radio.on_reattach.append(self._reattached)
         self.log.record(
             "start", robot_id=config.robot_id, state=self.sequence.state.label, user=config.user, seed=config.seed
@@ -144,7 +148,13 @@ class Robot:
         """Serve until ``stopping`` is set."""
         workers = [
             asyncio.create_task(coro)
-            for coro in (self._receive_loop(), self.formation.watch(), self.ir.run(), self.schedule.watch())
+            for coro in (
+                self._receive_loop(),
+                self.formation.watch(),
+                self.ir.run(),
+                self.schedule.watch(),
+                *self.driver.tasks(),
+            )
         ]
         if self.config.ping_interval > 0:
             workers.append(asyncio.create_task(self._ping_loop()))
@@ -170,6 +180,8 @@ class Robot:
             self._spawn(self.formation.on_message(incoming))
         elif self.schedule.handles(msg):
             self._spawn(self.schedule.on_message(incoming))
+        elif self.driver.handles(msg):
+            self.driver.on_message(incoming)
         elif isinstance(msg, RESPONSES):
             self.mpm.count_late()
         elif isinstance(msg, Ping):
@@ -194,6 +206,11 @@ class Robot:
             except (HubUnavailable, RadioError) as err:  # the hub may be restarting: keep pinging
                 self.log.record("error", where="ping", error=str(err))
             await asyncio.sleep(float(self.rng.uniform(0.5, 1.5)) * interval)
+
+    def _heading_deg(self) -> float:
+        """The AHRS yaw (the heading exchange's value), or the attach heading before the first reading."""
+        sensors = self.rf.radio.sensors
+        return math.degrees(sensors.yaw_rad) if sensors is not None else self.rf.radio.identity.heading_deg
 
     def _reattached(self) -> None:
         """The radio attached again to a restarted hub: tell it the IR module's mode too."""
@@ -344,6 +361,14 @@ class Robot:
             "duplicates": self.mpm.duplicates,
             "late_responses": self.mpm.late,
             "ir": self.schedule.status(),
+            "driving": {
+                "owner": self.driver.owner,
+                "mode": str(self.driver.mode),
+                "command": [
+                    round(v, 3) for v in (self.driver.command.vx, self.driver.command.vy, self.driver.command.omega)
+                ],
+                **self.driver.counters,
+            },
             "relative_location": self.locations.snapshot(),
         }
 

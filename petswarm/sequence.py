@@ -25,6 +25,10 @@ class RobotState(enum.IntEnum):
     ORGANIZING = 5
     MASTER_DRIVING = 6
     SLAVE_DRIVING = 7
+    COMMAND_WAITING = 8
+    """Connected to its owner (the belt answered within 1 m), waiting for the user to choose an operation."""
+    EMERGENCY = 9
+    """Lost its user while leading or following: stopped, alert sent to the belt."""
 
     @property
     def label(self) -> str:
@@ -32,7 +36,15 @@ class RobotState(enum.IntEnum):
         return self.name.lower().replace("_", "-")
 
 
-DRIVING = frozenset({RobotState.FOLLOWING, RobotState.LEADING, RobotState.REMOTE_CONTROL})
+DRIVING = frozenset(
+    {
+        RobotState.FOLLOWING,
+        RobotState.LEADING,
+        RobotState.REMOTE_CONTROL,
+        RobotState.COMMAND_WAITING,
+        RobotState.EMERGENCY,
+    }
+)
 """The states of a robot connected to its user, outside any swarm."""
 
 _ALLOWED: dict[RobotState, frozenset[RobotState]] = {

@@ -53,7 +53,7 @@ class User:
         self.plan = config.plan
         self.client = client
         self.log = log
-        self.owner = str(self.plan.owner)
+        self.owner = user_link.robot_node(self.plan.owner)
         self.register = wake_pattern(self.plan.owner)
         self.lf_config = LfConfig()
         """The belt's calibration: the module's datasheet curve, whatever the hub's noise settings."""
@@ -131,7 +131,7 @@ class User:
         distance = rssi_to_distance(burst.rssi_dbm, self.lf_config)
         if purpose == user_link.LF_WAKE:
             if distance <= self.lf_config.wake_range_m:
-                self.client.ble_send(str(robot_id), user_link.encode("owner", d=round(distance, 3)))
+                self.client.ble_send(user_link.robot_node(robot_id), user_link.encode("owner", d=round(distance, 3)))
                 self.log.record("owner_reply", robot=robot_id, d=round(distance, 3))
             return
         pair = self._pairs.setdefault(seq, {})
@@ -139,7 +139,9 @@ class User:
         if len(pair) == 2:
             del self._pairs[seq]
             self.counters["lf_reports"] += 1
-            self.client.ble_send(str(robot_id), user_link.encode("lf", seq=seq, dl=pair["left"], dr=pair["right"]))
+            self.client.ble_send(
+                user_link.robot_node(robot_id), user_link.encode("lf", seq=seq, dl=pair["left"], dr=pair["right"])
+            )
         for old in [s for s in self._pairs if (seq - s) % 256 > 4]:
             del self._pairs[old]  # a pair whose other burst never came
 

@@ -40,6 +40,11 @@ def decode(payload: bytes) -> dict[str, Any]:
     return body
 
 
+def robot_node(robot_id: int) -> str:
+    """A robot's node id on the hub (what BLE messages are addressed to)."""
+    return f"robot-{robot_id}"
+
+
 def lf_data(robot_id: int, seq: int, purpose: int) -> bytes:
     """The 4 data bytes of a burst."""
     return bytes([(robot_id >> 8) & 0xFF, robot_id & 0xFF, seq & 0xFF, purpose & 0xFF])

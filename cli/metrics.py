@@ -1,0 +1,152 @@
+"""Driving metrics of a run, from the hub's ground truth (``world.jsonl``: one line per world tick).
+
+Pure: lines in, figures out. Formation error is a slave's distance from its reference (its slot, placed
+by the master's true pose; the slot is what the slave itself reported); reaction time is from the start
+of the user's rotation (the user's true yaw rate leaving zero) to the first tick at which a robot's own
+yaw rate passes ``REACTION_OMEGA_RPS``; surround figures are the swarm's extent r and connectivity.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+REACTION_OMEGA_RPS = 0.3
+"""A robot 'moves' in answer to a rotation once it turns at this rate: well above the controllers'
+idle corrections (a few hundredths of a rad/s), well below a 60 deg/s user turn."""
+USER_TURN_RPS = 0.1
+REACTION_WINDOW_S = 5.0
+
+
+def read_world(path: str | Path) -> list[dict[str, Any]]:
+    """The lines of a world log; a torn last line (a killed hub) is skipped."""
+    lines = []
+    with open(path, encoding="utf-8") as f:
+        for line in f:
+            try:
+                lines.append(json.loads(line))
+            except json.JSONDecodeError:
+                continue
+    return lines
+
+
+def driving_metrics(world: list[dict[str, Any]], sight_m: float = 1.0) -> dict[str, Any]:
+    """Every figure issue 5 asks of a run: formation error, user-master distance, reactions, collisions."""
+    if not world:
+        return {"ticks": 0}
+    errors: dict[str, list[tuple[float, float]]] = {}
+    user_master: list[tuple[float, float]] = []
+    extents: list[tuple[float, float, bool]] = []
+    for tick in world:
+        t = tick["t_us"] / 1e6
+        bodies = {b["id"]: b for b in tick["bodies"]}
+        user = next((b for b in tick["bodies"] if b["kind"] == "user"), None)
+        for b in tick["bodies"]:
+            ref = b.get("reference")
+            if b.get("role") == "slave" and ref is not None:
+                errors.setdefault(b["id"], []).append((t, math.hypot(b["x"] - ref[0], b["y"] - ref[1])))
+            if b.get("role") == "master" and user is not None:
+                user_master.append((t, math.hypot(b["x"] - user["x"], b["y"] - user["y"])))
+        robots = np.array([(b["x"], b["y"]) for b in bodies.values() if b["kind"] == "robot"]).reshape(-1, 2)
+        if len(robots) > 1:
+            extents.append((t, swarm_extent(robots), is_connected(robots, sight_m)))
+    return {
+        "ticks": len(world),
+        "duration_s": round((world[-1]["t_us"] - world[0]["t_us"]) / 1e6, 2),
+        "collisions": world[-1].get("collisions", 0),
+        "formation_error_m": {node: _percentiles([e for _, e in series]) for node, series in sorted(errors.items())},
+        "formation_error_all_m": _percentiles([e for s in errors.values() for _, e in s]),
+        "formation_error_series": {node: _thin(series) for node, series in sorted(errors.items())},
+        "user_master_distance_m": _percentiles([d for _, d in user_master]),
+        "reactions": reactions(world),
+        "extent_m": _percentiles([r for _, r, _ in extents]),
+        "connected_fraction": round(float(np.mean([c for _, _, c in extents])), 4) if extents else None,
+    }
+
+
+def reactions(world: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """For each start of a user rotation: how long until the master and each slave turned."""
+    out = []
+    for t0 in rotation_starts(world):
+        roles: dict[str, str] = {}
+        first: dict[str, float] = {}
+        for tick in world:
+            t = tick["t_us"] / 1e6
+            if t < t0 or t > t0 + REACTION_WINDOW_S:
+                continue
+            for b in tick["bodies"]:
+                if b["kind"] != "robot" or b["id"] in first:
+                    continue
+                roles.setdefault(b["id"], b.get("role") or "")
+                if abs(b.get("omega", 0.0)) >= REACTION_OMEGA_RPS:
+                    first[b["id"]] = round(t - t0, 3)
+        master = next((n for n, r in roles.items() if r == "master"), None)
+        slaves = {n: first.get(n) for n, r in sorted(roles.items()) if r == "slave"}
+        master_s = first.get(master) if master else None
+        out.append(
+            {
+                "user_turn_at_s": round(t0, 3),
+                "master": master,
+                "master_s": master_s,
+                "slaves_s": slaves,
+                "slave_minus_master_s": {
+                    n: round(s - master_s, 3) for n, s in slaves.items() if s is not None and master_s is not None
+                },
+            }
+        )
+    return out
+
+
+def rotation_starts(world: Iterable[dict[str, Any]]) -> list[float]:
+    """Model times (s) at which the user's true yaw rate rose above ``USER_TURN_RPS``."""
+    starts, turning = [], False
+    for tick in world:
+        user = next((b for b in tick["bodies"] if b["kind"] == "user"), None)
+        if user is None:
+            continue
+        now_turning = abs(user.get("omega", 0.0)) > USER_TURN_RPS
+        if now_turning and not turning:
+            starts.append(tick["t_us"] / 1e6)
+        turning = now_turning
+    return starts
+
+
+def swarm_extent(positions: np.ndarray) -> float:
+    """r = sqrt(mean |p_i - g|^2) (surround paper)."""
+    return float(np.sqrt(np.mean(np.sum((positions - positions.mean(axis=0)) ** 2, axis=1))))
+
+
+def is_connected(positions: np.ndarray, sight_m: float) -> bool:
+    """True when the graph of robots closer than ``sight_m`` is connected."""
+    n = len(positions)
+    near = np.linalg.norm(positions[:, None] - positions[None], axis=2) < sight_m
+    seen, frontier = {0}, [0]
+    while frontier:
+        i = frontier.pop()
+        for j in np.flatnonzero(near[i]):
+            if int(j) not in seen:
+                seen.add(int(j))
+                frontier.append(int(j))
+    return len(seen) == n
+
+
+def _percentiles(values: list[float]) -> dict[str, float] | None:
+    if not values:
+        return None
+    a = np.asarray(values)
+    return {
+        "median": round(float(np.median(a)), 4),
+        "p90": round(float(np.percentile(a, 90)), 4),
+        "max": round(float(a.max()), 4),
+        "n": len(values),
+    }
+
+
+def _thin(series: list[tuple[float, float]], every: int = 5) -> list[list[float]]:
+    # 50 Hz is more than a plot needs; keep every 5th sample (10 Hz) for the summary's series
+    return [[round(t, 2), round(e, 4)] for t, e in series[::every]]

@@ -1,0 +1,487 @@
+"""Driving with the user: owner detection over LF/BLE, the single robot's modes, and swarm driving.
+
+The asyncio shell around the pure controllers (``pet_controller``, ``slave_controller``,
+``formation_shapes``) and the wearables' models (``lf_location``):
+
+- waiting for a user, the robot fires an LF wake-up burst every 3 s; a belt holding its pattern within
+  1 m answers over BLE and becomes the robot's owner (command-waiting);
+- tracking (following, leading, master-driving), it fires LF every 350 ms from each antenna in turn; the
+  belt answers with the two distances, which ``locate`` turns into the user's distance and bearing;
+- the watch's requests select the operation (follow, lead, remote), cancel it, organize or disperse a
+  swarm, change the driving mode, steer by gestures in remote control, or return from an exception;
+- every 50 ms the controller of the current state produces a motor command; the master broadcasts
+  ``DriveState`` every 100 ms on the swarm's PAN; a slave steers to its formation slot from its IR fix of
+  the master, dead-reckoned between token rounds with its own odometry and the master's broadcast speed.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import time
+import zlib
+from dataclasses import dataclass, field
+from typing import Any
+
+from petswarm import messages as m
+from petswarm import user_link
+from petswarm.activity import Activity, Movement
+from petswarm.formation import FormationError, NetworkFormation
+from petswarm.formation_shapes import Mode, mode_change, neighbours, slots
+from petswarm.formation_shapes import master_target_distance as formation_distance
+from petswarm.gestures import Gesture, combine
+from petswarm.lf_location import UserFix, locate
+from petswarm.motion import MotorCommand
+from petswarm.pet_controller import PetControllerConfig, Ranges, UserObservation, follow, lead, obstacle_ahead, safety
+from petswarm.relative_location import RelativeLocationManager
+from petswarm.rf import Incoming, RfCommunicationManager
+from petswarm.sequence import EventLog, RobotState, SequenceManager, TransitionError
+from petswarm.slave_controller import RelativeFix, RelativeTracker, SlaveControllerConfig, slave_decision
+from radio_hub.interface import BROADCAST, HubUnavailable, OwnSensors, RadioError
+from radio_hub.lf import LfConfig, wake_pattern
+
+WAKE_PERIOD_S = 3.0
+TRACK_PERIOD_S = 0.35
+CONTROL_PERIOD_S = 0.05
+BROADCAST_PERIOD_S = 0.1
+LOST_AFTER_S = 2.0
+"""No reliable LF fix for this long: the user is lost (emergency)."""
+REMOTE_SPEED_MPS = 0.3
+REMOTE_HOLD_S = 1.5
+"""A gesture moves the robot for this long, then it stops and waits for the next."""
+MASTER_SILENT_S = 1.0
+"""A slave that hears no DriveState for this long stops (the master may be gone)."""
+STATES = {"follow": RobotState.FOLLOWING, "lead": RobotState.LEADING, "remote": RobotState.REMOTE_CONTROL}
+
+
+@dataclass
+class DrivingConfig:
+    """The user's formation choices and the controllers' settings."""
+
+    shape: str = "column"
+    spacing_m: float = 0.6
+    pet: PetControllerConfig = field(default_factory=PetControllerConfig)
+    slave: SlaveControllerConfig = field(default_factory=SlaveControllerConfig)
+
+
+class Driver:
+    """One robot's driving: its owner, its mode, its controller and (as master) the drive broadcast."""
+
+    def __init__(
+        self,
+        robot_id: int,
+        rf: RfCommunicationManager,
+        sequence: SequenceManager,
+        formation: NetworkFormation,
+        locations: RelativeLocationManager,
+        log: EventLog,
+        config: DrivingConfig | None = None,
+    ) -> None:
+        self.robot_id = robot_id
+        self.rf = rf
+        self.radio = rf.radio
+        self.sequence = sequence
+        self.formation = formation
+        self.locations = locations
+        self.log = log
+        self.config = config or DrivingConfig()
+        self.lf = LfConfig()
+        """The robot's calibration: the belt's datasheet curve."""
+        self.owner: str | None = None
+        self.fix: UserFix | None = None
+        self.fix_at = -math.inf
+        self.activity = Activity(Movement.STOP, False, 0.0, 0.0)
+        self.command = MotorCommand()
+        self.mode = Mode.FOLLOWING
+        self.shape = self.config.shape
+        self.spacing = self.config.spacing_m
+        self.mirrored = False
+        self.exception_from: RobotState | None = None
+        self.remote = MotorCommand()
+        self.remote_until = 0.0
+        self.drive_state: m.DriveState | None = None
+        self.drive_state_at = -math.inf
+        self.tracker = RelativeTracker()
+        self._fix_seen: float | None = None
+        self._seq = 0
+        self._last_control = time.monotonic()
+        self.counters = {"wake_bursts": 0, "track_bursts": 0, "lf_fixes": 0, "lf_rejected": 0, "drive_states": 0}
+
+    # -- tasks -----------------------------------------------------------------------------------
+
+    def tasks(self) -> list[Any]:
+        """The coroutines the robot runs for driving."""
+        return [self._lf_loop(), self._ble_loop(), self._control_loop(), self._broadcast_loop()]
+
+    async def _lf_loop(self) -> None:
+        pattern = wake_pattern(self.robot_id)
+        seq = 0
+        while True:
+            state = self.sequence.state
+            seq = (seq + 1) & 0xFF
+            if state == RobotState.WAITING and self.owner is None:
+                self.counters["wake_bursts"] += 1
+                self.radio.lf_burst("left", pattern, user_link.lf_data(self.robot_id, seq, user_link.LF_WAKE))
+                await asyncio.sleep(WAKE_PERIOD_S)
+            elif self.owner is not None and self._tracking(state):
+                self.counters["track_bursts"] += 1
+                data = user_link.lf_data(self.robot_id, seq, user_link.LF_TRACK)
+                self.radio.lf_burst("left", pattern, data)
+                await asyncio.sleep(0.005)  # the antennas fire in turn
+                self.radio.lf_burst("right", pattern, data)
+                await asyncio.sleep(TRACK_PERIOD_S - 0.005)
+            else:
+                await asyncio.sleep(TRACK_PERIOD_S)
+
+    def _tracking(self, state: RobotState) -> bool:
+        return state in (
+            RobotState.FOLLOWING,
+            RobotState.LEADING,
+            RobotState.EMERGENCY,
+            RobotState.MASTER_DRIVING,
+            RobotState.REMOTE_CONTROL,
+            RobotState.COMMAND_WAITING,
+        ) or (state == RobotState.ORGANIZING and self.sequence.previous_driving is not None)
+
+    async def _ble_loop(self) -> None:
+        while True:
+            message = await self.radio.ble_receive()
+            try:
+                body = user_link.decode(message.payload)
+                await self._on_ble(message.src, body)
+            except (ValueError, KeyError, TypeError, TransitionError, FormationError) as err:
+                self.log.record("ble_refused", src=message.src, error=f"{type(err).__name__}: {err}")
+
+    async def _on_ble(self, src: str, body: dict[str, Any]) -> None:
+        kind = body["k"]
+        if kind == "owner":
+            self._on_owner(src, float(body["d"]))
+        elif src != self.owner:
+            self.log.record("ble_ignored", src=src, kind=kind)  # only the owner's wearables count
+        elif kind == "lf":
+            self._on_lf(float(body["dl"]), float(body["dr"]))
+        elif kind == "activity":
+            self.activity = Activity.from_dict({k: v for k, v in body.items() if k not in ("k", "t")})
+        elif kind == "request":
+            await self._on_request(body)
+
+    def _on_owner(self, src: str, distance: float) -> None:
+        if self.owner is not None or self.sequence.state != RobotState.WAITING or distance > self.lf.wake_range_m:
+            return
+        self.owner = src
+        self.formation.user = zlib.crc32(src.encode()) & 0xFFFF or 1
+        self.sequence.transition(RobotState.COMMAND_WAITING, owner=src, distance=round(distance, 3))
+        self._tell_owner()
+
+    def _on_lf(self, d_left: float, d_right: float) -> None:
+        fix = locate(d_left, d_right, self.lf, behind=self._user_behind())
+        if fix is None:
+            self.counters["lf_rejected"] += 1
+            return
+        self.counters["lf_fixes"] += 1
+        self.fix, self.fix_at = fix, time.monotonic()
+
+    def _user_behind(self) -> bool:
+        # leading: the user walks behind the robot (front/back is ambiguous for LF)
+        state = self.sequence.state
+        if state == RobotState.LEADING or (state == RobotState.REMOTE_CONTROL and self.exception_from):
+            return True
+        return state == RobotState.MASTER_DRIVING and self.mode == Mode.LEADING
+
+    async def _on_request(self, body: dict[str, Any]) -> None:
+        request = body["request"]
+        self.log.record("watch_request", **{k: v for k, v in body.items() if k != "k"})
+        state = self.sequence.state
+        if request in STATES:
+            self._select(STATES[request])
+        elif request == "cancel" and state in (RobotState.FOLLOWING, RobotState.LEADING, RobotState.REMOTE_CONTROL):
+            self.exception_from = None
+            self.sequence.transition(RobotState.COMMAND_WAITING, cause="cancel")
+        elif request == "return" and state == RobotState.REMOTE_CONTROL and self.exception_from is not None:
+            back, self.exception_from = self.exception_from, None
+            self.sequence.transition(back, cause="return")
+        elif request == "gesture":
+            self._on_gesture(Gesture(body["gesture"]))
+        elif request == "organize":
+            self.shape = str(body.get("shape", self.shape))
+            self.spacing = float(body.get("spacing", self.spacing))
+            asyncio.get_running_loop().create_task(self._organize(int(body.get("robots", 1))))
+        elif request == "disperse":
+            asyncio.get_running_loop().create_task(self._disperse())
+        elif request == "mode":
+            self._change_mode(Mode(body["mode"]), bool(body.get("change_master", False)))
+        self._tell_owner()
+
+    def _select(self, target: RobotState) -> None:
+        state = self.sequence.state
+        if state == RobotState.MASTER_DRIVING:
+            self._change_mode(Mode.LEADING if target == RobotState.LEADING else Mode.FOLLOWING, False)
+            return
+        self.mode = Mode.LEADING if target == RobotState.LEADING else Mode.FOLLOWING
+        if state != target:
+            self.sequence.transition(target, cause="watch")
+
+    def _on_gesture(self, gesture: Gesture) -> None:
+        if gesture == Gesture.CIRCLE:
+            if self.sequence.state in (RobotState.FOLLOWING, RobotState.LEADING, RobotState.REMOTE_CONTROL):
+                self.sequence.transition(RobotState.COMMAND_WAITING, cause="cancel")
+            return
+        vx_sign, vy_sign, turn_deg = combine([gesture])
+        omega = math.radians(turn_deg) / REMOTE_HOLD_S
+        self.remote = MotorCommand(vx_sign * REMOTE_SPEED_MPS, vy_sign * REMOTE_SPEED_MPS, omega)
+        self.remote_until = time.monotonic() + REMOTE_HOLD_S
+
+    def _change_mode(self, mode: Mode, change_master: bool) -> None:
+        """Table 3 as the master applies it. The master keeps its role (the No-change column): handing the
+        master's duties to another robot is not built, so a requested change is recorded and answered as
+        No change."""
+        if mode == self.mode:
+            return
+        swarm = self.formation.swarm
+        if self.sequence.state == RobotState.MASTER_DRIVING and swarm is not None:
+            members = list(range(len(swarm.members) + 1))
+            layout = slots(self.shape, len(members), self.spacing)
+            distances = {k: 1.0 + abs(layout[k][0]) for k in members}
+            outcome = mode_change(self.mode, mode, change_master, members, distances, layout)
+            self.log.record(
+                "mode_change",
+                frm=str(self.mode),
+                to=str(mode),
+                change_master_requested=change_master,
+                table3_master=outcome.new_master,
+                applied="no-change",
+            )
+            self.mirrored = not self.mirrored
+        else:
+            self.log.record("mode_change", frm=str(self.mode), to=str(mode))
+            target = RobotState.LEADING if mode == Mode.LEADING else RobotState.FOLLOWING
+            if self.sequence.state in (RobotState.FOLLOWING, RobotState.LEADING):
+                self.sequence.transition(target, cause="mode")
+        self.mode = mode
+
+    async def _organize(self, count: int) -> None:
+        try:
+            result = await self.formation.organize(count)
+            self.log.record("watch_organized", members=result.get("members"))
+        except (FormationError, RadioError, HubUnavailable, TransitionError) as err:
+            self.log.record("watch_organize_failed", error=str(err))
+        self._tell_owner()
+
+    async def _disperse(self) -> None:
+        try:
+            await self.formation.disperse()
+        except (FormationError, RadioError, HubUnavailable, TransitionError) as err:
+            self.log.record("watch_disperse_failed", error=str(err))
+        self.mirrored = False
+        self._tell_owner()
+
+    def _tell_owner(self) -> None:
+        if self.owner is not None:
+            self.radio.ble_send(self.owner, user_link.encode("state", state=self.sequence.state.label))
+
+    # -- control ---------------------------------------------------------------------------------
+
+    async def _control_loop(self) -> None:
+        tick = 0
+        while True:
+            await asyncio.sleep(CONTROL_PERIOD_S)
+            now = time.monotonic()
+            dt, self._last_control = now - self._last_control, now
+            self.command = self._decide(now, dt)
+            self.radio.drive(self.command.vx, self.command.vy, self.command.omega)
+            tick += 1
+            if tick % 10 == 0:
+                self._telemetry()
+
+    def _decide(self, now: float, dt: float) -> MotorCommand:
+        state = self.sequence.state
+        ranges = self._ranges()
+        if state == RobotState.SLAVE_DRIVING:
+            return self._slave(now, dt, ranges)
+        if state == RobotState.REMOTE_CONTROL:
+            return safety(self.remote if now < self.remote_until else MotorCommand(), ranges, self.config.pet)
+        if not self._tracking(state) or state in (RobotState.COMMAND_WAITING, RobotState.ORGANIZING):
+            return MotorCommand()
+        observation = self._observation(now)
+        if self._lost(now, state):
+            return MotorCommand()
+        if state == RobotState.EMERGENCY:
+            return MotorCommand()
+        leading = self._user_behind()
+        target = self._target_distance() if state == RobotState.MASTER_DRIVING else None
+        if leading and state == RobotState.LEADING and obstacle_ahead(ranges, self.config.pet):
+            self.exception_from = state
+            self.sequence.transition(RobotState.REMOTE_CONTROL, cause="obstacle ahead")
+            self._tell_owner()
+            return MotorCommand()
+        control = lead if leading else follow
+        return control(observation, ranges, self.config.pet, target)
+
+    def _observation(self, now: float) -> UserObservation | None:
+        if self.fix is None:
+            return None
+        speeds = {Movement.STOP: 0.0, Movement.REST: 0.4, Movement.WALK: 1.0, Movement.RUN: 2.5}
+        activity = self.activity
+        return UserObservation(
+            distance_m=self.fix.distance_m,
+            bearing_rad=self.fix.bearing_rad,
+            user_speed_mps=speeds[activity.movement],
+            rotating=activity.rotating,
+            angular_speed_rps=activity.angular_speed_rps if activity.rotating else 0.0,
+            age_s=max(0.0, now - self.fix_at),
+        )
+
+    def _lost(self, now: float, state: RobotState) -> bool:
+        """Emergency per the spec: no reliable LF fix for LOST_AFTER_S; back when one comes again."""
+        fresh = self.fix is not None and self.fix.reliable and now - self.fix_at < LOST_AFTER_S
+        if state in (RobotState.FOLLOWING, RobotState.LEADING) and not fresh and self.fix_at > -math.inf:
+            self.exception_from = state
+            self.sequence.transition(RobotState.EMERGENCY, cause="user lost")
+            if self.owner is not None:
+                self.radio.ble_send(self.owner, user_link.encode("alert", reason="user lost"))
+            return True
+        if state == RobotState.EMERGENCY and fresh:
+            back, self.exception_from = self.exception_from or RobotState.FOLLOWING, None
+            self.sequence.transition(back, cause="user found")
+        return False
+
+    def _target_distance(self) -> float:
+        swarm = self.formation.swarm
+        count = 1 if swarm is None else len(swarm.members) + 1
+        layout = self._layout(count)
+        return formation_distance(self.mode, layout)
+
+    def _layout(self, count: int) -> list[tuple[float, float]]:
+        layout = slots(self.shape, count, self.spacing)
+        return [(-x, y) for x, y in layout] if self.mirrored else layout
+
+    def _ranges(self) -> Ranges:
+        sensors: OwnSensors | None = self.radio.sensors
+        if sensors is None:
+            return Ranges()
+        readings = tuple(
+            (float(a), None if math.isnan(r) else float(r))
+            for a, r in zip(sensors.angles_rad, sensors.ranges_m, strict=True)
+        )
+        return Ranges(readings)
+
+    # -- the swarm -------------------------------------------------------------------------------
+
+    async def _broadcast_loop(self) -> None:
+        while True:
+            await asyncio.sleep(BROADCAST_PERIOD_S)
+            swarm = self.formation.swarm
+            if self.sequence.state != RobotState.MASTER_DRIVING or swarm is None:
+                continue
+            self._seq += 1
+            fix, activity, cmd = self.fix, self.activity, self.command
+            yaw = self.radio.sensors.yaw_rad if self.radio.sensors is not None else 0.0
+            state = m.DriveState(
+                swarm.session,
+                self._seq & 0xFFFF,
+                cmd.vx,
+                cmd.vy,
+                cmd.omega,
+                yaw,
+                int(activity.movement),
+                activity.angular_speed_rps if activity.rotating else 0.0,
+                str(self.mode),
+                self.shape,
+                self.spacing,
+                0.0 if fix is None else fix.forward_m,
+                0.0 if fix is None else fix.left_m,
+                int(self.mirrored),
+            )
+            try:
+                await self.rf.send(BROADCAST, state, ack=False)
+            except (RadioError, HubUnavailable) as err:
+                self.log.record("error", where="drive_state", error=str(err))
+
+    @staticmethod
+    def handles(message: m.SwarmMessage) -> bool:
+        """True for the messages this manager takes."""
+        return isinstance(message, m.DriveState)
+
+    def on_message(self, incoming: Incoming) -> None:
+        """A DriveState from our master."""
+        swarm = self.formation.swarm
+        msg = incoming.message
+        if swarm is None or not isinstance(msg, m.DriveState) or msg.session != swarm.session:
+            return
+        if incoming.sender != swarm.master:
+            return
+        self.counters["drive_states"] += 1
+        if (
+            self.drive_state is None
+            or msg.movement != self.drive_state.movement
+            or (msg.user_rate != 0) != (self.drive_state.user_rate != 0)
+        ):
+            self.log.record("user_activity_heard", movement=msg.movement, user_rate=round(msg.user_rate, 3))
+        self.drive_state, self.drive_state_at = msg, time.monotonic()
+
+    def _slave(self, now: float, dt: float, ranges: Ranges) -> MotorCommand:
+        swarm, state = self.formation.swarm, self.drive_state
+        if swarm is None or state is None or now - self.drive_state_at > MASTER_SILENT_S:
+            return MotorCommand()  # no word from the master: stop safely
+        own_yaw = self.radio.sensors.yaw_rad if self.radio.sensors is not None else 0.0
+        heading_rel = _wrap(state.yaw - own_yaw)
+        master_motion = MotorCommand(state.vx, state.vy, state.omega)
+        entry = self.locations.table.get(swarm.master)
+        if entry is not None and entry.fixed_at is not None and entry.fixed_at != self._fix_seen:
+            self._fix_seen = entry.fixed_at
+            assert entry.distance_m is not None and entry.bearing_rad is not None
+            self.tracker.fix(RelativeFix(entry.distance_m, entry.bearing_rad, heading_rel, entry.fixed_at))
+            self.tracker.predict(max(0.0, now - entry.fixed_at), self.command, master_motion)
+        elif self.tracker.pose is not None:
+            self.tracker.predict(dt, self.command, master_motion)
+        if self.tracker.pose is None:
+            return MotorCommand()
+        pose = (self.tracker.pose[0], self.tracker.pose[1], heading_rel)
+        count = len(swarm.members) + 1
+        layout = (
+            [(-x, y) for x, y in slots(state.shape, count, state.spacing)]
+            if state.mirrored
+            else slots(state.shape, count, state.spacing)
+        )
+        number = swarm.number
+        near = neighbours(state.shape, number)
+        neighbour_fix, neighbour_ref = None, None
+        chain = (swarm.master, *swarm.members)
+        if near and near[0] != 0:
+            other = self.locations.table.get(chain[near[0]])
+            if other is not None and other.fixed_at is not None and other.distance_m is not None:
+                neighbour_fix = RelativeFix(other.distance_m, other.bearing_rad or 0.0, None, other.fixed_at)
+                neighbour_ref = layout[near[0]]
+        decision = slave_decision(
+            pose,
+            neighbour_fix,
+            layout[number],
+            neighbour_ref,
+            master_motion,
+            state.mode,
+            state.user_rate,
+            self.config.slave,
+            (state.user_x, state.user_y),
+        )
+        return safety(decision.command, ranges, self.config.pet)
+
+    def _telemetry(self) -> None:
+        swarm = self.formation.swarm
+        state = self.sequence.state
+        role, master, slot = "", "", None
+        if swarm is not None and state in (RobotState.MASTER_DRIVING, RobotState.SLAVE_DRIVING):
+            role = "master" if swarm.number == 0 else "slave"
+            master = user_link.robot_node(swarm.master)
+            if role == "slave" and self.drive_state is not None:
+                ds = self.drive_state
+                layout = slots(ds.shape, len(swarm.members) + 1, ds.spacing)
+                x, y = layout[swarm.number]
+                slot = (-x if ds.mirrored else x, y)
+        try:
+            self.radio.telemetry(state.label, role, master, slot, str(self.mode))
+        except Exception as err:  # telemetry is for viewers: never let it stop the controller
+            self.log.record("error", where="telemetry", error=str(err))
+
+
+def _wrap(angle: float) -> float:
+    return (angle + math.pi) % (2 * math.pi) - math.pi
