@@ -55,7 +55,7 @@ class SurroundConfig:
     - B = 6.4 /s: the impedance's damping, 1.1 of critical for K = 8 and the unit mass; at 3 robots touched.
     - M = 0.1: a small added mass (stable below the unit body mass); the second difference is noisy.
     - drag = 0.3 /s: absolute damping, so a lone push does not coast forever, kept low because the rear
-      robots (c_i ~ 1) push the whole swarm: at drag 0.6 it trailed the human by 3 m at 1 m/s.
+      robots (c_i ~ 1) push the whole swarm: at drag 0.6 (F_G 1.5) it trailed the human by 2.8 m at 1 m/s.
     - F_G = 2.5 m/s^2: keeps the swarm centroid within ~0.6 m of the human at 1 m/s; at 3 the rear pushed
       robots into the human.
     - max speed 1.5 m/s (headroom over the human's 1 m/s), max acceleration 4 m/s^2 (a small mecanum base).
