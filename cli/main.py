@@ -183,6 +183,11 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("--json", action="store_true", help="print the answer as JSON")
 
     run = sub.add_parser("run", help="run a hub and N robots on this machine and summarise the radio traffic")
+    run.add_argument(
+        "scenario",
+        nargs="?",
+        help="a scenario file (scenarios/*.toml): hub, robots and user end to end, with driving metrics",
+    )
     run.add_argument("--robots", type=bounded(int, 1, 200), default=5, help="number of robot processes (default 5)")
     run.add_argument("--seed", type=seed, default=None, help="seed (default: random, and reported)")
     run.add_argument("--duration", type=bounded(float, 0.1, 86400), default=5.0, help="seconds of traffic (default 5)")
@@ -411,6 +416,7 @@ def _run(args: argparse.Namespace) -> int:
         organize=args.organize,
         protocol=args.protocol,
         record_dir=args.record,
+        scenario=args.scenario,
     )
     return run(opts)
 

@@ -41,6 +41,8 @@ class RunOptions:
     protocol: str = "paper"
     record_dir: str | None = None
     """Where the run record goes (default ``runs/<UTC time>-<seed>``)."""
+    scenario: str | None = None
+    """A scenario file: run its world, robots and user end to end instead of the ping phase."""
     faults: tuple[dict[str, Any], ...] = ()
     """Chaos requests with ``at`` (seconds into the traffic phase); those later than the phase act just
     before the swarm is organized. ``{"at": 1, "kind": "loss", "p": 0.3}``, ``{"at": 2, "clear": true}``."""
@@ -57,6 +59,16 @@ class RunFailed(RuntimeError):
 
 def run(opts: RunOptions) -> int:
     """Run the emulation; returns the process exit code."""
+    if opts.scenario:
+        from cli.run_scenario import run_scenario
+        from petswarm.scenario import ScenarioError, load
+
+        try:
+            scenario = load(opts.scenario)
+        except ScenarioError as err:
+            print(f"petswarm run: {err}", file=sys.stderr)
+            return 2
+        return run_scenario(opts, scenario)
     world = opts.world or f"run-{os.getpid()}-{opts.seed}"
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     keys = Keys(world)

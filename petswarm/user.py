@@ -73,7 +73,7 @@ class User:
     async def run(self) -> None:
         """Walk, listen and request until the scenario's duration is over."""
         self._t0 = asyncio.get_running_loop().time()
-        self.log.record("user_start", owner=self.owner, turns_at=self.plan.turn_starts())
+        self.log.record("start", role="user", owner=self.owner, turns_at=self.plan.turn_starts())
         tasks = [
             asyncio.create_task(self._walk()),
             asyncio.create_task(self._belt_lf()),
@@ -86,7 +86,7 @@ class User:
             for task in tasks:
                 task.cancel()
             await asyncio.gather(*tasks, return_exceptions=True)
-            self.log.record("user_end", **self.counters)
+            self.log.record("stop", role="user", **self.counters)
 
     async def _walk(self) -> None:
         next_accel = next_gyro = 0.0
