@@ -50,6 +50,31 @@ def build_parser() -> argparse.ArgumentParser:
         help="write every 802.15.4 frame on the air (data and ACK, with FCS) to this pcap file for Wireshark",
     )
 
+    hub.add_argument(
+        "--scenario",
+        metavar="FILE",
+        help="take the world from a scenario file: its obstacles and [hub] tables (see scenarios/)",
+    )
+    hub.add_argument(
+        "--world-log",
+        metavar="FILE",
+        help="write the ground truth (every body's pose, every world tick) to this JSON-lines file",
+    )
+
+    user = sub.add_parser(
+        "user",
+        help="run the user process: a person walking a scenario's path with belt and watch",
+        description="The person walks the scenario's path; the belt answers its robot's LF bursts and reports "
+        "distances and activity over BLE; the watch sends the scenario's requests at their times.",
+    )
+    user.add_argument("--scenario", metavar="FILE", required=True, help="scenario file with a [user] table")
+    _add_hub(user)
+    user.add_argument("--seed", type=seed, default=0, help="seed of the belt's IMU noise (default 0)")
+    user.add_argument(
+        "--duration", type=bounded(float, 0.1, 86400), default=None, help="seconds (default: the scenario's)"
+    )
+    user.add_argument("--record", metavar="FILE", help="append every event to this JSON-lines file as it happens")
+
     robot = sub.add_parser("robot", help="run one robot process attached to a hub")
     robot.add_argument(
         "--id",
@@ -266,8 +291,9 @@ def _add_hub(p: argparse.ArgumentParser) -> None:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``petswarm`` console script."""
     args = build_parser().parse_args(argv)
-    commands = {"hub": _hub, "robot": _robot, "run": _run, "stats": _stats, "bench": _bench, "swarm": _swarm}
-    handler = {**commands, "report": _report, "chaos": _chaos, "experiment": _experiment, "watch": _watch}[args.command]
+    commands = {"hub": _hub, "user": _user, "robot": _robot, "run": _run, "stats": _stats, "bench": _bench}
+    commands.update(swarm=_swarm, watch=_watch)
+    handler = {**commands, "report": _report, "chaos": _chaos, "experiment": _experiment}[args.command]
     try:
         return handler(args)
     except KeyboardInterrupt:
@@ -278,17 +304,35 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _hub(args: argparse.Namespace) -> int:
-    from radio_hub.hub import RadioHub, load_config, ready_line
+    from petswarm.scenario import ScenarioError, load
+    from radio_hub.hub import RadioHub, environment_from_dict, load_config, ready_line
 
     try:
-        config, ir = load_config(args.config) if args.config else (None, None)
+        environment = load_config(args.config) if args.config else None
     except (OSError, ValueError) as err:
         print(f"petswarm hub: bad --config: {err}", file=sys.stderr)
         return 2
+    if args.scenario:
+        try:
+            scenario = load(args.scenario)
+            from_scenario = environment_from_dict(scenario.hub_tables())
+        except (ScenarioError, ValueError) as err:
+            print(f"petswarm hub: bad --scenario: {err}", file=sys.stderr)
+            return 2
+        if environment is not None:  # --config gives the radio and light; the scenario the world
+            from_scenario.medium, from_scenario.ir = environment.medium, environment.ir
+        environment = from_scenario
     try:
-        hub = RadioHub(args.listen, args.world, config, args.seed, ir, pcap_path=args.pcap)
+        hub = RadioHub(
+            args.listen,
+            args.world,
+            seed=args.seed,
+            pcap_path=args.pcap,
+            environment=environment,
+            world_log=args.world_log,
+        )
     except OSError as err:
-        print(f"petswarm hub: cannot open --pcap file: {err}", file=sys.stderr)
+        print(f"petswarm hub: cannot open an output file: {err}", file=sys.stderr)
         return 2
     try:
         hub.open()
@@ -307,6 +351,29 @@ def _hub(args: argparse.Namespace) -> int:
     finally:
         hub.close()
     return 0
+
+
+def _user(args: argparse.Namespace) -> int:
+    from petswarm.scenario import ScenarioError, load
+    from petswarm.sequence import EventLog
+    from petswarm.user import UserConfig, run_user
+
+    try:
+        scenario = load(args.scenario)
+    except ScenarioError as err:
+        print(f"petswarm user: {err}", file=sys.stderr)
+        return 2
+    if scenario.user is None:
+        print(f"petswarm user: {args.scenario} has no [user] table", file=sys.stderr)
+        return 2
+    duration = args.duration or scenario.duration_s
+    config = UserConfig(scenario.user, args.hub, args.world, duration, args.seed)
+    sink = open(args.record, "a") if args.record else None  # noqa: SIM115 (closed below)
+    try:
+        return asyncio.run(run_user(config, EventLog(sink=sink)))
+    finally:
+        if sink is not None:
+            sink.close()
 
 
 def _robot(args: argparse.Namespace) -> int:

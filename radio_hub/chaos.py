@@ -6,14 +6,23 @@ A fault is a small rule the medium consults at every reception:
 - ``corrupt``: the frame arrives with a bad FCS with probability ``p`` and the receiving MAC drops it
   (counted as lost, like any frame the MAC could not use);
 - ``duplicate``: a delivered frame is handed up twice with probability ``p`` (counted ``duplicated``);
+- ``delay``: a delivered frame is handed up ``ms`` later, plus a jitter of ``jitter_ms`` (uniform in
+  [-jitter_ms, +jitter_ms], or Gaussian with that standard deviation), as if the receiver's radio stack
+  (SPI, driver, a busy host) were slow. It acts after the air: the frame's airtime, its outcome, the
+  counters and the MAC's ACK are what they would have been, only the hand-up comes later. With jitter,
+  frames to one receiver can be handed up out of the order they left the air;
+- ``burst``: Gilbert-Elliott loss: a two-state chain per (sender, receiver) link, stepped once per
+  reception, good -> bad with ``p_gb``, bad -> good with ``p_bg``, losing ``loss_good`` / ``loss_bad``
+  of the frames in each state, so losses come in runs (mean run in the bad state 1/p_bg frames);
 - ``partition``: the nodes of ``group`` and those of ``others`` (everyone else when empty) cannot hear
   each other at all: no reception, no interference, no carrier sense;
 - ``ir_blind``: a receiving IR module (``node``, or every one) reads full scale on all 12 receivers, as
   under a lamp; ``ir_noise``: extra Gaussian noise of ``sigma`` counts on its readings.
 
-Loss, corruption and duplication apply to the receptions selected by ``node`` (frames sent or
-received by it), ``link`` (from one node to another), ``pan`` (receivers on that PAN) or ``channel``;
-without a selector they apply to every reception. Pure: the medium passes its RNG.
+Loss, corruption, duplication, delay and bursts apply to the receptions selected by ``node`` (frames
+sent or received by it), ``link`` (from one node to another), ``pan`` (receivers on that PAN) or
+``channel``; without a selector they apply to every reception. Pure: the medium passes its RNG, and
+draws from it only for the receptions an active fault selects.
 """
 
 from __future__ import annotations
@@ -22,7 +31,21 @@ import itertools
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-KINDS = ("loss", "corrupt", "duplicate", "partition", "ir_blind", "ir_noise")
+import numpy as np
+
+from radio_hub.config import GilbertElliottConfig
+from radio_hub.propagation import GilbertElliott
+
+KINDS = ("loss", "corrupt", "duplicate", "delay", "burst", "partition", "ir_blind", "ir_noise")
+JITTERS = ("uniform", "gaussian")
+MAX_DELAY_MS = 10_000.0
+"""Longest extra delay (and jitter) a delay fault takes. A frame ten seconds late is, for every timeout in
+the middleware, a lost frame: use a loss fault for that. The bound catches a value typed in microseconds."""
+_SELECTORS = {"node", "link", "pan", "channel"}
+BURST_DEFAULTS = {"p_gb": 0.05, "p_bg": 0.25, "loss_good": 0.0, "loss_bad": 1.0}
+"""A burst fault's defaults: one reception in twenty starts a burst, a burst lasts 4 receptions on
+average and loses them all (about 17 % of the frames lost in all); chosen to be seen in a few seconds of
+pings, not taken from a measurement."""
 
 
 @dataclass(frozen=True)
@@ -40,9 +63,23 @@ class Fault:
     others: tuple[str, ...] = ()
     sigma: float = 0.0
     """ir_noise: standard deviation of the extra noise, in ADC counts."""
+    ms: float | None = None
+    """delay: the extra delay of every selected delivery, in milliseconds."""
+    jitter_ms: float | None = None
+    """delay: uniform half-width, or Gaussian standard deviation, of the delay's variation (ms)."""
+    jitter: str | None = None
+    """delay: ``uniform`` or ``gaussian``."""
+    p_gb: float | None = None
+    """burst: probability that a link in the good state turns bad at a reception."""
+    p_bg: float | None = None
+    """burst: probability that a link in the bad state turns good at a reception."""
+    loss_good: float | None = None
+    """burst: loss probability in the good state."""
+    loss_bad: float | None = None
+    """burst: loss probability in the bad state."""
 
     def selects(self, sender: str, receiver: str, receiver_pan: int, channel: int) -> bool:
-        """True when this (loss, corrupt or duplicate) fault applies to the reception."""
+        """True when this (loss, corrupt, duplicate, delay or burst) fault applies to the reception."""
         if self.node is not None and self.node not in (sender, receiver):
             return False
         if self.link is not None and self.link != (sender, receiver):
@@ -68,6 +105,19 @@ class Fault:
         """For the wire and the logs (only the fields that are set)."""
         return {k: v for k, v in asdict(self).items() if v not in (None, ())}
 
+    def delay_us(self, rng: np.random.Generator) -> int:
+        """One draw of this delay fault's extra delay; never negative (no frame is handed up before it arrived)."""
+        ms, jitter = self.ms or 0.0, self.jitter_ms or 0.0
+        if jitter > 0:
+            ms += rng.normal(0.0, jitter) if self.jitter == "gaussian" else rng.uniform(-jitter, jitter)
+        return max(round(ms * 1000), 0)
+
+    def burst_config(self) -> GilbertElliottConfig:
+        """This burst fault's chain parameters."""
+        return GilbertElliottConfig(
+            float(self.p_gb or 0.0), float(self.p_bg or 0.0), float(self.loss_good or 0.0), float(self.loss_bad or 0.0)
+        )
+
 
 def parse_fault(fault_id: int, spec: dict[str, Any]) -> Fault:
     """A fault from a request map; ValueError with the reason on anything malformed."""
@@ -79,13 +129,13 @@ def parse_fault(fault_id: int, spec: dict[str, Any]) -> Fault:
         "partition": {"group", "others"},
         "ir_blind": {"node"},
         "ir_noise": {"node", "sigma"},
-    }.get(kind, {"p", "node", "link", "pan", "channel"})
+        "delay": {"ms", "jitter_ms", "jitter", *_SELECTORS},
+        "burst": {*BURST_DEFAULTS, *_SELECTORS},
+    }.get(kind, {"p", *_SELECTORS})
     unknown = set(spec) - allowed
     if unknown:
         raise ValueError(f"a {kind} fault takes {sorted(allowed)}, not {sorted(unknown)}")
-    p = float(spec.get("p", 1.0))
-    if not 0.0 <= p <= 1.0:
-        raise ValueError(f"p must be a probability in [0, 1], got {p}")
+    p = _probability("p", spec.get("p", 1.0))
     link = spec.get("link")
     if link is not None and (len(link) != 2 or not all(isinstance(n, str) for n in link)):
         raise ValueError("link is a pair of node ids [sender, receiver]")
@@ -100,6 +150,7 @@ def parse_fault(fault_id: int, spec: dict[str, Any]) -> Fault:
         tuple(spec.get("group", ())),
         tuple(spec.get("others", ())),
         float(spec.get("sigma", 0.0)),
+        **(_delay_fields(spec) if kind == "delay" else _burst_fields(spec) if kind == "burst" else {}),
     )
     if fault.sigma < 0:
         raise ValueError(f"sigma must be >= 0, got {fault.sigma}")
@@ -109,6 +160,44 @@ def parse_fault(fault_id: int, spec: dict[str, Any]) -> Fault:
     return fault
 
 
+def _number(name: str, value: Any) -> float:
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+
+
+def _probability(name: str, value: Any) -> float:
+    p = _number(name, value)
+    if not 0.0 <= p <= 1.0:
+        raise ValueError(f"{name} must be a probability in [0, 1], got {p}")
+    return p
+
+
+def _delay_fields(spec: dict[str, Any]) -> dict[str, Any]:
+    if "ms" not in spec:
+        raise ValueError("a delay fault needs ms, the extra delay in milliseconds")
+    fields = {"ms": _number("ms", spec["ms"]), "jitter_ms": _number("jitter_ms", spec.get("jitter_ms", 0.0))}
+    for name, value in fields.items():
+        if not 0.0 <= value <= MAX_DELAY_MS:  # also refuses NaN
+            raise ValueError(f"{name} must be in [0, {MAX_DELAY_MS:g}] milliseconds, got {value}")
+    jitter = spec.get("jitter", "uniform")
+    if jitter not in JITTERS:
+        raise ValueError(f"jitter must be one of {JITTERS}, not {jitter!r}")
+    if fields["ms"] == 0 and fields["jitter_ms"] == 0:
+        raise ValueError("a delay fault with ms = 0 and jitter_ms = 0 delays nothing")
+    return {**fields, "jitter": jitter}
+
+
+def _burst_fields(spec: dict[str, Any]) -> dict[str, Any]:
+    fields = {name: _probability(name, spec.get(name, default)) for name, default in BURST_DEFAULTS.items()}
+    if fields["p_bg"] == 0 and fields["p_gb"] > 0:
+        raise ValueError("p_bg must be > 0: with 0 the first burst never ends (use a loss fault for a dead link)")
+    if not GilbertElliottConfig(*fields.values()).enabled:
+        raise ValueError("this burst fault never loses a frame: give loss_good > 0, or p_gb > 0 and loss_bad > 0")
+    return fields
+
+
 @dataclass
 class Chaos:
     """The active faults and the log of every change."""
@@ -116,11 +205,15 @@ class Chaos:
     faults: dict[int, Fault] = field(default_factory=dict)
     log: list[dict[str, Any]] = field(default_factory=list)
     _ids: itertools.count = field(default_factory=lambda: itertools.count(1))
+    _chains: dict[int, GilbertElliott] = field(default_factory=dict)
+    """Each burst fault's chains, one per (sender, receiver) link, all starting in the good state."""
 
     def add(self, spec: dict[str, Any], now_us: int, wall: float) -> Fault:
         """Activate a fault; ValueError when the spec is malformed."""
         fault = parse_fault(next(self._ids), spec)
         self.faults[fault.fault_id] = fault
+        if fault.kind == "burst":
+            self._chains[fault.fault_id] = GilbertElliott(fault.burst_config())
         self.log.append({"op": "add", "model_us": now_us, "wall": wall, **fault.to_dict()})
         return fault
 
@@ -129,6 +222,7 @@ class Chaos:
         ended = list(self.faults) if fault_id is None else [fault_id] if fault_id in self.faults else []
         for fid in ended:
             del self.faults[fid]
+            self._chains.pop(fid, None)
         self.log.append({"op": "clear", "model_us": now_us, "wall": wall, "ended": ended})
         return ended
 
@@ -142,6 +236,28 @@ class Chaos:
 
     def probabilities(self, kind: str, sender: str, receiver: str, receiver_pan: int, channel: int) -> list[float]:
         """The ``p`` of every active fault of ``kind`` that applies to this reception."""
+        return [f.p for f in self._selecting(kind, sender, receiver, receiver_pan, channel)]
+
+    def _selecting(self, kind: str, sender: str, receiver: str, receiver_pan: int, channel: int) -> list[Fault]:
         return [
-            f.p for f in self.faults.values() if f.kind == kind and f.selects(sender, receiver, receiver_pan, channel)
+            f for f in self.faults.values() if f.kind == kind and f.selects(sender, receiver, receiver_pan, channel)
         ]
+
+    def burst_lost(self, sender: str, receiver: str, receiver_pan: int, channel: int, rng: np.random.Generator) -> bool:
+        """Step the link's chain of every burst fault that selects this reception; True when one loses it.
+
+        Every selecting chain steps, even after another has lost the frame, so each chain sees one step
+        per reception and its runs keep their length."""
+        lost = False
+        for fault in self._selecting("burst", sender, receiver, receiver_pan, channel):
+            lost |= self._chains[fault.fault_id].lost((sender, receiver), rng)
+        return lost
+
+    def delay_us(self, sender: str, receiver: str, receiver_pan: int, channel: int, rng: np.random.Generator) -> int:
+        """Extra hand-up delay of this delivery in microseconds: the delay faults that select it add up."""
+        return sum(f.delay_us(rng) for f in self._selecting("delay", sender, receiver, receiver_pan, channel))
+
+    def forget(self, node_id: str) -> None:
+        """Drop the burst chains of a node that left (it comes back in the good state, like a new link)."""
+        for chain in self._chains.values():
+            chain.forget(node_id)

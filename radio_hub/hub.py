@@ -32,18 +32,49 @@ import numpy as np
 import zenoh
 
 from radio_hub import wire
+from radio_hub.ble import BleAir, BleConfig
 from radio_hub.config import MediumConfig
 from radio_hub.ir_air import IrAir
 from radio_hub.keys import Keys, check_name, reliable_publisher, session_config
+from radio_hub.lf import LfConfig, antenna_positions, lf_rssi
 from radio_hub.light import IrConfig
 from radio_hub.medium import Medium, Output, RadioNode, Reception, Transmission, TxReport, TxStatus
 from radio_hub.pcap import PcapWriter
+from radio_hub.world import Obstacle, World, WorldConfig, parse_obstacle
 
 _IDLE_WAKE_US = 200_000
 _SPIN_US = 100
 """Sleep until this close to the next model event, then spin: deliveries land within a few us of model time."""
 
 _PR_SET_TIMERSLACK = 29
+_SENSORS_EVERY = 2
+"""World ticks per robot sensor message (50 Hz ticks: sensors at 25 Hz)."""
+_PUBLISH_EVERY = 5
+"""World ticks per world publication for viewers (10 Hz)."""
+
+
+@dataclass
+class Environment:
+    """Everything a hub emulates besides the 802.15.4 medium's own tables: the IR light, the world,
+    the obstacles of a scenario, the BLE links and the LF field."""
+
+    medium: MediumConfig = field(default_factory=MediumConfig)
+    ir: IrConfig = field(default_factory=IrConfig)
+    world: WorldConfig = field(default_factory=WorldConfig)
+    ble: BleConfig = field(default_factory=BleConfig)
+    lf: LfConfig = field(default_factory=LfConfig)
+    obstacles: list[Obstacle] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain values for stats and run records."""
+        return {
+            "medium": self.medium.to_dict(),
+            "ir": self.ir.to_dict(),
+            "world": self.world.to_dict(),
+            "ble": self.ble.to_dict(),
+            "lf": self.lf.to_dict(),
+            "obstacles": [o.to_dict() for o in self.obstacles],
+        }
 
 
 @dataclass
@@ -85,8 +116,18 @@ class RadioHub:
         seed: int = 0,
         ir_config: IrConfig | None = None,
         pcap_path: str | Path | None = None,
+        environment: Environment | None = None,
+        world_log: str | Path | None = None,
     ) -> None:
-        """Raises OSError when ``pcap_path`` is given and cannot be opened for writing."""
+        """Raises OSError when ``pcap_path`` or ``world_log`` is given and cannot be opened for writing.
+
+        ``environment`` gives every table at once (``config`` and ``ir_config`` override its medium and IR);
+        ``world_log`` receives one JSON line per world tick (the ground truth a run's metrics come from).
+        """
+        env = environment or Environment()
+        config = config or env.medium
+        ir_config = ir_config or env.ir
+        self.environment = Environment(config, ir_config, env.world, env.ble, env.lf, env.obstacles)
         self.endpoint = endpoint
         self.keys = Keys(world)
         self.seed = seed
@@ -105,8 +146,19 @@ class RadioHub:
         self._pubs: dict[str, zenoh.Publisher] = {}
         self._up_seq: dict[str, int] = {}
         self._instances: dict[str, str] = {}
-        self._headings: dict[str, float] = {}
-        self.ir = IrAir(ir_config or IrConfig(), np.random.default_rng([seed, 1]))
+        self.ir = IrAir(ir_config, np.random.default_rng([seed, 1]))
+        self.world = World(env.world, env.obstacles)
+        self.ble = BleAir(env.ble, np.random.default_rng([seed, 2]))
+        self._body_rng = np.random.default_rng([seed, 3])
+        self._lf_rng = np.random.default_rng([seed, 4])
+        self.lf_counters = {"bursts": 0, "heard": 0}
+        self._kinds: dict[str, str] = {}
+        """Attached nodes and their kind (robot or user)."""
+        self._telemetry: dict[str, dict[str, Any]] = {}
+        self._ticks = 0
+        self._next_tick_us = 0
+        self._world_log = None if world_log is None else open(world_log, "w")  # noqa: SIM115 (closed in close())
+        self._world_pub: zenoh.Publisher | None = None
         self._down_seq: dict[str, int] = {}
         self._t0_ns = time.perf_counter_ns()
         self._t0_wall_us = time.time_ns() // 1000
@@ -131,8 +183,11 @@ class RadioHub:
             session.declare_queryable(keys.stats, lambda q: put(("stats", q))),
             session.declare_queryable(keys.air, lambda q: put(("air", q))),
             session.declare_queryable(keys.chaos, lambda q: put(("chaos", q))),
+            session.declare_queryable(keys.world_query, lambda q: put(("world", q))),
             session.liveliness().declare_token(keys.hub_alive),
         ]
+        self._world_pub = session.declare_publisher(keys.world_state)
+        self._decls.append(self._world_pub)
         self._t0_ns = time.perf_counter_ns()
         self._t0_wall_us = time.time_ns() // 1000
 
@@ -146,6 +201,9 @@ class RadioHub:
         pcap, self._pcap = self._pcap, None
         if pcap is not None:
             pcap.close()
+        log, self._world_log = self._world_log, None
+        if log is not None:
+            log.close()
         for decl in self._decls:
             decl.undeclare()
         self._decls = []
@@ -158,7 +216,8 @@ class RadioHub:
         _tight_timer_slack()
         inbox, medium = self._inbox, self.medium
         while not self._stop.is_set():
-            due = min((t for t in (medium.next_event_us(), self.ir.next_event_us()) if t is not None), default=None)
+            events = (medium.next_event_us(), self.ir.next_event_us(), self.ble.next_event_us(), self._next_tick_us)
+            due = min((t for t in events if t is not None), default=None)
             until_due = _IDLE_WAKE_US if due is None else due - self.now_us()
             try:
                 if until_due > _SPIN_US:
@@ -172,14 +231,101 @@ class RadioHub:
                     # a timed wait wakes tens of microseconds late; yield-spin the last stretch instead
                     os.sched_yield()
             self._dispatch(medium.advance(self.now_us()))
+            self._tick_world()
             self._sweep_ir()
+            self._deliver_ble()
 
     def _sweep_ir(self) -> None:
         now = self.now_us()
-        nodes = self.medium.nodes
-        poses = {n: (*node.position, self._headings.get(n, 0.0)) for n, node in nodes.items()}
-        for node_id, readings in self.ir.sweep(now, poses, self.medium.chaos).items():
+        if not self.ir.take_due(now):
+            return
+        poses = {n: (float(b.pose[0]), float(b.pose[1]), float(b.pose[2])) for n, b in self.world.bodies.items()}
+        chaos = self.medium.chaos
+        for node_id, readings in self.ir.receive_sweep(poses, chaos).items():
             self._send_down(node_id, wire.IrSample(readings=readings.astype("<f4").tobytes(), t_us=now))
+        if self.ir.sweeps % 5 == 0:  # beacons at 20 Hz: 20 robots x 19 sources at 100 Hz would swamp the nodes
+            for node_id, (sources, block) in self.ir.beacon_sweep(poses, chaos).items():
+                self._send_down(
+                    node_id, wire.IrBeacons(sources=sources, readings=block.astype("<f4").tobytes(), t_us=now)
+                )
+
+    def _tick_world(self) -> None:
+        now = self.now_us()
+        if now < self._next_tick_us:
+            return
+        tick_us = round(self.world.config.tick_s * 1e6)
+        self._next_tick_us = max(self._next_tick_us + tick_us, now - tick_us)  # a late hub does not race to catch up
+        self._ticks += 1
+        world = self.world
+        world.step(now / 1e6)
+        for node_id, node in self.medium.nodes.items():
+            body = world.bodies.get(node_id)
+            if body is not None:
+                node.position = (float(body.pose[0]), float(body.pose[1]))
+        if self._ticks % _SENSORS_EVERY == 0:
+            self._send_sensors(now)
+        if self._world_log is not None or self._ticks % _PUBLISH_EVERY == 0:
+            self._record_world(now)
+
+    def _send_sensors(self, now: int) -> None:
+        for node_id, kind in self._kinds.items():
+            if kind != "robot" or node_id not in self.world.bodies:
+                continue
+            own = self.world.sense(node_id, self._body_rng)
+            self._send_down(
+                node_id,
+                wire.Sensors(
+                    t_us=now,
+                    ranges=own.ranges_m.astype("<f4").tobytes(),
+                    yaw=float(own.yaw_rad),
+                    odometry=[float(v) for v in own.odometry],
+                ),
+            )
+
+    def _record_world(self, now: int) -> None:
+        state = self.world_state(now)
+        if self._world_log is not None:
+            try:
+                self._world_log.write(json.dumps(state, separators=(",", ":")) + "\n")
+                self._world_log.flush()
+            except (OSError, ValueError) as err:  # a full disk must not take the world down
+                print(f"hub: world log: {err}; no longer recording", file=sys.stderr)
+                self._world_log = None
+        if self._ticks % _PUBLISH_EVERY == 0 and self._world_pub is not None:
+            with contextlib.suppress(zenoh.ZError):
+                self._world_pub.put(msgpack.packb(state, use_bin_type=True))
+
+    def world_state(self, now: int) -> dict[str, Any]:
+        """The ground truth as viewers and run records see it (one line of ``world.jsonl``)."""
+        bodies = self.world.snapshot()
+        poses = {b["id"]: b for b in bodies}
+        modes = self.ir.counter.modes
+        for body in bodies:
+            node = self.medium.nodes.get(body["id"])
+            body["pan_id"] = None if node is None else node.pan_id
+            body["ir"] = str(modes.get(body["id"], "idle"))
+            tele = self._telemetry.get(body["id"], {})
+            body["state"], body["role"] = tele.get("state"), tele.get("role")
+            body["reference"] = _reference(poses.get(tele.get("master", "")), tele.get("slot"))
+        totals = {"delivered": 0, "collided": 0, "lost": 0}
+        for counters in self.medium.node_counters.values():
+            for name in totals:
+                totals[name] += getattr(counters, name, 0)
+        return {
+            "v": 1,
+            "t_us": now,
+            "wall": round(self._t0_wall_us / 1e6 + now / 1e6, 4),
+            "bodies": bodies,
+            "obstacles": [o.to_dict() for o in self.world.obstacles],
+            "collisions": self.world.collisions,
+            "radio": totals,
+        }
+
+    def _deliver_ble(self) -> None:
+        for delivery in self.ble.due(self.now_us()):
+            if delivery.dst in self._kinds:
+                msg = wire.BleReceived(src=delivery.src, payload=delivery.payload, t_us=delivery.due_us)
+                self._send_down(delivery.dst, msg)
 
     # -- inputs ----------------------------------------------------------------------------------
 
@@ -195,6 +341,8 @@ class RadioHub:
             self._reply(item[1], {"transmissions": [tx.to_dict() for tx in self.medium.air_log]})
         elif kind == "chaos":
             self._reply(item[1], self._on_chaos(item[1]))
+        elif kind == "world":
+            self._reply(item[1], self.world_state(self.now_us()))
 
     def _on_up(self, node_id: str, data: bytes) -> None:
         try:
@@ -204,17 +352,22 @@ class RadioHub:
             self.counters.malformed += 1
             self._send_down(node_id, wire.Error(reason=f"malformed message: {err}"))
             return
-        if isinstance(msg, wire.Attach) and msg.exclusive and node_id in self.medium.nodes:
+        if isinstance(msg, wire.Attach) and msg.exclusive and node_id in self._kinds:
             # a refused claim must not touch the live node's sequence numbering
             self._send_down(node_id, wire.Error(reason=f"node id {node_id} is taken"))
             return
         self._check_sequence(node_id, msg)
         if isinstance(msg, wire.Attach):
             self._on_attach(node_id, msg)
-        elif node_id not in self.medium.nodes:
+        elif node_id not in self._kinds:
             self.counters.unattached += 1
             self._send_down(node_id, wire.Error(token=getattr(msg, "token", 0), reason=wire.NOT_ATTACHED))
+        elif isinstance(msg, (wire.Drive, wire.Place, wire.LfBurst, wire.BleSend, wire.Telemetry)):
+            self._on_body(node_id, msg)
         elif isinstance(msg, wire.Transmit):
+            if self._kinds[node_id] != "robot":
+                self._send_down(node_id, wire.Error(token=msg.token, reason="a user has no 802.15.4 radio"))
+                return
             self._dispatch(self.medium.submit(node_id, msg.psdu, msg.token, self.now_us()))
         elif isinstance(msg, wire.Configure):
             self._on_configure(node_id, msg)
@@ -236,38 +389,104 @@ class RadioHub:
     def _on_attach(self, node_id: str, msg: wire.Attach) -> None:
         self.medium.detach(node_id)
         self.ir.remove(node_id, self.now_us())  # a restarted node's module starts dark, as the node believes
-        # a node that restarts under the same id starts afresh
+        self._kinds.pop(node_id, None)
+        # a node that restarts under the same id starts afresh; a robot that re-attaches to a restarted
+        # hub says where it last was (its position as the old hub reported it)
         node = RadioNode(node_id, msg.ext_addr, msg.short_addr, msg.pan_id, msg.channel, _pos(msg.position))
         try:
-            self.medium.attach(node)
+            if msg.kind not in ("robot", "user"):
+                raise ValueError(f"kind must be robot or user, not {msg.kind!r}")
+            if msg.kind == "robot":
+                self.medium.attach(node)
+            x, y = node.position
+            self.world.add(node_id, msg.kind, x, y, math.radians(msg.heading_deg))
         except ValueError as err:
+            self.medium.detach(node_id)
             self.counters.config_errors += 1
             self._send_down(node_id, wire.Error(reason=f"cannot attach: {err}"))
             return
-        self._headings[node_id] = math.radians(msg.heading_deg)
+        self._kinds[node_id] = msg.kind
         self.counters.attaches += 1
         self._instances[node_id] = msg.instance
         if node_id not in self._pubs:
             self._pubs[node_id] = reliable_publisher(self._require_session(), self.keys.down(node_id))
 
         self._down_seq[node_id] = 0
-        self._send_down(node_id, self._attached(node, 0))
+        self._send_down(node_id, self._attached(node_id, 0))
 
     def _on_configure(self, node_id: str, msg: wire.Configure) -> None:
         changes: dict[str, Any] = {
             name: getattr(msg, name) for name in ("pan_id", "short_addr", "channel") if getattr(msg, name) is not None
         }
-        if msg.position is not None:
-            changes["position"] = _pos(msg.position)
-        if msg.heading_deg is not None:
-            self._headings[node_id] = math.radians(msg.heading_deg)
+        body = self.world.bodies[node_id]
         try:
-            node = self.medium.update(node_id, **changes)
+            if changes and self._kinds[node_id] != "robot":
+                raise ValueError("a user has no 802.15.4 radio")
+            if changes:
+                self.medium.update(node_id, **changes)
+            if msg.position is not None or msg.heading_deg is not None:
+                x, y = _pos(msg.position) if msg.position is not None else body.pose[:2]
+                yaw = math.radians(msg.heading_deg) if msg.heading_deg is not None else body.pose[2]
+                self.world.place(node_id, float(x), float(y), float(yaw))
+                if node_id in self.medium.nodes:
+                    self.medium.nodes[node_id].position = (float(x), float(y))
         except (ValueError, TypeError) as err:
             self.counters.config_errors += 1
             self._send_down(node_id, wire.Error(token=msg.token, reason=f"cannot configure: {err}"))
             return
-        self._send_down(node_id, self._attached(node, msg.token))
+        self._send_down(node_id, self._attached(node_id, msg.token))
+
+    def _on_body(self, node_id: str, msg: wire.Message) -> None:
+        """Motor commands, a user's pose, LF bursts, BLE messages and telemetry; none is answered, so a
+        bad one is counted and reported with an error message."""
+        try:
+            if isinstance(msg, wire.Drive):
+                self.world.command(node_id, msg.vx, msg.vy, msg.omega, self.now_us() / 1e6)
+            elif isinstance(msg, wire.Place):
+                if self._kinds[node_id] != "user":
+                    raise ValueError("only a user places itself; robots drive")
+                self.world.place(node_id, msg.x, msg.y, msg.yaw, msg.vx, msg.vy, msg.omega)
+            elif isinstance(msg, wire.LfBurst):
+                self._on_lf_burst(node_id, msg)
+            elif isinstance(msg, wire.BleSend):
+                self._on_ble_send(node_id, msg)
+            elif isinstance(msg, wire.Telemetry):
+                self._telemetry[node_id] = {
+                    "state": msg.state,
+                    "role": msg.role,
+                    "master": msg.master,
+                    "slot": msg.slot,
+                }
+        except ValueError as err:
+            self.counters.config_errors += 1
+            self._send_down(node_id, wire.Error(reason=f"{msg.TYPE}: {err}"))
+
+    def _on_lf_burst(self, node_id: str, msg: wire.LfBurst) -> None:
+        if self._kinds[node_id] != "robot":
+            raise ValueError("only robots have LF antennas")
+        if msg.antenna not in ("left", "right") or len(msg.data) > 4:
+            raise ValueError("antenna is left or right and data at most 4 bytes")
+        self.lf_counters["bursts"] += 1
+        left, right = antenna_positions(self.world.bodies[node_id].pose)
+        at = left if msg.antenna == "left" else right
+        now = self.now_us()
+        for user_id, kind in self._kinds.items():
+            if kind != "user":
+                continue
+            rssi = lf_rssi(at, self.world.bodies[user_id].pose[:2], self.environment.lf, self._lf_rng)
+            if rssi is None:
+                continue
+            self.lf_counters["heard"] += 1
+            heard = wire.LfHeard(antenna=msg.antenna, pattern=msg.pattern, data=msg.data, rssi_dbm=rssi, t_us=now)
+            self._send_down(user_id, heard)
+
+    def _on_ble_send(self, node_id: str, msg: wire.BleSend) -> None:
+        if msg.to not in self._kinds:
+            self.ble.counters.sent += 1
+            self.ble.counters.out_of_range += 1  # nobody of that name: like a peer out of reach
+            return
+        a, b = self.world.bodies[node_id].pose, self.world.bodies[msg.to].pose
+        self.ble.send(node_id, msg.to, msg.payload, self.now_us(), float(math.hypot(a[0] - b[0], a[1] - b[1])))
 
     def _on_ir_mode(self, node_id: str, msg: wire.SetIrMode) -> None:
         try:
@@ -276,7 +495,7 @@ class RadioHub:
             self.counters.config_errors += 1
             self._send_down(node_id, wire.Error(token=msg.token, reason=f"unknown IR mode {msg.mode!r}"))
             return
-        self._send_down(node_id, self._attached(self.medium.nodes[node_id], msg.token))
+        self._send_down(node_id, self._attached(node_id, msg.token))
 
     def _on_chaos(self, query: zenoh.Query) -> dict[str, Any]:
         """Add, clear or list faults; every change is logged with model and wall time."""
@@ -298,26 +517,32 @@ class RadioHub:
             return {"error": f"{type(err).__name__}: {err}"}
         return {"faults": [f.to_dict() for f in chaos.faults.values()], "log": chaos.log}
 
-    def _attached(self, node: RadioNode, token: int) -> wire.Attached:
+    def _attached(self, node_id: str, token: int) -> wire.Attached:
+        node = self.medium.nodes.get(node_id)
+        pose = self.world.bodies[node_id].pose
         return wire.Attached(
             token=token,
-            ext_addr=node.ext_addr,
-            short_addr=node.short_addr,
-            pan_id=node.pan_id,
-            channel=node.channel,
-            position=list(node.position),
-            heading_deg=math.degrees(self._headings.get(node.node_id, 0.0)),
+            ext_addr=0 if node is None else node.ext_addr,
+            short_addr=0 if node is None else node.short_addr,
+            pan_id=0 if node is None else node.pan_id,
+            channel=11 if node is None else node.channel,
+            position=[float(pose[0]), float(pose[1])],
+            heading_deg=math.degrees(float(pose[2])),
             now_us=self.now_us(),
+            ultrasonic_deg=list(self.world.config.ultrasonic_angles_deg),
         )
 
     def _on_alive(self, node_id: str, instance: str, kind: zenoh.SampleKind) -> None:
         gone = kind == zenoh.SampleKind.DELETE
-        if gone and node_id in self.medium.nodes and self._instances.get(node_id) == instance:
+        if gone and node_id in self._kinds and self._instances.get(node_id) == instance:
             self._detach(node_id)
 
     def _detach(self, node_id: str) -> None:
         self.medium.detach(node_id)
         self.ir.remove(node_id, self.now_us())
+        self.world.remove(node_id)
+        self._kinds.pop(node_id, None)
+        self._telemetry.pop(node_id, None)
         self.counters.detaches += 1
         pub = self._pubs.pop(node_id, None)
         if pub is not None:
@@ -332,7 +557,7 @@ class RadioHub:
         lag = self.counters.lag_us
         for out in outputs:
             if isinstance(out, Reception):
-                lag.append(now - out.end_us)
+                lag.append(now - out.handed_up_us)  # a chaos delay is model time, not hub lag
                 msg: wire.Message = wire.Received(
                     psdu=out.psdu,
                     rssi_dbm=out.rssi_dbm,
@@ -416,6 +641,15 @@ class RadioHub:
                 "sweeps": self.ir.sweeps,
                 "config": self.ir.config.to_dict(),
             },
+            "world_model": {
+                "bodies": len(self.world.bodies),
+                "collisions": self.world.collisions,
+                "collision_log": self.world.collision_log[-100:],
+                "config": self.world.config.to_dict(),
+                "obstacles": [o.to_dict() for o in self.world.obstacles],
+            },
+            "ble": self.ble.counters.to_dict(),
+            "lf": dict(self.lf_counters),
         }
         if self.pcap_path is not None:
             stats["pcap"] = {"path": str(self.pcap_path), "records": self._pcap_records, "error": self._pcap_error}
@@ -441,22 +675,46 @@ def _tx_done(report: TxReport) -> wire.TxDone:
     )
 
 
+def _reference(master: dict[str, Any] | None, slot: list[float] | None) -> list[float] | None:
+    """A slave's formation reference in the world: its slot (master frame) placed by the master's true pose."""
+    if master is None or slot is None:
+        return None
+    c, s = math.cos(master["yaw"]), math.sin(master["yaw"])
+    return [round(master["x"] + c * slot[0] - s * slot[1], 4), round(master["y"] + s * slot[0] + c * slot[1], 4)]
+
+
 def _pos(values: list[float]) -> tuple[float, float]:
     return (float(values[0]), float(values[1]))
 
 
-def load_config(path: str | Path) -> tuple[MediumConfig, IrConfig]:
-    """A hub config file (TOML or JSON): the radio's tables plus an optional ``[ir]`` table."""
+def load_config(path: str | Path) -> Environment:
+    """A hub config file (TOML or JSON): the radio's tables plus optional ``[ir]``, ``[world]``, ``[ble]``,
+    ``[lf]`` tables and ``[[obstacles]]``."""
     path = Path(path)
     text = path.read_text()
     data = tomllib.loads(text) if path.suffix == ".toml" else json.loads(text)
     if not isinstance(data, dict):
         raise ValueError("a hub config file holds tables")
+    return environment_from_dict(data)
+
+
+def environment_from_dict(data: dict[str, Any]) -> Environment:
+    """The tables of a hub config (or a scenario's ``[hub]`` table plus its obstacles)."""
+    data = dict(data)
     ir = IrConfig.from_dict(data.pop("ir", {}))
+    world = WorldConfig.from_dict(data.pop("world", {}))
+    ble = BleConfig.from_dict(data.pop("ble", {}))
+    lf = LfConfig.from_dict(data.pop("lf", {}))
+    obstacles = data.pop("obstacles", [])
+    if not isinstance(obstacles, list):
+        raise ValueError("obstacles is a list of [[obstacles]] tables")
+    parsed = [parse_obstacle(o) for o in obstacles]
     try:
-        return MediumConfig.from_dict(data.get("medium", data)), ir
+        medium = MediumConfig.from_dict(data.get("medium", data))
     except ValueError as err:
-        raise ValueError(f"{err} (and [ir] for the IR module)" if "the top level" in str(err) else str(err)) from None
+        extra = " (and [ir], [world], [ble], [lf], [[obstacles]])"
+        raise ValueError(f"{err}{extra}" if "the top level" in str(err) else str(err)) from None
+    return Environment(medium, ir, world, ble, lf, parsed)
 
 
 def ready_line(hub: RadioHub) -> str:

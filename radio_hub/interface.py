@@ -34,6 +34,7 @@ __all__ = [
     "DEFAULT_ENDPOINT",
     "DEFAULT_WORLD",
     "MAX_PSDU",
+    "BleMessage",
     "Frame",
     "FrameError",
     "FrameType",
@@ -41,7 +42,9 @@ __all__ = [
     "IrConfig",
     "IrSweep",
     "Keys",
+    "LfBurstHeard",
     "MediumConfig",
+    "OwnSensors",
     "RadioClient",
     "RadioError",
     "RadioIdentity",
@@ -74,7 +77,9 @@ class RadioIdentity:
     channel: int = 11
     position: tuple[float, float] = (0.0, 0.0)
     heading_deg: float = 0.0
-    """Until the world model: the robot's fixed heading, which orients its IR receivers."""
+    """Where the body faces when it attaches (the world moves it from then on)."""
+    kind: str = "robot"
+    """``robot`` or ``user`` (a person's wearables: BLE, the belt's LF receiver, an IR beacon; no 802.15.4)."""
 
 
 @dataclass(frozen=True)
@@ -104,6 +109,38 @@ class TxResult:
     def ok(self) -> bool:
         """True when the frame went out (and, for acknowledged unicast, was acknowledged)."""
         return self.status == TxStatus.SUCCESS
+
+
+@dataclass(frozen=True)
+class OwnSensors:
+    """A robot's own body sensors at model time ``t_us``: ultrasonic ranges (m, nan = no echo) at
+    ``angles_rad`` from its heading, AHRS yaw (rad), wheel odometry (vx, vy, omega in its frame)."""
+
+    t_us: int
+    ranges_m: np.ndarray
+    angles_rad: np.ndarray
+    yaw_rad: float
+    odometry: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class BleMessage:
+    """A BLE message from ``src`` (a user's wearable or a robot)."""
+
+    src: str
+    payload: bytes
+    t_us: int
+
+
+@dataclass(frozen=True)
+class LfBurstHeard:
+    """What a belt's LF front end heard: which antenna, the wake-up pattern, the 4 data bytes, RSSI."""
+
+    antenna: str
+    pattern: int
+    data: bytes
+    rssi_dbm: float
+    t_us: int
 
 
 @dataclass(frozen=True)
@@ -156,6 +193,14 @@ class RadioClient:
         self._loop = asyncio.get_running_loop()
         self._rx: asyncio.Queue[RxFrame] = asyncio.Queue()
         self._ir: asyncio.Queue[IrSweep] = asyncio.Queue()
+        self._ble: asyncio.Queue[BleMessage] = asyncio.Queue()
+        self._lf: asyncio.Queue[LfBurstHeard] = asyncio.Queue()
+        self.sensors: OwnSensors | None = None
+        """The latest own-body sensors (robots; the hub sends them at 25 Hz)."""
+        self.beacons: tuple[int, dict[str, np.ndarray]] = (0, {})
+        """The latest beacon sweep: (model time, readings per source), in beacon mode."""
+        self.on_sensors: list[Callable[[OwnSensors], None]] = []
+        self._ultrasonic_rad = np.zeros(0)
         self._pending: dict[int, asyncio.Future[Any]] = {}
         self._pending_types: dict[int, str] = {}
 
@@ -263,6 +308,47 @@ class RadioClient:
         """The next sweep of the 12 phototransistors (arrives only while receiving and something shines)."""
         return await self._ir.get()
 
+    # -- the body and the wearables' links --------------------------------------------------------
+
+    def drive(self, vx: float, vy: float, omega: float) -> None:
+        """Command the motors (robot frame, m/s and rad/s); the motor controller's watchdog stops the
+        robot if no command comes for half a second."""
+        self._put(wire.Drive(vx=float(vx), vy=float(vy), omega=float(omega)))
+
+    def place(self, x: float, y: float, yaw: float, vx: float = 0.0, vy: float = 0.0, omega: float = 0.0) -> None:
+        """A user's pose and motion in the world frame (users walk; the world does not move them)."""
+        self._put(wire.Place(x=float(x), y=float(y), yaw=float(yaw), vx=float(vx), vy=float(vy), omega=float(omega)))
+
+    def lf_burst(self, antenna: str, pattern: int, data: bytes) -> None:
+        """Fire one LF burst from the ``left`` or ``right`` antenna (one-way, not answered)."""
+        self._put(wire.LfBurst(antenna=antenna, pattern=int(pattern), data=bytes(data)))
+
+    def ble_send(self, to: str, payload: bytes) -> None:
+        """A BLE message to another node (not answered; the link may drop it)."""
+        self._put(wire.BleSend(to=to, payload=bytes(payload)))
+
+    def telemetry(
+        self, state: str, role: str = "", master: str = "", slot: tuple[float, float] | None = None, mode: str = ""
+    ) -> None:
+        """Tell the hub what this robot believes (for viewers and metrics only)."""
+        self._put(
+            wire.Telemetry(
+                state=state,
+                role=role,
+                master=master,
+                slot=None if slot is None else [float(slot[0]), float(slot[1])],
+                mode=mode,
+            )
+        )
+
+    async def ble_receive(self) -> BleMessage:
+        """The next BLE message."""
+        return await self._ble.get()
+
+    async def lf_heard(self) -> LfBurstHeard:
+        """The next LF burst the belt's front end heard (users)."""
+        return await self._lf.get()
+
     def __aiter__(self) -> RadioClient:
         return self
 
@@ -333,6 +419,7 @@ class RadioClient:
             position=(attached.position[0], attached.position[1]),
             heading_deg=attached.heading_deg,
         )
+        self._ultrasonic_rad = np.radians(np.asarray(attached.ultrasonic_deg, dtype=float))
 
     def _put(self, msg: wire.Message) -> None:
         msg.n = next(self._up_seq)
@@ -374,6 +461,14 @@ class RadioClient:
             self._on_received(msg)
         elif isinstance(msg, wire.IrSample):
             self._on_ir(msg)
+        elif isinstance(msg, wire.Sensors):
+            self._on_sensors(msg)
+        elif isinstance(msg, wire.BleReceived):
+            self._ble.put_nowait(BleMessage(msg.src, msg.payload, msg.t_us))
+        elif isinstance(msg, wire.LfHeard):
+            self._lf.put_nowait(LfBurstHeard(msg.antenna, msg.pattern, msg.data, msg.rssi_dbm, msg.t_us))
+        elif isinstance(msg, wire.IrBeacons):
+            self._on_beacons(msg)
         elif isinstance(msg, (wire.TxDone, wire.Attached)):
             self._resolve(msg.token, msg)
         elif isinstance(msg, wire.Error):
@@ -399,6 +494,23 @@ class RadioClient:
             self.malformed += 1
             return
         self._ir.put_nowait(IrSweep(np.frombuffer(msg.readings, dtype="<f4").astype(float), msg.t_us))
+
+    def _on_sensors(self, msg: wire.Sensors) -> None:
+        ranges = np.frombuffer(msg.ranges, dtype="<f4").astype(float)
+        if len(ranges) != len(self._ultrasonic_rad):
+            self.malformed += 1
+            return
+        odometry = (float(msg.odometry[0]), float(msg.odometry[1]), float(msg.odometry[2]))
+        self.sensors = OwnSensors(msg.t_us, ranges, self._ultrasonic_rad, float(msg.yaw), odometry)
+        for callback in self.on_sensors:
+            callback(self.sensors)
+
+    def _on_beacons(self, msg: wire.IrBeacons) -> None:
+        block = np.frombuffer(msg.readings, dtype="<f4").astype(float)
+        if block.size != len(msg.sources) * IR_RECEIVERS:
+            self.malformed += 1
+            return
+        self.beacons = (msg.t_us, dict(zip(msg.sources, block.reshape(-1, IR_RECEIVERS), strict=True)))
 
     def _on_hub_alive(self, sample: zenoh.Sample) -> None:
         # zenoh's thread: a hub appeared (again; a restarted hub knows nothing of us) or went away
@@ -431,6 +543,7 @@ class RadioClient:
             heading_deg=float(me.heading_deg),
             instance=self.instance,
             exclusive=exclusive,
+            kind=me.kind,
         )
 
     async def _reattach(self) -> None:

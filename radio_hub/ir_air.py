@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from radio_hub.chaos import Chaos
-from radio_hub.light import IrConfig, IrMode, OverlapCounter, receiver_readings
+from radio_hub.light import IrConfig, IrMode, OverlapCounter, receiver_gains, receiver_readings, sense, strength_at
 
 Pose = tuple[float, float, float]
 """x (m), y (m), heading (rad)."""
@@ -42,12 +42,20 @@ class IrAir:
         """When the next sweep is due (None while nothing transmits)."""
         return self._next_us
 
+    def take_due(self, now_us: int) -> bool:
+        """True (once) when a sweep is due at ``now_us``; the next one is then scheduled."""
+        if self._next_us is None or now_us < self._next_us:
+            return False
+        self._next_us += self.period_us
+        return True
+
     def sweep(self, now_us: int, poses: dict[str, Pose], chaos: Chaos | None = None) -> dict[str, np.ndarray]:
         """Readings (12 ADC counts) of every receiving module with a known pose, if a sweep is due;
         ``chaos`` may blind receivers (every reading at full scale) or add noise to them."""
-        if self._next_us is None or now_us < self._next_us:
-            return {}
-        self._next_us += self.period_us
+        return self.receive_sweep(poses, chaos) if self.take_due(now_us) else {}
+
+    def receive_sweep(self, poses: dict[str, Pose], chaos: Chaos | None = None) -> dict[str, np.ndarray]:
+        """One sweep of every module in receive mode, under every transmitting module's light."""
         modes = self.counter.modes
         sources = [poses[n] for n in self.counter.transmitters if n in poses]
         receivers = [n for n, mode in modes.items() if mode is IrMode.RECEIVE and n in poses]
@@ -60,6 +68,34 @@ class IrAir:
         # quantisation is part of the model's noise floor, so readings travel unrounded
         return dict(zip(receivers, readings.astype(np.float32), strict=True))
 
+    def beacon_sweep(
+        self, poses: dict[str, Pose], chaos: Chaos | None = None
+    ) -> dict[str, tuple[list[str], np.ndarray]]:
+        """For every module in beacon mode: the beacons it sees (sources in range) and one demodulated
+        sweep per source, shape (sources, 12)."""
+        names = [n for n, mode in self.counter.modes.items() if mode is IrMode.BEACON and n in poses]
+        if len(names) < 2:
+            return {}
+        at = np.array([poses[n] for n in names], dtype=float)
+        dx = at[None, :, 0] - at[:, None, 0]
+        dy = at[None, :, 1] - at[:, None, 1]
+        distance = np.hypot(dx, dy)
+        np.fill_diagonal(distance, np.inf)  # a module does not see its own beacon
+        strength = np.where(
+            np.isfinite(distance), strength_at(np.where(np.isfinite(distance), distance, 0), self.config), 0
+        )
+        light = strength[..., None] * receiver_gains(np.arctan2(dy, dx) - at[:, None, 2])
+        seen = strength > 0
+        out: dict[str, tuple[list[str], np.ndarray]] = {}
+        for row, node in enumerate(names):
+            if not seen[row].any():
+                continue
+            readings = sense(light[row, seen[row]], self.config, self.rng)
+            if chaos is not None and chaos.faults:
+                readings = self._disturb(readings, [node] * len(readings), chaos)
+            out[node] = ([n for n, s in zip(names, seen[row], strict=True) if s], readings.astype(np.float32))
+        return out
+
     def _disturb(self, readings: np.ndarray, receivers: list[str], chaos: Chaos) -> np.ndarray:
         for row, node in enumerate(receivers):
             for fault in chaos.ir_faults(node):
@@ -71,7 +107,8 @@ class IrAir:
         return readings
 
     def _schedule(self, now_us: int) -> None:
-        if not self.counter.transmitters:
+        beacons = sum(mode is IrMode.BEACON for mode in self.counter.modes.values())
+        if not self.counter.transmitters and beacons < 2:
             self._next_us = None
         elif self._next_us is None:
             self._next_us = now_us + self.period_us

@@ -72,6 +72,16 @@ class Keys:
         return f"{self.prefix}/hub/chaos"
 
     @property
+    def world_state(self) -> str:
+        """The hub's ground truth, published about 10 times a second for viewers (msgpack)."""
+        return f"{self.prefix}/hub/world"
+
+    @property
+    def world_query(self) -> str:
+        """The hub's ground truth now (queryable)."""
+        return f"{self.prefix}/hub/world/now"
+
+    @property
     def air(self) -> str:
         """The hub's recent frame log (queryable)."""
         return f"{self.prefix}/hub/air"

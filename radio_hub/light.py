@@ -180,6 +180,9 @@ class IrMode(StrEnum):
     IDLE = "idle"
     RECEIVE = "receive"
     TRANSMIT = "transmit"
+    BEACON = "beacon"
+    """Surround formation: the module emits its own coded beacon (each robot's LEDs modulated at their
+    own frequency) and demodulates every other beacon separately, so all can shine at once."""
 
 
 def overlapping(transmitting: ArrayLike) -> np.ndarray:

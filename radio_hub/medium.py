@@ -119,7 +119,8 @@ class Counters:
 
 @dataclass(frozen=True, slots=True)
 class Reception:
-    """A frame handed up by a receiver's MAC at ``end_us``."""
+    """A frame handed up by a receiver's MAC at ``handed_up_us``: when it left the air (``end_us``), or later
+    under a chaos delay fault."""
 
     node_id: str
     sender: str
@@ -130,7 +131,9 @@ class Reception:
     start_us: int
     end_us: int
     submitted_us: int
-    """When the sender's MAC got the request: end_us - submitted_us is the modelled latency."""
+    """When the sender's MAC got the request: end_us - submitted_us is the modelled latency on the air."""
+    handed_up_us: int
+    """When the receiver's stack hands the frame up: ``end_us`` plus any injected delay."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -463,7 +466,10 @@ class Medium:
             return True
         if not self.chaos.faults:
             return False
-        # injected faults: a fade (loss) or a bad FCS the receiving MAC drops (corrupt)
+        # injected faults: a burst, a fade (loss) or a bad FCS the receiving MAC drops (corrupt)
+        if self.chaos.burst_lost(tx.sender, node.node_id, node.pan_id, tx.channel, rng):
+            self._count(node.node_id, "chaos_lost")
+            return True
         for kind in ("loss", "corrupt"):
             for p in self.chaos.probabilities(kind, tx.sender, node.node_id, node.pan_id, tx.channel):
                 if rng.random() < p:
@@ -476,12 +482,13 @@ class Medium:
         rssi = mean_rssi_dbm(pl, distance(tx.position, node.position))
         if pl.shadowing_sigma_db > 0:
             rssi += float(self.rng.normal(0.0, pl.shadowing_sigma_db))
-        copies = 1
+        copies, delay_us = 1, 0
         if self.chaos.faults:
             for p in self.chaos.probabilities("duplicate", tx.sender, node.node_id, node.pan_id, tx.channel):
                 if self.rng.random() < p:
                     copies = 2
                     self._count(node.node_id, "duplicated")
+            delay_us = self.chaos.delay_us(tx.sender, node.node_id, node.pan_id, tx.channel, self.rng)
         reception = Reception(
             node.node_id,
             tx.sender,
@@ -492,8 +499,18 @@ class Medium:
             tx.start_us,
             tx.end_us,
             tx.submitted_us,
+            tx.end_us + delay_us,
         )
-        self._out.extend([reception] * copies)
+        if delay_us:
+            # the outcome and the ACK stay the air's; only the receiver's stack hands the frame up later
+            self._at(reception.handed_up_us, self._hand_up, node, reception, copies)
+        else:
+            self._out.extend([reception] * copies)
+
+    def _hand_up(self, node: RadioNode, reception: Reception, copies: int) -> None:
+        # a node that left (or re-attached as a new radio) meanwhile does not get its old frames
+        if self.nodes.get(node.node_id) is node:
+            self._out.extend([reception] * copies)
 
     # -- acknowledgements ------------------------------------------------------------------------
 

@@ -57,6 +57,9 @@ class Attach(Message):
     """The node's liveliness instance: only that token's disappearance detaches this attachment."""
     exclusive: bool = False
     """Refuse (instead of replacing) when a live node already has this id: how ``--id auto`` claims one."""
+    kind: str = "robot"
+    """``robot`` (a body with an 802.15.4 radio, IR module and own sensors) or ``user`` (a person: a body,
+    BLE wearables, an LF receiver on the belt and an IR beacon; no 802.15.4 radio)."""
 
 
 @dataclass
@@ -101,6 +104,8 @@ class Attached(Message):
     position: list[float] = field(default_factory=lambda: [0.0, 0.0])
     heading_deg: float = 0.0
     now_us: int = 0
+    ultrasonic_deg: list[float] = field(default_factory=list)
+    """Where the robot's ultrasonic sensors look (degrees from its heading), in ``Sensors.ranges`` order."""
 
 
 @dataclass
@@ -157,9 +162,131 @@ class IrSample(Message):
     t_us: int = 0
 
 
+@dataclass
+class IrBeacons(Message):
+    """Hub -> node in beacon mode: one sweep per coded beacon in sight, ``sources[i]`` lit ``readings[i]``
+    (len(sources) x 12 little-endian float32 counts)."""
+
+    TYPE: ClassVar[str] = "ir_beacons"
+    sources: list[str] = field(default_factory=list)
+    readings: bytes = b""
+    t_us: int = 0
+
+
+@dataclass
+class Drive(Message):
+    """Robot -> hub: the motor command, in the robot's own frame (m/s, m/s, rad/s); not answered."""
+
+    TYPE: ClassVar[str] = "drive"
+    vx: float = 0.0
+    vy: float = 0.0
+    omega: float = 0.0
+
+
+@dataclass
+class Place(Message):
+    """User -> hub: where the person is now and how they move (world frame); not answered."""
+
+    TYPE: ClassVar[str] = "place"
+    x: float = 0.0
+    y: float = 0.0
+    yaw: float = 0.0
+    vx: float = 0.0
+    vy: float = 0.0
+    omega: float = 0.0
+
+
+@dataclass
+class Sensors(Message):
+    """Hub -> robot: its own body's sensors: ultrasonic ranges (float32, NaN = no echo; sensor angles
+    in ``Attached.ultrasonic_deg``), AHRS yaw (rad) and wheel odometry (vx, vy, omega in its frame)."""
+
+    TYPE: ClassVar[str] = "sensors"
+    t_us: int = 0
+    ranges: bytes = b""
+    yaw: float = 0.0
+    odometry: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+
+
+@dataclass
+class LfBurst(Message):
+    """Robot -> hub: fire one LF burst from the ``left`` or ``right`` antenna with a wake-up pattern and
+    up to 4 bytes of user data; not answered (LF is one-way)."""
+
+    TYPE: ClassVar[str] = "lf_burst"
+    antenna: str = "left"
+    pattern: int = 0
+    data: bytes = b""
+
+
+@dataclass
+class LfHeard(Message):
+    """Hub -> user: the belt's LF front end heard a burst (the belt decides whether its pattern wakes it)."""
+
+    TYPE: ClassVar[str] = "lf_heard"
+    antenna: str = "left"
+    pattern: int = 0
+    data: bytes = b""
+    rssi_dbm: float = 0.0
+    t_us: int = 0
+
+
+@dataclass
+class BleSend(Message):
+    """Node -> hub: a BLE message to another node (robot <-> user wearables); not answered."""
+
+    TYPE: ClassVar[str] = "ble_send"
+    to: str = ""
+    payload: bytes = b""
+
+
+@dataclass
+class BleReceived(Message):
+    """Hub -> node: a BLE message from ``src``, after the link's latency."""
+
+    TYPE: ClassVar[str] = "ble_received"
+    src: str = ""
+    payload: bytes = b""
+    t_us: int = 0
+
+
+@dataclass
+class Telemetry(Message):
+    """Robot -> hub: what the robot believes about its role, for viewers and run metrics (never for
+    other robots: they learn only through the air). ``slot`` is its formation reference in the
+    master's frame; not answered."""
+
+    TYPE: ClassVar[str] = "telemetry"
+    state: str = ""
+    role: str = ""
+    master: str = ""
+    slot: list[float] | None = None
+    mode: str = ""
+
+
 _TYPES: dict[str, type[Message]] = {
     cls.TYPE: cls
-    for cls in (Attach, Configure, Transmit, Detach, SetIrMode, Attached, Received, TxDone, Error, IrSample)
+    for cls in (
+        Attach,
+        Configure,
+        Transmit,
+        Detach,
+        SetIrMode,
+        Attached,
+        Received,
+        TxDone,
+        Error,
+        IrSample,
+        IrBeacons,
+        Drive,
+        Place,
+        Sensors,
+        LfBurst,
+        LfHeard,
+        BleSend,
+        BleReceived,
+        Telemetry,
+    )
 }
 
 
@@ -193,6 +320,10 @@ _SCALARS: dict[str, tuple[type, ...]] = {
 }
 
 
+_LIST_LENGTHS = {"position": (2,), "slot": (2,), "odometry": (3,)}
+"""Lengths of the fixed-size number lists; any other number list holds at most 64 values."""
+
+
 def _check_types(msg: Message) -> None:
     for f in fields(msg):
         value: Any = getattr(msg, f.name)
@@ -200,10 +331,12 @@ def _check_types(msg: Message) -> None:
         if value is None and "None" in annotation:
             continue
         base = annotation.split(" |")[0]
-        if base.startswith("list"):
+        if base == "list[str]":
+            ok = isinstance(value, list) and all(isinstance(v, str) for v in value)
+        elif base.startswith("list"):
             ok = (
                 isinstance(value, list)
-                and len(value) == 2
+                and len(value) in _LIST_LENGTHS.get(f.name, range(65))
                 and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
             )
         else:

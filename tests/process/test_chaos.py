@@ -7,7 +7,13 @@ import subprocess
 import sys
 import time
 
+import msgpack
 import pytest
+
+from radio_hub.interface import query_hub
+
+from . import test_relative_location as rl
+from .conftest import LOSSLESS
 
 pytestmark = pytest.mark.process
 
@@ -141,3 +147,130 @@ def test_the_hub_restarts_and_the_robots_reattach_and_carry_on_or_reorganize(mak
     views = {rid: (air.cmd(rid, "status")["state"], air.node(rid)["pan_id"]) for rid in (1, 2, 3, 4)}
     assert sorted(again["members"]) == [2, 3, 4], (again, views)
     assert air.stats()["hub"]["transport_gaps"] == 0
+
+
+def test_corruption_fails_unicast_and_the_receiver_counts_it(make_air):
+    air = make_air()
+    air.robot(1, (0.0, 0.0))
+    air.robot(2, (1.0, 0.0))
+    assert _chaos(air, "corrupt", "--link", "robot-1,robot-2").returncode == 0
+    answer = air.cmd(1, "ping", dst=2, wait=0.2)
+    assert answer["tx"]["status"] == "no_ack" and _senders(answer) == set()
+    node = air.node(2)
+    assert node["corrupted"] == 4 and node["chaos_lost"] == 0  # the first try and 3 MAC retries, all bad FCS
+    assert node["heard"] == node["delivered"] + node["collided"] + node["lost"] + node["filtered"]
+    assert _chaos(air, "clear").returncode == 0
+    assert _senders(air.cmd(1, "ping", dst=2, wait=0.2)) == {2}
+
+
+def test_duplication_hands_robot_2_each_frame_twice(make_air):
+    air = make_air()
+    air.robot(1, (0.0, 0.0))
+    air.robot(2, (1.0, 0.0))
+    assert _chaos(air, "duplicate", "--link", "robot-1,robot-2").returncode == 0
+    air.cmd(1, "ping", wait=0.2)
+    pings = [f for f in air.cmd(2, "received")["frames"] if f["type"] == "ping" and f["src"] == 1]
+    assert len(pings) == 2 and pings[0] == pings[1]  # the same frame off the air, handed up twice
+    assert air.node(2)["duplicated"] == 1 and air.node(2)["delivered"] == 1
+
+
+def _best_rtt_ms(air, rounds: int = 2) -> float:
+    answers = [air.cmd(1, "ping", dst=2, wait=0.25) for _ in range(rounds)]
+    assert all(a["tx"]["status"] == "success" for a in answers)  # the ACK keeps the air's timing
+    return min(r["rtt_ms"] for a in answers for r in a["replies"])
+
+
+def test_delay_lengthens_the_round_trip_by_the_delay_on_its_path(make_air):
+    air = make_air()
+    air.robot(1, (0.0, 0.0))
+    air.robot(2, (1.0, 0.0))
+    base = _best_rtt_ms(air)
+    assert _chaos(air, "delay", "--ms", "60", "--link", "robot-1,robot-2").returncode == 0
+    one_way = _best_rtt_ms(air) - base
+    assert _chaos(air, "clear").returncode == 0
+    assert _chaos(air, "delay", "--ms", "60", "--node", "robot-2").returncode == 0  # both ways
+    both_ways = _best_rtt_ms(air) - base
+    assert 55 <= one_way <= 60 + 25, one_way
+    assert 115 <= both_ways <= 120 + 25, both_ways
+    assert air.stats()["hub"]["lag_p50_us"] < 5_000  # the delay is model time, not the hub being late
+    refused = query_hub(air.session, air.keys.chaos, payload=msgpack.packb({"op": "add", "fault": {"kind": "delay"}}))
+    assert "needs ms" in refused["error"]  # the hub refuses a malformed fault on its own too
+
+
+def _runs_of(outcomes: list[str]) -> list[int]:
+    runs, length = [], 0
+    for outcome in [*outcomes, "delivered"]:
+        if outcome == "lost":
+            length += 1
+        elif length:
+            runs.append(length)
+            length = 0
+    return runs
+
+
+def test_burst_losses_come_in_runs(make_air):
+    air = make_air()
+    air.robot(1, (0.0, 0.0), 0x1000, 11, "--ping-interval", "0.01")
+    air.robot(2, (1.0, 0.0))
+    assert _chaos(air, "burst", "--link", "robot-1,robot-2", "--p-gb", "0.1", "--p-bg", "0.2").returncode == 0
+    added = query_hub(air.session, air.keys.chaos)["log"][-1]  # logged with the model time it began
+    assert added["kind"] == "burst" and added["p_bg"] == 0.2
+    time.sleep(2.5)
+    outcomes = [
+        tx["outcomes"]["robot-2"]
+        for tx in air.air_log()
+        if tx["sender"] == "robot-1" and tx["type"] == "data" and tx["start_us"] >= added["model_us"]
+    ]
+    judged = [o for o in outcomes if o in ("delivered", "lost")]
+    runs = _runs_of(judged)
+    rate = judged.count("lost") / len(judged)
+    assert len(judged) >= 100 and 0.15 <= rate <= 0.55, (len(judged), rate)  # stationary share 0.1 / 0.3
+    # independent loss at this rate has mean runs of 1 / (1 - rate), about 1.5; these bursts average 1 / 0.2
+    assert sum(runs) / len(runs) >= 2.5 and max(runs) >= 5, runs
+    assert air.node(2)["chaos_lost"] >= judged.count("lost")
+
+
+def _fix_errors(status: dict) -> list[tuple[float, float]]:
+    """(distance error in m, bearing error in degrees) of each of a robot's neighbour fixes."""
+    me = status["robot_id"]
+    errors = []
+    for neighbour in status["swarm"]["neighbours"]:
+        fix = status["relative_location"][str(neighbour)]
+        bearing, distance = rl._truth(me, neighbour)
+        errors.append((abs(fix["distance_m"] - distance), rl._angle_gap(fix["bearing_deg"], bearing)))
+    return errors
+
+
+def _after_rounds(air, rounds: int) -> dict[int, dict]:
+    """Statuses once every robot has held the token ``rounds`` more times: every fix is that fresh."""
+    held = {rid: air.cmd(rid, "status")["ir"]["rounds_held"] for rid in rl.POSES}
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline:
+        statuses = {rid: air.cmd(rid, "status") for rid in rl.POSES}
+        if all(s["ir"]["rounds_held"] >= held[rid] + rounds for rid, s in statuses.items()):
+            return statuses
+        time.sleep(0.1)
+    raise AssertionError({rid: s["ir"] for rid, s in statuses.items()})
+
+
+def _good(errors: list[tuple[float, float]]) -> bool:
+    return all(d <= 0.01 and b <= 1.0 for d, b in errors)  # noise-free IR: within 1 cm and 1 degree
+
+
+def test_ir_blinding_and_noise_spoil_the_fixes_until_cleared(make_air):
+    air = make_air({**LOSSLESS, "ir": rl.NOISE_FREE_IR})
+    rl._swarm_of_four(air)
+    assert all(_good(_fix_errors(s)) for s in rl._wait_for_rounds(air, 2).values())
+    assert _chaos(air, "ir-blind", "--node", "robot-2").returncode == 0
+    statuses = _after_rounds(air, 2)
+    # saturated on every receiver, robot 2 reads each neighbour as if it touched it, bearing unknown
+    assert all(d > 0.5 for d, _ in _fix_errors(statuses[2])), _fix_errors(statuses[2])
+    assert all(_good(_fix_errors(statuses[rid])) for rid in (1, 3, 4))
+    assert _chaos(air, "clear").returncode == 0
+    statuses = _after_rounds(air, 2)
+    assert _good(_fix_errors(statuses[2]))  # recovered
+    assert _chaos(air, "ir-noise", "--node", "robot-3", "--sigma", "150").returncode == 0
+    statuses = _after_rounds(air, 2)
+    assert max(max(d * 100, b) for d, b in _fix_errors(statuses[3])) > 10  # off by over 10 cm or 10 degrees
+    assert all(_good(_fix_errors(statuses[rid])) for rid in (1, 2, 4))
+    assert air.stats()["ir"]["overlap_episodes"] == 0

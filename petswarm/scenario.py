@@ -1,0 +1,237 @@
+"""Scenario files: the world, the user's walk and watch requests, the robots, and a fault timeline.
+
+A scenario is one TOML file (``scenarios/*.toml`` ship with the project)::
+
+    name = "following-turn"
+    duration_s = 30          # the run ends then (after the last watch request at the latest)
+    [hub]                    # optional hub tables: [hub.world], [hub.ble], [hub.lf], [hub.ir], [hub.medium]
+    [[obstacles]]            # kind = circle (x, y, r) | wall (x0, y0, x1, y1) | rect (x0, y0, x1, y1)
+    [user]
+    owner = 1                # the robot whose wake-up pattern the belt holds
+    start = [0, 0, 90]       # x, y (m), heading (degrees)
+    walk_at = 6              # when the path starts (s after the user process starts)
+    path = [ {walk = 5, speed = 1.0}, {turn = -90, rate = 60}, {stop = 2} ]
+    watch = [ {at = 1, request = "follow"}, {at = 3, request = "organize", robots = 3} ]
+    [robots]
+    count = 4
+    positions = [[0, -1, 90], [0, -1.6, 90]]   # x, y, heading (deg) per robot id 1, 2, ...
+    [[faults]]               # as in experiment files: at = s, then a fault or an action
+
+Pure: parsing and the user's path as a function of time; every error names what is wrong.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+REQUESTS = ("follow", "lead", "remote", "cancel", "organize", "disperse", "mode", "return", "gesture")
+"""Watch requests: select a main operation, cancel it, organize/disperse a swarm, change driving mode,
+return from an obstacle exception, or perform a gesture."""
+
+
+class ScenarioError(ValueError):
+    """A scenario file that cannot be run, and why."""
+
+
+@dataclass(frozen=True)
+class Leg:
+    """One piece of the user's path: walk ``distance`` at ``speed``, turn ``angle`` at ``rate``, or stop."""
+
+    kind: str
+    duration_s: float
+    speed: float = 0.0
+    """m/s while walking."""
+    rate: float = 0.0
+    """rad/s while turning (signed: positive counter-clockwise)."""
+
+
+@dataclass(frozen=True)
+class WatchRequest:
+    """A request the user makes on the watch at ``at`` seconds."""
+
+    at: float
+    request: str
+    args: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class UserPlan:
+    """The user's start, path and watch requests."""
+
+    node_id: str = "user"
+    owner: int = 1
+    start: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """x, y (m), heading (rad)."""
+    walk_at: float = 0.0
+    legs: list[Leg] = field(default_factory=list)
+    watch: list[WatchRequest] = field(default_factory=list)
+
+    def pose_at(self, t: float) -> tuple[float, float, float, float, float, float]:
+        """x, y, yaw and world velocity (vx, vy, omega) at ``t`` seconds after the user process started."""
+        x, y, yaw = self.start
+        elapsed = t - self.walk_at
+        for leg in self.legs:
+            if elapsed <= 0:
+                break
+            dt = min(elapsed, leg.duration_s)
+            moving = dt < leg.duration_s
+            if leg.kind == "walk":
+                x, y = x + math.cos(yaw) * leg.speed * dt, y + math.sin(yaw) * leg.speed * dt
+                if moving:
+                    return x, y, yaw, math.cos(yaw) * leg.speed, math.sin(yaw) * leg.speed, 0.0
+            elif leg.kind == "turn":
+                yaw += leg.rate * dt
+                if moving:
+                    return x, y, _wrap(yaw), 0.0, 0.0, leg.rate
+            elapsed -= leg.duration_s
+        return x, y, _wrap(yaw), 0.0, 0.0, 0.0
+
+    @property
+    def path_end_s(self) -> float:
+        """When the last leg ends."""
+        return self.walk_at + sum(leg.duration_s for leg in self.legs)
+
+    def turn_starts(self) -> list[float]:
+        """When each turn leg begins (s after the user process started): reaction times count from them."""
+        starts, t = [], self.walk_at
+        for leg in self.legs:
+            if leg.kind == "turn":
+                starts.append(t)
+            t += leg.duration_s
+        return starts
+
+
+@dataclass
+class Scenario:
+    """A whole scenario file."""
+
+    name: str
+    path: Path | None
+    duration_s: float
+    hub: dict[str, Any]
+    obstacles: list[dict[str, Any]]
+    user: UserPlan | None
+    robot_count: int
+    robot_poses: list[tuple[float, float, float]]
+    """x, y, heading (deg) for robots 1..robot_count."""
+    formation: str = "surround-free"
+    faults: list[dict[str, Any]] = field(default_factory=list)
+    surround: dict[str, Any] = field(default_factory=dict)
+    raw: dict[str, Any] = field(default_factory=dict)
+
+    def hub_tables(self) -> dict[str, Any]:
+        """The hub's config tables with the obstacles, as ``radio_hub.hub.environment_from_dict`` takes them."""
+        return {**self.hub, "obstacles": self.obstacles}
+
+
+def load(path: str | Path) -> Scenario:
+    """Read and check a scenario file; ScenarioError names the first problem."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise ScenarioError(f"no scenario file {path}") from None
+    except tomllib.TOMLDecodeError as err:
+        raise ScenarioError(f"{path}: not TOML: {err}") from None
+    try:
+        return parse(data, path)
+    except (TypeError, KeyError, ValueError) as err:
+        raise ScenarioError(f"{path}: {err}") from None
+
+
+def parse(data: dict[str, Any], path: Path | None = None) -> Scenario:
+    """A scenario from its tables."""
+    known = {"name", "description", "duration_s", "seed", "hub", "obstacles", "user", "robots", "faults", "surround"}
+    unknown = sorted(set(data) - known)
+    if unknown:
+        raise ValueError(f"unknown top-level keys {unknown}; known: {sorted(known)}")
+    duration = _positive(data.get("duration_s", 30.0), "duration_s")
+    robots = data.get("robots", {})
+    count = int(robots.get("count", 0))
+    if not 0 <= count <= 64:
+        raise ValueError(f"robots.count must be 0-64, got {count}")
+    poses = [_pose(p, f"robots.positions[{i}]") for i, p in enumerate(robots.get("positions", []))]
+    if len(poses) < count:
+        poses += [(1.5 * (i % 5), -1.5 * (i // 5) - 2.0, 90.0) for i in range(len(poses), count)]
+    user = _user(data["user"]) if "user" in data else None
+    return Scenario(
+        name=str(data.get("name", path.stem if path else "scenario")),
+        path=path,
+        duration_s=duration,
+        hub=dict(data.get("hub", {})),
+        obstacles=list(data.get("obstacles", [])),
+        user=user,
+        robot_count=count,
+        robot_poses=poses[:count],
+        formation=str(robots.get("formation", "column")),
+        faults=list(data.get("faults", [])),
+        surround=dict(data.get("surround", {})),
+        raw=data,
+    )
+
+
+def _user(table: dict[str, Any]) -> UserPlan:
+    start = _pose(table.get("start", [0.0, 0.0, 0.0]), "user.start")
+    plan = UserPlan(
+        node_id=str(table.get("id", "user")),
+        owner=int(table.get("owner", 1)),
+        start=(start[0], start[1], math.radians(start[2])),
+        walk_at=float(table.get("walk_at", 0.0)),
+        legs=[_leg(leg, i) for i, leg in enumerate(table.get("path", []))],
+        watch=sorted((_request(r, i) for i, r in enumerate(table.get("watch", []))), key=lambda r: r.at),
+    )
+    if plan.walk_at < 0:
+        raise ValueError("user.walk_at must be >= 0")
+    return plan
+
+
+def _leg(spec: dict[str, Any], i: int) -> Leg:
+    where = f"user.path[{i}]"
+    if "walk" in spec:
+        speed = _positive(spec.get("speed", 1.0), f"{where}.speed")
+        if speed > 3.0:
+            raise ValueError(f"{where}.speed {speed} m/s is faster than a person runs here (max 3)")
+        return Leg("walk", _positive(spec["walk"], f"{where}.walk") / speed, speed=speed)
+    if "turn" in spec:
+        angle = math.radians(float(spec["turn"]))
+        rate = math.radians(_positive(spec.get("rate", 60.0), f"{where}.rate"))
+        return Leg("turn", abs(angle) / rate, rate=math.copysign(rate, angle))
+    if "stop" in spec:
+        return Leg("stop", _positive(spec["stop"], f"{where}.stop"))
+    raise ValueError(f"{where} must have walk (m), turn (deg) or stop (s), got {sorted(spec)}")
+
+
+def _request(spec: dict[str, Any], i: int) -> WatchRequest:
+    where = f"user.watch[{i}]"
+    spec = dict(spec)
+    at = float(spec.pop("at", math.nan))
+    if not at >= 0:
+        raise ValueError(f"{where} needs at = seconds (>= 0)")
+    request = spec.pop("request", "gesture" if "gesture" in spec else None)
+    if request not in REQUESTS:
+        raise ValueError(f"{where}.request must be one of {REQUESTS}, not {request!r}")
+    return WatchRequest(at, request, spec)
+
+
+def _pose(values: Any, where: str) -> tuple[float, float, float]:
+    if not isinstance(values, list) or len(values) not in (2, 3):
+        raise ValueError(f"{where} is [x, y] or [x, y, heading_deg]")
+    x, y, heading = (*(float(v) for v in values), 0.0)[:3]
+    if not all(math.isfinite(v) for v in (x, y, heading)):
+        raise ValueError(f"{where} must be finite numbers")
+    return x, y, heading
+
+
+def _positive(value: Any, where: str) -> float:
+    number = float(value)
+    if not number > 0 or not math.isfinite(number):
+        raise ValueError(f"{where} must be a positive number, got {value!r}")
+    return number
+
+
+def _wrap(angle: float) -> float:
+    return (angle + math.pi) % (2 * math.pi) - math.pi

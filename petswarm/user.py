@@ -1,0 +1,190 @@
+"""The user process: a person walking a scripted path, wearing a smart belt and a smart watch.
+
+- The person: every world tick the process tells the hub where the person is (``place``); the hub
+  records it as ground truth. The walk follows the scenario's legs (walk, turn, stop).
+- The belt: its LF front end hears bursts (from the hub's LF field); a burst with the pattern in its
+  register wakes it. A wake-up burst within 1 m makes it answer the robot over BLE (``owner``); tracking
+  bursts (left, then right antenna) become a pair of distances, reported over BLE (``lf``). Its IMU,
+  emulated from the walk, feeds the activity recognizer; the activity goes to the owner every gyro
+  sample (70 ms).
+- The watch: the scenario's requests, sent over BLE to the owner at their times.
+
+Everything is recorded as structured events (``EventLog``), flushed per event.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import sys
+from dataclasses import dataclass
+
+import numpy as np
+
+from petswarm import user_link
+from petswarm.activity import ActivityRecognizer
+from petswarm.imu import ACCEL_PERIOD_S, GYRO_PERIOD_S, BeltImu
+from petswarm.lf_location import rssi_to_distance
+from petswarm.scenario import UserPlan
+from petswarm.sequence import EventLog
+from radio_hub.interface import HubUnavailable, LfBurstHeard, RadioClient, RadioError, RadioIdentity
+from radio_hub.lf import LfConfig, wake_pattern, wakes
+
+PLACE_PERIOD_S = 0.02
+"""The person's pose goes to the hub at the world's tick rate."""
+
+
+@dataclass
+class UserConfig:
+    """One user process."""
+
+    plan: UserPlan
+    endpoint: str
+    world: str
+    duration_s: float
+    seed: int = 0
+
+
+class User:
+    """The person, the belt and the watch."""
+
+    def __init__(self, config: UserConfig, client: RadioClient, log: EventLog) -> None:
+        self.config = config
+        self.plan = config.plan
+        self.client = client
+        self.log = log
+        self.owner = str(self.plan.owner)
+        self.register = wake_pattern(self.plan.owner)
+        self.lf_config = LfConfig()
+        """The belt's calibration: the module's datasheet curve, whatever the hub's noise settings."""
+        rng = np.random.default_rng([config.seed, 7])
+        self.imu = BeltImu(rng)
+        self.recognizer = ActivityRecognizer()
+        self.owned = False
+        self.counters = {"bursts": 0, "ignored": 0, "lf_reports": 0, "activity": 0, "requests": 0, "bad_ble": 0}
+        self._pairs: dict[int, dict[str, float]] = {}
+        self._t0 = 0.0
+        self._rotation_reported: float | None = None
+
+    def now(self) -> float:
+        """Seconds since the user process started its scenario."""
+        return asyncio.get_running_loop().time() - self._t0
+
+    async def run(self) -> None:
+        """Walk, listen and request until the scenario's duration is over."""
+        self._t0 = asyncio.get_running_loop().time()
+        self.log.record("user_start", owner=self.owner, turns_at=self.plan.turn_starts())
+        tasks = [
+            asyncio.create_task(self._walk()),
+            asyncio.create_task(self._belt_lf()),
+            asyncio.create_task(self._belt_ble()),
+            asyncio.create_task(self._watch()),
+        ]
+        try:
+            await asyncio.sleep(self.config.duration_s)
+        finally:
+            for task in tasks:
+                task.cancel()
+            await asyncio.gather(*tasks, return_exceptions=True)
+            self.log.record("user_end", **self.counters)
+
+    async def _walk(self) -> None:
+        next_accel = next_gyro = 0.0
+        while True:
+            t = self.now()
+            x, y, yaw, vx, vy, omega = self.plan.pose_at(t)
+            self.client.place(x, y, yaw, vx, vy, omega)
+            speed = math.hypot(vx, vy)
+            while next_accel <= t:
+                self.recognizer.add_accel(next_accel, self.imu.accel_z(next_accel, speed))
+                next_accel += ACCEL_PERIOD_S
+            while next_gyro <= t:
+                self.recognizer.add_gyro(next_gyro, self.imu.gyro_z(next_gyro, omega))
+                next_gyro += GYRO_PERIOD_S
+                self._report_activity(next_gyro)
+            await asyncio.sleep(PLACE_PERIOD_S)
+
+    def _report_activity(self, t: float) -> None:
+        activity = self.recognizer.activity(t)
+        started = self.recognizer.rotation_started_at
+        if activity.rotating and started is not None and started != self._rotation_reported:
+            self._rotation_reported = started
+            self.log.record("rotation_detected", at=round(started, 3), user_t=round(t, 3))
+        if self.owned:
+            self.counters["activity"] += 1
+            self.client.ble_send(self.owner, user_link.encode("activity", t=round(t, 3), **activity.to_dict()))
+
+    async def _belt_lf(self) -> None:
+        while True:
+            self._on_burst(await self.client.lf_heard())
+
+    def _on_burst(self, burst: LfBurstHeard) -> None:
+        self.counters["bursts"] += 1
+        if not wakes(self.register, burst.pattern):
+            self.counters["ignored"] += 1  # another robot's pattern: the wake-up receiver stays asleep
+            return
+        try:
+            robot_id, seq, purpose = user_link.parse_lf_data(burst.data)
+        except ValueError:
+            self.counters["ignored"] += 1
+            return
+        distance = rssi_to_distance(burst.rssi_dbm, self.lf_config)
+        if purpose == user_link.LF_WAKE:
+            if distance <= self.lf_config.wake_range_m:
+                self.client.ble_send(str(robot_id), user_link.encode("owner", d=round(distance, 3)))
+                self.log.record("owner_reply", robot=robot_id, d=round(distance, 3))
+            return
+        pair = self._pairs.setdefault(seq, {})
+        pair[burst.antenna] = distance
+        if len(pair) == 2:
+            del self._pairs[seq]
+            self.counters["lf_reports"] += 1
+            self.client.ble_send(str(robot_id), user_link.encode("lf", seq=seq, dl=pair["left"], dr=pair["right"]))
+        for old in [s for s in self._pairs if (seq - s) % 256 > 4]:
+            del self._pairs[old]  # a pair whose other burst never came
+
+    async def _belt_ble(self) -> None:
+        while True:
+            message = await self.client.ble_receive()
+            try:
+                body = user_link.decode(message.payload)
+            except ValueError:
+                self.counters["bad_ble"] += 1
+                continue
+            if body["k"] == "state" and message.src == self.owner:
+                self.owned = body.get("state") not in ("waiting", None)
+            self.log.record(f"ble_{body['k']}", src=message.src, **{k: v for k, v in body.items() if k != "k"})
+
+    async def _watch(self) -> None:
+        for request in self.plan.watch:
+            await asyncio.sleep(max(0.0, request.at - self.now()))
+            self.counters["requests"] += 1
+            self.client.ble_send(self.owner, user_link.encode("request", request=request.request, **request.args))
+            self.log.record("request", request=request.request, **request.args)
+
+
+async def run_user(config: UserConfig, log: EventLog, attach_timeout: float = 15.0) -> int:
+    """The user process's main coroutine; returns the exit code."""
+    plan = config.plan
+    x, y, yaw = plan.start
+    identity = RadioIdentity(plan.node_id, 0, 0, 0, position=(x, y), heading_deg=math.degrees(yaw), kind="user")
+    deadline = asyncio.get_running_loop().time() + attach_timeout
+    while True:
+        try:
+            client = await RadioClient.connect(identity, config.endpoint, config.world, timeout=1.0)
+            break
+        except HubUnavailable as err:
+            if asyncio.get_running_loop().time() >= deadline:
+                print(f"user: {err}", file=sys.stderr)
+                return 2
+            await asyncio.sleep(0.5)
+        except RadioError as err:
+            print(f"user: {err}", file=sys.stderr)
+            return 2
+    user = User(config, client, log)
+    print(f"user {plan.node_id}: walking (owner robot {plan.owner})", file=sys.stderr, flush=True)
+    try:
+        await user.run()
+    finally:
+        await client.close()
+    return 0
