@@ -36,11 +36,6 @@ HUB_RETRY_S = 1.0
 """How often a live watcher tries again to reach a hub that is not up yet."""
 
 
-def world_key(keys: Keys) -> str:
-    """Where the hub publishes the world (``Keys.world_state`` on main once the hub publishes it)."""
-    return getattr(keys, "world_state", f"{keys.prefix}/hub/world")
-
-
 def watch_command(args: argparse.Namespace) -> int:
     """Serve the page until Ctrl-C or SIGTERM; 2 when the replay cannot be read or the port is taken."""
     if args.replay:
@@ -139,7 +134,7 @@ class LiveFeed:
             except HubUnavailable as err:
                 self._set_status(f"waiting for the hub: {err}")
                 await asyncio.sleep(HUB_RETRY_S)
-        self._subscriber = self._session.declare_subscriber(world_key(self.keys), self._from_zenoh)
+        self._subscriber = self._session.declare_subscriber(self.keys.world_state, self._from_zenoh)
         self._set_status(f"connected to {self.endpoint}; waiting for world frames of {self.keys.world!r}")
         await asyncio.Event().wait()  # frames arrive through the subscriber until the watcher stops
 

@@ -6,20 +6,16 @@ from __future__ import annotations
 import re
 import shutil
 import tempfile
-import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-import msgpack
 import pytest
 
 from cli.processes import Supervisor
-from cli.watch import world_key
-from radio_hub.interface import open_session
 
-from .world_samples import frame, write_record
+from .world_samples import write_record
 
 pytestmark = pytest.mark.process
 
@@ -87,6 +83,8 @@ def _page(driver: Any) -> dict[str, Any]:
           frames: Number(document.body.dataset.frames),
           t_us: Number(document.body.dataset.tUs || -1),
           mode: document.body.dataset.mode,
+          users: rows.filter(r => r.dataset.kind === 'user').length,
+          user_x: Math.max(...rows.filter(r => r.dataset.kind === 'user').map(r => Number(r.dataset.x)), -1e9),
           positions: Object.fromEntries(rows.filter(r => r.dataset.kind === 'robot')
                                           .map(r => [r.dataset.id, [Number(r.dataset.x), Number(r.dataset.y)]])),
         };"""
@@ -142,35 +140,53 @@ def test_the_replay_page_shows_every_robot_moving_and_pauses_and_seeks(browser, 
         sup.stop_all()
 
 
-def _publish_frames(endpoint: str, world: str, robots: int, stop: threading.Event) -> None:
-    """What the hub publishes: a frame every 0.1 s on the world key, until stopped."""
-    from radio_hub.interface import Keys
+SCENARIO = """
+name = "watch-test"
+duration_s = 60
+[[obstacles]]
+kind = "circle"
+x = 2.0
+y = 2.5
+r = 0.4
+[[obstacles]]
+kind = "wall"
+x0 = -1.0
+y0 = -2.5
+x1 = 6.0
+y1 = -2.5
+[user]
+owner = 1
+start = [0, 1, 0]
+walk_at = 0
+path = [ {walk = 30, speed = 1.0} ]
+"""
 
-    session = open_session("client", endpoint)
-    try:
-        key, k = world_key(Keys(world)), 0
-        while not stop.is_set() and k < 600:
-            session.put(key, msgpack.packb(frame(k, robots), use_bin_type=True))
-            k += 1
-            time.sleep(0.1)
-    finally:
-        session.close()
 
-
-def test_the_live_page_follows_the_world_the_hub_publishes(browser, make_air, tmp_path):
-    air = make_air()
-    stop = threading.Event()
-    publisher = threading.Thread(target=_publish_frames, args=(air.endpoint, air.world, 3, stop), daemon=True)
+def test_the_live_page_follows_a_real_run_and_replays_its_world_log(browser, make_air, tmp_path):
+    scenario, world_log = tmp_path / "scenario.toml", tmp_path / "world.jsonl"
+    scenario.write_text(SCENARIO)
+    air = make_air(hub_args=("--scenario", str(scenario), "--world-log", str(world_log)))
+    for rid, pos in {1: (0.0, -1.0), 2: (1.5, -1.0), 3: (3.0, -1.0)}.items():
+        air.robot(rid, pos)
+    where = ["--hub", air.endpoint, "--world", air.world]
     sup = Supervisor(tmp_path / "logs")
     try:
-        browser.get(_start_watch(sup, "--hub", air.endpoint, "--world", air.world))
-        publisher.start()
-        first = _wait(browser, lambda p: p["robots"] == "3" and len(p["positions"]) == 3, "3 robots")
+        browser.get(_start_watch(sup, *where))
+        sup.spawn("user", ["user", "--scenario", str(scenario), *where])  # the person walks east at 1 m/s
+        first = _wait(browser, lambda p: p["robots"] == "3" and p["users"] == 1, "3 robots and the user")
         assert first["mode"] == "live"
-        later = _wait(browser, lambda p: p["frames"] >= first["frames"] + 8, "new frames arriving")
-        assert later["t_us"] > first["t_us"] and _moved(first["positions"], later["positions"])
+        later = _wait(browser, lambda p: p["frames"] >= first["frames"] + 10, "new frames arriving")
+        assert later["t_us"] > first["t_us"]
+        assert later["user_x"] > first["user_x"] + 0.3, (first, later)  # the walking user moved on the page
         _screenshot(browser, "watch-live.png")
     finally:
-        stop.set()
-        publisher.join(5)
+        sup.stop_all()
+    air.close()  # the hub has written its world log: replay it
+
+    sup = Supervisor(tmp_path / "logs-replay")
+    try:
+        browser.get(_start_watch(sup, "--replay", str(world_log)))
+        # the robots attached before the user came: the replay shows them first, then the user walking
+        _wait(browser, lambda p: p["robots"] == "3" and p["users"] == 1 and p["mode"] == "replay", "the replay")
+    finally:
         sup.stop_all()
