@@ -5,6 +5,7 @@ COPY pyproject.toml README.md ./
 COPY radio_hub radio_hub
 COPY petswarm petswarm
 COPY cli cli
+COPY examples examples
 RUN pip install --no-cache-dir .
 ENV PYTHONUNBUFFERED=1
 ENTRYPOINT ["petswarm"]

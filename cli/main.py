@@ -20,6 +20,7 @@ EPILOG = """examples:
   petswarm swarm status --robot 2               one robot's state, swarm and IR fixes of its neighbours
   petswarm stats                                the hub's counters per node and per channel
   petswarm report runs/<time>-<seed>            a recorded run's summary and plots
+  petswarm watch --world lab                    a web page drawing the world live (--replay RUN: a record)
   petswarm bench hub|organize|ir                the benchmarks (figures, JSON and plots)
 
 start the hub before its robots (they wait up to 15 s for it); every process of one swarm uses the
@@ -220,6 +221,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_chaos_arguments(sub, _add_hub, robot_id, bounded)
 
+    watch = sub.add_parser("watch", help="a local web page drawing the world live from a hub, or replaying a run")
+    _add_hub(watch)
+    watch.add_argument("--replay", metavar="RUN", help="replay a run record (its directory, or its world.jsonl)")
+    watch.add_argument(
+        "--port", type=bounded(int, 0, 65535), default=8047, help="port of the page (default %(default)s; 0: any)"
+    )
+    watch.add_argument("--bind", default="127.0.0.1", help="address to serve on (default %(default)s; 0.0.0.0: all)")
+
     exp = sub.add_parser("experiment", help="run an experiment file: a run, a fault timeline, repetitions, seeds")
     exp.add_argument("file", help="a TOML experiment file (see examples/experiment-loss.toml)")
     exp.add_argument("--out", help="directory for the records and results (default runs/experiment-<time>)")
@@ -288,7 +297,7 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``petswarm`` console script."""
     args = build_parser().parse_args(argv)
     commands = {"hub": _hub, "user": _user, "robot": _robot, "run": _run, "stats": _stats, "bench": _bench}
-    commands["swarm"] = _swarm
+    commands.update(swarm=_swarm, watch=_watch)
     handler = {**commands, "report": _report, "chaos": _chaos, "experiment": _experiment}[args.command]
     try:
         return handler(args)
@@ -425,6 +434,12 @@ def _experiment(args: argparse.Namespace) -> int:
     from cli.experiment import experiment_command
 
     return experiment_command(args)
+
+
+def _watch(args: argparse.Namespace) -> int:
+    from cli.watch import watch_command
+
+    return watch_command(args)
 
 
 def _chaos(args: argparse.Namespace) -> int:

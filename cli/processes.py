@@ -10,7 +10,7 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import IO, Any
 
@@ -39,15 +39,20 @@ class Supervisor:
         self.children: dict[str, subprocess.Popen[bytes]] = {}
         self._logs: dict[str, IO[bytes]] = {}
 
-    def spawn(self, name: str, args: list[str]) -> subprocess.Popen[bytes]:
-        """Start ``petswarm <args>`` as a child; its stdout and stderr go to ``<log_dir>/<name>.log``."""
-        return self.spawn_module(name, "cli", args)
+    def spawn(self, name: str, args: list[str], wrapper: Sequence[str] = ()) -> subprocess.Popen[bytes]:
+        """Start ``petswarm <args>`` as a child; its stdout and stderr go to ``<log_dir>/<name>.log``.
 
-    def spawn_module(self, name: str, module: str, args: list[str]) -> subprocess.Popen[bytes]:
+        ``wrapper`` runs it inside another command that execs it, e.g. ``ip netns exec NS`` (another host).
+        """
+        return self.spawn_module(name, "cli", args, wrapper)
+
+    def spawn_module(
+        self, name: str, module: str, args: list[str], wrapper: Sequence[str] = ()
+    ) -> subprocess.Popen[bytes]:
         """Start ``python -m <module> <args>`` as a child, logged and stopped like ``spawn``'s."""
         log = open(self.log_dir / f"{name}.log", "wb")  # noqa: SIM115 - closed in stop_all
         proc = subprocess.Popen(
-            [sys.executable, "-m", module, *args],
+            [*wrapper, sys.executable, "-m", module, *args],
             stdin=subprocess.DEVNULL,
             stdout=log,
             stderr=subprocess.STDOUT,

@@ -41,3 +41,13 @@ def test_example_experiments_load():
 
     for path in (ROOT / "examples").glob("experiment-*.toml"):
         assert load(path)["seeds"]
+
+
+def test_the_compose_user_walks_a_scenario_that_loads():
+    from petswarm.scenario import load
+
+    compose = yaml.safe_load((ROOT / "compose.yaml").read_text())
+    command = compose["services"]["user"]["command"]
+    scenario = load(ROOT / command[command.index("--scenario") + 1])
+    assert scenario.user is not None and scenario.user.legs
+    assert "127.0.0.1:8047:8047" in compose["services"]["watch"]["ports"]  # the live view, on loopback only
