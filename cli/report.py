@@ -1,17 +1,22 @@
 """``petswarm report RUN``: read a run record, print its summary, render its plots to PNG.
 
 Works on a finished run and on one that was killed midway (no summary: the events still tell the story).
+A scenario run also leaves the hub's ground truth (``world.jsonl``); from it come the driving figures, the
+bodies' paths (``trajectories.png``) and each slave's formation error over time (``formation_error.png``).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 from typing import Any
 
+from cli.metrics import driving_metrics, read_world, rotation_starts
 from cli.records import read_events
+from cli.run_scenario import describe_driving
 
 STATE_COLOURS = {
     "waiting": "#bbbbbb",
@@ -40,7 +45,25 @@ def report_command(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     plot(summary, events, out / "report.png")
     print(f"plots: {out / 'report.png'}")
+    if (run / "world.jsonl").exists():
+        for line in report_world(run / "world.jsonl", summary, out):
+            print(line)
     return 0
+
+
+def report_world(world_log: Path, summary: dict[str, Any] | None, out: Path) -> list[str]:
+    """Driving figures of a scenario run in text, and its trajectory and formation-error plots in ``out``."""
+    world = read_world(world_log)
+    if not world:
+        return [f"{world_log}: no world ticks"]
+    driving = driving_metrics(world)
+    faults = (summary or {}).get("faults") or []
+    plot_trajectories(world, out / "trajectories.png")
+    plot_formation_error(driving, rotation_starts(world), faults, out / "formation_error.png")
+    return [
+        describe_driving(driving),
+        f"plots: {out / 'trajectories.png'}, {out / 'formation_error.png'}",
+    ]
 
 
 def describe(manifest: dict[str, Any], summary: dict[str, Any] | None, events: dict[str, list]) -> list[str]:
@@ -128,6 +151,142 @@ def _plot_radio(ax: Any, summary: dict[str, Any] | None) -> None:
     ax.set_xticks([x + 0.4 - width / 2 for x in range(len(names))], names, rotation=30)
     ax.legend(fontsize=8)
     ax.set(title="radio per node (frames)")
+
+
+HEADING_EVERY_S = 3.0
+"""Heading arrows this far apart in model time: a few per path at walking speed (~1.5 m), not a hedge."""
+HEADING_MIN_MOVE_M = 0.3
+"""...and only once the body has moved two robot diameters since the last arrow, so they do not pile up."""
+REFERENCE_EVERY_S = 0.5
+"""A slave's reference drawn twice a second: dense enough to read as a track, faint enough not to hide the path."""
+USER_COLOUR = "#000000"
+
+
+def plot_trajectories(world: list[dict[str, Any]], path: Path) -> None:
+    """Every body's path over the obstacles: the user in black, robots coloured, the master starred."""
+    plt = _pyplot()
+    paths = _paths(world)
+    fig, ax = plt.subplots(figsize=(9, 8))
+    _draw_obstacles(ax, next((t["obstacles"] for t in reversed(world) if t.get("obstacles")), []))
+    for (kind, node), ticks in sorted(paths.items(), key=lambda kv: (kv[0][0] != "user", len(kv[0][1]), kv[0][1])):
+        _draw_path(ax, kind, node, ticks, USER_COLOUR if kind == "user" else robot_colour(node))
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="best")
+    ax.set(xlabel="x east (m)", ylabel="y north (m)", title="paths (o start, arrows heading, faint dots references)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_formation_error(
+    driving: dict[str, Any], turn_starts: list[float], faults: list[dict[str, Any]], path: Path
+) -> None:
+    """Each slave's distance from its reference over time, with the user's turns and the faults marked."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(11, 4.5))
+    for node, series in driving.get("formation_error_series", {}).items():
+        if series:
+            t, err = zip(*series, strict=True)
+            ax.plot(t, err, lw=1.2, color=robot_colour(node), label=_name("robot", node))
+    for i, t0 in enumerate(turn_starts):
+        ax.axvline(t0, color="#555555", ls="--", lw=0.8, label="user turns" if i == 0 else None)
+    for i, fault in enumerate(faults):
+        ax.axvline(float(fault.get("at", 0.0)), color="#c44e52", ls=":", lw=1.2, label="faults" if i == 0 else None)
+    if not driving.get("formation_error_series"):
+        ax.text(0.5, 0.5, "no slave had a reference", ha="center", va="center", transform=ax.transAxes)
+    ax.set_ylim(bottom=0.0)  # a distance: its zero is the formation held
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="upper right")
+    ax.set(xlabel="model time (s)", ylabel="distance from reference (m)", title="formation error per slave")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _paths(world: list[dict[str, Any]]) -> dict[tuple[str, str], list[tuple[float, dict[str, Any]]]]:
+    # the user and robot 1 may share the id "1": a body is its kind and its id
+    paths: dict[tuple[str, str], list[tuple[float, dict[str, Any]]]] = {}
+    for tick in world:
+        for body in tick["bodies"]:
+            paths.setdefault((body["kind"], body["id"]), []).append((tick["t_us"] / 1e6, body))
+    return paths
+
+
+def _draw_path(ax: Any, kind: str, node: str, ticks: list[tuple[float, dict[str, Any]]], colour: Any) -> None:
+    xs = [b["x"] for _, b in ticks]
+    ys = [b["y"] for _, b in ticks]
+    was_master = any(b.get("role") == "master" for _, b in ticks)
+    label = "user" if kind == "user" else _name(kind, node) + (" (master)" if was_master else "")
+    ax.plot(xs, ys, color=colour, lw=2.2 if kind == "user" else 1.3, ls="--" if kind == "user" else "-", label=label)
+    ax.plot(xs[0], ys[0], "o", color=colour, ms=6)
+    ax.plot(xs[-1], ys[-1], "*" if was_master else "s", color=colour, ms=14 if was_master else 6, mec="black")
+    arrows = [*_every(ticks, HEADING_EVERY_S, HEADING_MIN_MOVE_M), ticks[-1]]
+    ax.quiver(
+        [b["x"] for _, b in arrows],
+        [b["y"] for _, b in arrows],
+        [math.cos(b["yaw"]) for _, b in arrows],
+        [math.sin(b["yaw"]) for _, b in arrows],
+        color=colour,
+        angles="xy",
+        scale_units="xy",
+        scale=5.0,
+        width=0.003,
+    )
+    refs = [b["reference"] for _, b in _every(ticks, REFERENCE_EVERY_S) if b.get("reference") is not None]
+    if refs:
+        ax.scatter([r[0] for r in refs], [r[1] for r in refs], s=8, color=colour, alpha=0.3, lw=0)
+
+
+def robot_colour(node: str) -> Any:
+    """The same colour for a robot in every plot: tab10 by the number in its id ("robot-2" and "2" alike)."""
+    import matplotlib
+
+    digits = "".join(c for c in node if c.isdigit())
+    index = int(digits) - 1 if digits else sum(map(ord, node))
+    return matplotlib.colormaps["tab10"](index % 10)
+
+
+def _name(kind: str, node: str) -> str:
+    # hubs name robots "2" or "robot-2"; the plots say "robot-2" either way
+    return node if node.startswith(kind) else f"{kind}-{node}"
+
+
+def _every(
+    ticks: list[tuple[float, dict[str, Any]]], period_s: float, min_move_m: float = 0.0
+) -> list[tuple[float, dict[str, Any]]]:
+    # a body standing still would pile arrows on one spot: the next one also waits until it has moved
+    kept: list[tuple[float, dict[str, Any]]] = []
+    for t, body in ticks:
+        last = kept[-1][1] if kept else None
+        if last is None or (
+            t >= kept[-1][0] + period_s and math.hypot(body["x"] - last["x"], body["y"] - last["y"]) >= min_move_m
+        ):
+            kept.append((t, body))
+    return kept
+
+
+def _draw_obstacles(ax: Any, obstacles: list[dict[str, Any]]) -> None:
+    from matplotlib.patches import Circle, Rectangle
+
+    style = {"facecolor": "#cccccc", "edgecolor": "#666666"}
+    for ob in obstacles:
+        if ob["kind"] == "circle":
+            ax.add_patch(Circle((ob["x"], ob["y"]), ob["r"], **style))
+        elif ob["kind"] == "rect":
+            x0, y0 = min(ob["x0"], ob["x1"]), min(ob["y0"], ob["y1"])
+            ax.add_patch(Rectangle((x0, y0), abs(ob["x1"] - ob["x0"]), abs(ob["y1"] - ob["y0"]), **style))
+        elif ob["kind"] == "wall":
+            ax.plot([ob["x0"], ob["x1"]], [ob["y0"], ob["y1"]], color="#444444", lw=3)
+
+
+def _pyplot() -> Any:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
 
 
 def matplotlib_patch(colour: str, label: str) -> Any:
