@@ -44,6 +44,7 @@ WAKE_PERIOD_S = 3.0
 TRACK_PERIOD_S = 0.35
 CONTROL_PERIOD_S = 0.05
 BROADCAST_PERIOD_S = 0.1
+LF_VALID_RANGE_M = 2.0
 LOST_AFTER_S = 2.0
 """No reliable LF fix for this long: the user is lost (emergency)."""
 REMOTE_SPEED_MPS = 0.3
@@ -333,7 +334,8 @@ class Driver:
 
     def _lost(self, now: float, state: RobotState) -> bool:
         """Emergency per the spec: no reliable LF fix for LOST_AFTER_S; back when one comes again."""
-        fresh = self.fix is not None and self.fix.reliable and now - self.fix_at < LOST_AFTER_S
+        # lost = too far (the LF fix's valid range is 2 m) or no fix at all; a user off the axis is not lost
+        fresh = self.fix is not None and self.fix.distance_m <= LF_VALID_RANGE_M and now - self.fix_at < LOST_AFTER_S
         if state in (RobotState.FOLLOWING, RobotState.LEADING) and not fresh and self.fix_at > -math.inf:
             self.exception_from = state
             self.sequence.transition(RobotState.EMERGENCY, cause="user lost")
