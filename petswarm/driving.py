@@ -373,7 +373,9 @@ class Driver:
         while True:
             await asyncio.sleep(BROADCAST_PERIOD_S)
             swarm = self.formation.swarm
-            if self.sequence.state != RobotState.MASTER_DRIVING or swarm is None:
+            # no owner found over LF (a master connected by the control channel's stand-in): nobody to
+            # accompany, so the swarm holds still and slaves, hearing no DriveState, stay where they are
+            if self.sequence.state != RobotState.MASTER_DRIVING or swarm is None or self.owner is None:
                 continue
             self._seq += 1
             fix, activity, cmd = self.fix, self.activity, self.command
