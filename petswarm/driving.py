@@ -31,7 +31,7 @@ from petswarm.formation_shapes import Mode, mode_change, neighbours, slots
 from petswarm.formation_shapes import master_target_distance as formation_distance
 from petswarm.gestures import Gesture, combine
 from petswarm.lf_location import UserFix, locate
-from petswarm.motion import MotorCommand
+from petswarm.motion import MotorCommand, wrap
 from petswarm.pet_controller import PetControllerConfig, Ranges, UserObservation, follow, lead, obstacle_ahead, safety
 from petswarm.relative_location import RelativeLocationManager
 from petswarm.rf import Incoming, RfCommunicationManager
@@ -428,7 +428,7 @@ class Driver:
         if swarm is None or state is None or now - self.drive_state_at > MASTER_SILENT_S:
             return MotorCommand()  # no word from the master: stop safely
         own_yaw = self.radio.sensors.yaw_rad if self.radio.sensors is not None else 0.0
-        heading_rel = _wrap(state.yaw - own_yaw)
+        heading_rel = wrap(state.yaw - own_yaw)
         master_motion = MotorCommand(state.vx, state.vy, state.omega)
         entry = self.locations.table.get(swarm.master)
         if entry is not None and entry.fixed_at is not None and entry.fixed_at != self._fix_seen:
@@ -485,7 +485,3 @@ class Driver:
             self.radio.telemetry(state.label, role, master, slot, str(self.mode))
         except Exception as err:  # telemetry is for viewers: never let it stop the controller
             self.log.record("error", where="telemetry", error=str(err))
-
-
-def _wrap(angle: float) -> float:
-    return (angle + math.pi) % (2 * math.pi) - math.pi

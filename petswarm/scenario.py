@@ -28,6 +28,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from petswarm.motion import wrap
+
 REQUESTS = ("follow", "lead", "remote", "cancel", "organize", "disperse", "mode", "return", "gesture")
 """Watch requests: select a main operation, cancel it, organize/disperse a swarm, change driving mode,
 return from an obstacle exception, or perform a gesture."""
@@ -86,9 +88,9 @@ class UserPlan:
             elif leg.kind == "turn":
                 yaw += leg.rate * dt
                 if moving:
-                    return x, y, _wrap(yaw), 0.0, 0.0, leg.rate
+                    return x, y, wrap(yaw), 0.0, 0.0, leg.rate
             elapsed -= leg.duration_s
-        return x, y, _wrap(yaw), 0.0, 0.0, 0.0
+        return x, y, wrap(yaw), 0.0, 0.0, 0.0
 
     @property
     def path_end_s(self) -> float:
@@ -231,7 +233,3 @@ def _positive(value: Any, where: str) -> float:
     if not number > 0 or not math.isfinite(number):
         raise ValueError(f"{where} must be a positive number, got {value!r}")
     return number
-
-
-def _wrap(angle: float) -> float:
-    return (angle + math.pi) % (2 * math.pi) - math.pi

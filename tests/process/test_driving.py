@@ -24,6 +24,7 @@ FORMATION_MEDIAN_BOUND_M = 0.25
 IR fixes refresh once per token round (about 0.55 s for 4 robots) and the slaves dead-reckon between them."""
 
 
+@pytest.mark.timeout(240)  # a 45 s scenario plus start-up and shutdown, on a busy 2-core machine
 def test_a_following_swarm_of_4_keeps_its_formation_through_a_90_degree_turn(tmp_path: Path) -> None:
     record = tmp_path / "run"
     argv = [sys.executable, "-m", "cli", "run", str(ROOT / "scenarios/following-turn.toml"), "--seed", "5"]
