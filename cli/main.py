@@ -337,7 +337,7 @@ def _hub(args: argparse.Namespace) -> int:
             world_log=args.world_log,
         )
     except OSError as err:
-        print(f"petswarm hub: cannot open an output file: {err}", file=sys.stderr)
+        print(f"petswarm hub: cannot open --pcap file or --world-log file: {err}", file=sys.stderr)
         return 2
     try:
         hub.open()
