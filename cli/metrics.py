@@ -150,3 +150,20 @@ def _percentiles(values: list[float]) -> dict[str, float] | None:
 def _thin(series: list[tuple[float, float]], every: int = 5) -> list[list[float]]:
     # 50 Hz is more than a plot needs; keep every 5th sample (10 Hz) for the summary's series
     return [[round(t, 2), round(e, 4)] for t, e in series[::every]]
+
+
+def describe_driving(driving: dict[str, Any]) -> str:
+    """A few lines a person reads after a scenario run."""
+    lines = [f"collisions {driving.get('collisions', 0)}"]
+    error = driving.get("formation_error_all_m")
+    if error:
+        lines.append(f"formation error (all slaves): median {error['median']:.3f} m, p90 {error['p90']:.3f} m")
+    distance = driving.get("user_master_distance_m")
+    if distance:
+        lines.append(f"user-master distance: median {distance['median']:.2f} m, p90 {distance['p90']:.2f} m")
+    for reaction in driving.get("reactions", []):
+        lines.append(
+            f"user turn at {reaction['user_turn_at_s']:.1f} s: master reacted after {reaction['master_s']} s, "
+            f"slaves {reaction['slaves_s']}"
+        )
+    return "\n".join(lines)

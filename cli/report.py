@@ -14,9 +14,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from cli.metrics import driving_metrics, read_world, rotation_starts
+from cli.metrics import describe_driving, driving_metrics, read_world, rotation_starts
 from cli.records import read_events
-from cli.run_scenario import describe_driving
 
 STATE_COLOURS = {
     "waiting": "#bbbbbb",

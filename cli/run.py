@@ -7,6 +7,7 @@ import os
 import signal
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -14,6 +15,7 @@ import msgpack
 import zenoh
 
 from cli.checker import check_record
+from cli.metrics import describe_driving
 from cli.processes import Supervisor, free_tcp_port, raise_interrupt
 from cli.records import RunRecord
 from cli.swarm import describe
@@ -69,7 +71,33 @@ def run(opts: RunOptions) -> int:
             print(f"petswarm run: {err}", file=sys.stderr)
             return 2
         return run_scenario(opts, scenario)
-    world = opts.world or f"run-{os.getpid()}-{opts.seed}"
+    return supervise(opts, "run", lambda _record: [], _ping_and_organize)
+
+
+@dataclass
+class RunContext:
+    """What a run's phase works with: its options, world, hub endpoint, record and processes."""
+
+    opts: RunOptions
+    world: str
+    endpoint: str
+    keys: Keys
+    record: RunRecord
+    sup: Supervisor
+    session: zenoh.Session
+
+
+def supervise(
+    opts: RunOptions,
+    prefix: str,
+    hub_extra: Callable[[RunRecord], list[str]],
+    phase: Callable[[RunContext], dict[str, Any]],
+    after_stop: Callable[[dict[str, Any], RunRecord], None] | None = None,
+) -> int:
+    """The skeleton of every run: a record, a hub on a free port (``hub_extra``: more hub arguments),
+    ``phase`` (which starts the other processes and returns the summary), a clean stop of every process
+    on success, failure, Ctrl-C or SIGTERM, then ``after_stop``, the checker and the printed summary."""
+    world = opts.world or f"{prefix}-{os.getpid()}-{opts.seed}"
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     keys = Keys(world)
     record = RunRecord.create(opts, world, endpoint)
@@ -81,30 +109,10 @@ def run(opts: RunOptions) -> int:
         progress(f"world {world}, seed {opts.seed}, hub on {endpoint}, record in {record.path}")
         hub_args = ["hub", "--listen", endpoint, "--world", world, "--seed", str(opts.seed)]
         # the air's frame log belongs to the record unless the user wants the capture elsewhere
-        hub_args += ["--pcap", opts.pcap or str(record.path / "air.pcap")]
-
+        hub_args += ["--pcap", opts.pcap or str(record.path / "air.pcap"), *hub_extra(record)]
         sup.spawn("hub", hub_args + (["--config", opts.config] if opts.config else []))
         session = _wait_for_hub(sup, endpoint, keys, opts.startup_timeout)
-        for rid in range(1, opts.robots + 1):
-            robot_args = ["robot", "--id", str(rid), "--hub", endpoint, "--world", world]
-            robot_args += ["--record", str(record.events_of(f"robot-{rid}"))]
-
-            if rid == 1 and opts.organize:
-                robot_args += ["--user", "1", "--protocol", opts.protocol]
-            sup.spawn(
-                f"robot-{rid}", [*robot_args, "--ping-interval", str(opts.ping_interval), "--seed", str(opts.seed)]
-            )
-        _wait_for_robots(sup, session, keys, opts.robots, opts.startup_timeout)
-        timeline = FaultTimeline(list(opts.faults))
-        _exercise(sup, session, keys, opts.duration, timeline)
-        timeline.apply_due(session, keys, float("inf"))  # what is left acts on the swarm phase
-        swarm = organize_and_disperse(session, keys, opts) if opts.organize else {}
-        summary = _summarise(session, keys, opts, world, endpoint)
-        summary["faults"] = timeline.applied
-
-        problems = summary["problems"] + swarm.pop("problems", [])
-        summary.update(swarm, problems=problems, ok=not problems)
-
+        summary = phase(RunContext(opts, world, endpoint, keys, record, sup, session))
     except (RunFailed, HubUnavailable) as err:
         progress(f"failed: {err}")
         summary["problems"] = [f"failed: {err}"]
@@ -120,15 +128,38 @@ def run(opts: RunOptions) -> int:
         signal.signal(signal.SIGTERM, previous)
         record.finish(summary, codes)
         progress(f"stopped {len(codes)} processes; record in {record.path}")
+    if after_stop is not None:
+        after_stop(summary, record)
     violations = check_record(record.path)
     summary["invariants"] = violations or "all hold"
-    if violations:
-        summary["problems"] += [f"invariant violated: {v}" for v in violations]
-        summary["ok"] = False
+    summary["problems"] += [f"invariant violated: {v}" for v in violations]
+    summary["ok"] = not summary["problems"]
     record.finish(summary, codes)
     _print(summary, opts.as_json)
-
     return 0 if summary["ok"] else 1
+
+
+def _ping_and_organize(ctx: RunContext) -> dict[str, Any]:
+    """The default run: robots ping each other for ``duration``, then robot 1 may organize a swarm."""
+    opts, session, keys = ctx.opts, ctx.session, ctx.keys
+    for rid in range(1, opts.robots + 1):
+        robot_args = ["robot", "--id", str(rid), "--hub", ctx.endpoint, "--world", ctx.world]
+        robot_args += ["--record", str(ctx.record.events_of(f"robot-{rid}"))]
+        if rid == 1 and opts.organize:
+            robot_args += ["--user", "1", "--protocol", opts.protocol]
+        ctx.sup.spawn(
+            f"robot-{rid}", [*robot_args, "--ping-interval", str(opts.ping_interval), "--seed", str(opts.seed)]
+        )
+    _wait_for_robots(ctx.sup, session, keys, opts.robots, opts.startup_timeout)
+    timeline = FaultTimeline(list(opts.faults))
+    _exercise(ctx.sup, session, keys, opts.duration, timeline)
+    timeline.apply_due(session, keys, float("inf"))  # what is left acts on the swarm phase
+    swarm = organize_and_disperse(session, keys, opts) if opts.organize else {}
+    summary = _summarise(session, keys, opts, ctx.world, ctx.endpoint)
+    summary["faults"] = timeline.applied
+    problems = summary["problems"] + swarm.pop("problems", [])
+    summary.update(swarm, problems=problems, ok=not problems)
+    return summary
 
 
 def _check_alive(sup: Supervisor) -> None:
@@ -355,4 +386,6 @@ def _print(summary: dict[str, Any], as_json: bool) -> None:
         print(describe("organize", organized))
         if "disperse_time_s" in summary.get("dispersal", {}):
             print(describe("disperse", summary["dispersal"]))
+    if "driving" in summary:
+        print(describe_driving(summary["driving"]))
     print("OK" if summary["ok"] else "PROBLEMS: " + "; ".join(summary["problems"]))
