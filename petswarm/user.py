@@ -100,8 +100,8 @@ class User:
                 next_accel += ACCEL_PERIOD_S
             while next_gyro <= t:
                 self.recognizer.add_gyro(next_gyro, self.imu.gyro_z(next_gyro, omega))
+                self._report_activity(next_gyro)  # the activity as of this gyro sample
                 next_gyro += GYRO_PERIOD_S
-                self._report_activity(next_gyro)
             await asyncio.sleep(PLACE_PERIOD_S)
 
     def _report_activity(self, t: float) -> None:
