@@ -50,7 +50,7 @@ def driving_metrics(world: list[dict[str, Any]], sight_m: float = 1.0) -> dict[s
             ref = b.get("reference")
             if b.get("role") == "slave" and ref is not None:
                 errors.setdefault(b["id"], []).append((t, math.hypot(b["x"] - ref[0], b["y"] - ref[1])))
-            if b.get("role") == "master" and user is not None:
+            if b.get("role") in ("master", "single") and user is not None:
                 user_master.append((t, math.hypot(b["x"] - user["x"], b["y"] - user["y"])))
         robots = np.array([(b["x"], b["y"]) for b in bodies.values() if b["kind"] == "robot"]).reshape(-1, 2)
         if len(robots) > 1:
@@ -85,7 +85,7 @@ def reactions(world: list[dict[str, Any]]) -> list[dict[str, Any]]:
                 roles.setdefault(b["id"], b.get("role") or "")
                 if abs(b.get("omega", 0.0)) >= REACTION_OMEGA_RPS:
                     first[b["id"]] = round(t - t0, 3)
-        master = next((n for n, r in roles.items() if r == "master"), None)
+        master = next((n for n, r in roles.items() if r in ("master", "single")), None)
         slaves = {n: first.get(n) for n, r in sorted(roles.items()) if r == "slave"}
         master_s = first.get(master) if master else None
         out.append(

@@ -6,7 +6,7 @@ what a run record keeps in ``world.jsonl`` (one JSON object per line)::
     {"v": 1, "t_us": int, "wall": float,
      "bodies": [{"id": "1", "kind": "robot"|"user", "x", "y", "yaw", "vx", "vy", "radius",
                  "pan_id": int|None, "ir": "idle"|"receive"|"transmit"|"beacon", "state": str|None,
-                 "role": "master"|"slave"|None, "reference": [x, y]|None}],
+                 "role": "master"|"slave"|"single"|None, "reference": [x, y]|None}],
      "obstacles": [{"kind": "circle", "x", "y", "r"} | {"kind": "wall"|"rect", "x0", "y0", "x1", "y1"}],
      "collisions": int, "radio": {"delivered": int, "collided": int, "lost": int},
      "events": [{"kind": "collision"|"loss", "node": "3", "t_us": int}]}
@@ -26,7 +26,8 @@ from typing import Any
 VERSION = 1
 BODY_KINDS = ("robot", "user")
 IR_MODES = ("idle", "receive", "transmit", "beacon")
-ROLES = ("master", "slave")
+ROLES = ("master", "slave", "single")
+"""single: a robot driving with its user outside any swarm."""
 EVENT_KINDS = ("collision", "loss")
 RADIO_COUNTERS = ("delivered", "collided", "lost")
 DEFAULT_RADIUS_M = 0.15

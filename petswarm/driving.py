@@ -53,6 +53,10 @@ REMOTE_HOLD_S = 1.5
 MASTER_SILENT_S = 1.0
 """A slave that hears no DriveState for this long stops (the master may be gone)."""
 STATES = {"follow": RobotState.FOLLOWING, "lead": RobotState.LEADING, "remote": RobotState.REMOTE_CONTROL}
+STEERED = (RobotState.FOLLOWING, RobotState.LEADING)
+TURN_GAIN = 2.0
+"""Turn-about: omega per radian still to turn (1/s), capped by the base's limit."""
+TURN_DONE_RAD = math.radians(10)
 
 
 @dataclass
@@ -93,6 +97,9 @@ class Driver:
         self.fix_at = -math.inf
         self.activity = Activity(Movement.STOP, False, 0.0, 0.0)
         self.command = MotorCommand()
+        self.intent = MotorCommand()
+        """What the controller wants before the safety stage: what the master broadcasts, so slaves ahead
+        of it (leading) move on at the user's pace instead of waiting for a master they block."""
         self.mode = Mode.FOLLOWING
         self.shape = self.config.shape
         self.spacing = self.config.spacing_m
@@ -103,6 +110,8 @@ class Driver:
         self.drive_state: m.DriveState | None = None
         self.drive_state_at = -math.inf
         self.tracker = RelativeTracker()
+        self.turn_to: float | None = None
+        """AHRS yaw a turn-about is turning to."""
         self._fix_seen: float | None = None
         self._seq = 0
         self._last_control = time.monotonic()
@@ -215,7 +224,8 @@ class Driver:
 
     def _select(self, target: RobotState) -> None:
         state = self.sequence.state
-        if state == RobotState.MASTER_DRIVING:
+        turning_round = state in (RobotState.FOLLOWING, RobotState.LEADING) and target in STEERED
+        if state == RobotState.MASTER_DRIVING or turning_round:
             self._change_mode(Mode.LEADING if target == RobotState.LEADING else Mode.FOLLOWING, False)
             return
         self.mode = Mode.LEADING if target == RobotState.LEADING else Mode.FOLLOWING
@@ -238,6 +248,7 @@ class Driver:
         No change."""
         if mode == self.mode:
             return
+        self._start_turn_about()
         swarm = self.formation.swarm
         if self.sequence.state == RobotState.MASTER_DRIVING and swarm is not None:
             members = list(range(len(swarm.members) + 1))
@@ -253,12 +264,37 @@ class Driver:
                 applied="no-change",
             )
             self.mirrored = not self.mirrored
+            # dispersing restores the driving state the user has now chosen, not the one before the swarm
+            self.sequence.previous_driving = RobotState.LEADING if mode == Mode.LEADING else RobotState.FOLLOWING
         else:
             self.log.record("mode_change", frm=str(self.mode), to=str(mode))
             target = RobotState.LEADING if mode == Mode.LEADING else RobotState.FOLLOWING
             if self.sequence.state in (RobotState.FOLLOWING, RobotState.LEADING):
                 self.sequence.transition(target, cause="mode")
         self.mode = mode
+
+    def _start_turn_about(self) -> None:
+        """Following and leading face opposite ways relative to the user: a mode change that comes with
+        the user's turn-about first turns the robot round (on its AHRS), and forgets its LF fix, which was
+        taken with the user on the other side (LF cannot tell front from back)."""
+        sensors = self.radio.sensors
+        if sensors is None:
+            return
+        self.turn_to = wrap(sensors.yaw_rad + math.pi)
+        self.log.record("turn_about", from_yaw=round(sensors.yaw_rad, 3), to_yaw=round(self.turn_to, 3))
+
+    def _turning(self) -> MotorCommand | None:
+        """The in-place turn of a turn-about, or None when there is none (any more)."""
+        sensors = self.radio.sensors
+        if self.turn_to is None or sensors is None:
+            return None
+        error = wrap(self.turn_to - sensors.yaw_rad)
+        if abs(error) < TURN_DONE_RAD:
+            self.turn_to, self.fix, self.fix_at = None, None, time.monotonic()
+            self.log.record("turn_about_done")
+            return None
+        limit = self.config.pet.limits.max_omega
+        return MotorCommand(0.0, 0.0, max(-limit, min(limit, TURN_GAIN * error)))
 
     async def _organize(self, count: int) -> None:
         try:
@@ -297,12 +333,17 @@ class Driver:
     def _decide(self, now: float, dt: float) -> MotorCommand:
         state = self.sequence.state
         ranges = self._ranges()
+        self.intent = MotorCommand()
         if state == RobotState.SLAVE_DRIVING:
             return self._slave(now, dt, ranges)
         if state == RobotState.REMOTE_CONTROL:
             return safety(self.remote if now < self.remote_until else MotorCommand(), ranges, self.config.pet)
         if not self._tracking(state) or state in (RobotState.COMMAND_WAITING, RobotState.ORGANIZING):
             return MotorCommand()
+        turn = self._turning()
+        if turn is not None:
+            self.intent = turn
+            return turn
         observation = self._observation(now)
         if self._lost(now, state):
             return MotorCommand()
@@ -316,7 +357,8 @@ class Driver:
             self._tell_owner()
             return MotorCommand()
         control = lead if leading else follow
-        return control(observation, ranges, self.config.pet, target)
+        self.intent = control(observation, Ranges(), self.config.pet, target)
+        return safety(self.intent, ranges, self.config.pet)
 
     def _observation(self, now: float) -> UserObservation | None:
         if self.fix is None:
@@ -378,7 +420,7 @@ class Driver:
             if self.sequence.state != RobotState.MASTER_DRIVING or swarm is None or self.owner is None:
                 continue
             self._seq += 1
-            fix, activity, cmd = self.fix, self.activity, self.command
+            fix, activity, cmd = self.fix, self.activity, self.intent
             yaw = self.radio.sensors.yaw_rad if self.radio.sensors is not None else 0.0
             state = m.DriveState(
                 swarm.session,
@@ -473,6 +515,8 @@ class Driver:
         swarm = self.formation.swarm
         state = self.sequence.state
         role, master, slot = "", "", None
+        if swarm is None and self.owner is not None:
+            role = "single"  # driving with its user, no swarm: the metrics' reaction counts it as the master
         if swarm is not None and state in (RobotState.MASTER_DRIVING, RobotState.SLAVE_DRIVING):
             role = "master" if swarm.number == 0 else "slave"
             master = user_link.robot_node(swarm.master)

@@ -305,7 +305,8 @@ class RadioHub:
             body["pan_id"] = None if node is None else node.pan_id
             body["ir"] = str(modes.get(body["id"], "idle"))
             tele = self._telemetry.get(body["id"], {})
-            body["state"], body["role"] = tele.get("state"), tele.get("role")
+            # an empty role or state (a robot outside any swarm) is published as none
+            body["state"], body["role"] = tele.get("state") or None, tele.get("role") or None
             body["reference"] = _reference(poses.get(tele.get("master", "")), tele.get("slot"))
         totals = {"delivered": 0, "collided": 0, "lost": 0}
         for counters in self.medium.node_counters.values():
