@@ -194,20 +194,42 @@ def allowed_approach_speed(range_m: float, cfg: PetControllerConfig) -> float:
 
 
 def safety(cmd: MotorCommand, ranges: Ranges, cfg: PetControllerConfig) -> MotorCommand:
-    """The safety stage: cap the velocity component toward each obstacle seen, then bound all speeds.
+    """The safety stage: the translation nearest the command whose component toward each obstacle seen is
+    within ``allowed_approach_speed``, then every speed bounded.
 
-    Only the component toward the obstacle is cut, so the robot may still slide past it sideways. Sensors
-    less than 90 degrees apart never raise each other's component, so one pass suffices.
+    Only motion toward an obstacle is cut, so the robot may still slide past it sideways; and the nearest
+    allowed velocity (not sensor-by-sensor cuts) adds no sideways motion of its own in front of a wall.
     """
-    vx, vy = cmd.vx, cmd.vy
-    for angle, rng in ranges.readings:
-        if rng is None:
-            continue
-        ux, uy = math.cos(angle), math.sin(angle)
-        excess = vx * ux + vy * uy - allowed_approach_speed(rng, cfg)
-        if excess > 0:
-            vx, vy = vx - excess * ux, vy - excess * uy
+    constraints = [
+        (math.cos(angle), math.sin(angle), allowed_approach_speed(rng, cfg))
+        for angle, rng in ranges.readings
+        if rng is not None
+    ]
+    vx, vy = _nearest_allowed((cmd.vx, cmd.vy), constraints)
     return MotorCommand(vx, vy, cmd.omega).limited(cfg.limits)
+
+
+def _nearest_allowed(v: tuple[float, float], constraints: list[tuple[float, float, float]]) -> tuple[float, float]:
+    """The velocity nearest ``v`` with ``ux * vx + uy * vy <= limit`` for every ``(ux, uy, limit)``.
+
+    A 2-D projection onto a few half-planes, solved exactly by trying the candidates: ``v`` itself, its
+    projection onto each boundary, and each pair of boundaries' corner. Standing still is always allowed.
+    """
+
+    def allowed(c: tuple[float, float]) -> bool:
+        return all(ux * c[0] + uy * c[1] <= limit + 1e-12 for ux, uy, limit in constraints)
+
+    candidates = [v, (0.0, 0.0)]
+    for ux, uy, limit in constraints:
+        excess = ux * v[0] + uy * v[1] - limit
+        candidates.append((v[0] - excess * ux, v[1] - excess * uy))
+    for i, (ax, ay, a_lim) in enumerate(constraints):
+        for bx, by, b_lim in constraints[i + 1 :]:
+            det = ax * by - ay * bx
+            if abs(det) > 1e-9:
+                candidates.append(((a_lim * by - ay * b_lim) / det, (ax * b_lim - a_lim * bx) / det))
+    feasible = [c for c in candidates if allowed(c)]
+    return min(feasible, key=lambda c: (c[0] - v[0]) ** 2 + (c[1] - v[1]) ** 2)
 
 
 def obstacle_ahead(ranges: Ranges, cfg: PetControllerConfig) -> bool:

@@ -61,8 +61,9 @@ class SlaveControllerConfig:
     """The twist means a twisted heading only once the robot is near its reference; farther out a location
     error also makes bearings differ, so the correction waits."""
     min_twist_sensitivity: float = 0.25
-    """How much a heading twist must move the neighbour's bearing (rad per rad) for the twist to be trusted:
-    a neighbour in line with the master shows none."""
+    """How much a heading twist must move the neighbour's bearing (rad per rad) for the twist to be trusted
+    (``twist_sensitivity``): 1 for a column's neighbour between this robot and the master; 0 for a neighbour
+    on the circle whose diameter joins this robot and the master, or the master itself."""
     rotation_threshold_rps: float = 0.05
     """User yaw rates (rad/s) below this are gyro noise, not a rotation."""
     limits: DriveLimits = field(default_factory=DriveLimits)
