@@ -99,6 +99,9 @@ class Ranges:
 
     readings: tuple[tuple[float, float | None], ...] = ()
     max_range_m: float = 3.0
+    receding_mps: tuple[float, ...] = ()
+    """Per reading, how fast the thing seen moves away along the beam (m/s; from the echo's range rate
+    and the robot's own motion); empty when unknown. A robot ahead that drives on may be followed closely."""
 
     def __post_init__(self) -> None:
         for angle, rng in self.readings:
@@ -195,14 +198,16 @@ def allowed_approach_speed(range_m: float, cfg: PetControllerConfig) -> float:
 
 def safety(cmd: MotorCommand, ranges: Ranges, cfg: PetControllerConfig) -> MotorCommand:
     """The safety stage: the translation nearest the command whose component toward each obstacle seen is
-    within ``allowed_approach_speed``, then every speed bounded.
+    within ``allowed_approach_speed`` plus the speed at which that obstacle moves away (``receding_mps``:
+    a robot may follow another that drives on), then every speed bounded.
 
     Only motion toward an obstacle is cut, so the robot may still slide past it sideways; and the nearest
     allowed velocity (not sensor-by-sensor cuts) adds no sideways motion of its own in front of a wall.
     """
+    receding = ranges.receding_mps or (0.0,) * len(ranges.readings)
     constraints = [
-        (math.cos(angle), math.sin(angle), allowed_approach_speed(rng, cfg))
-        for angle, rng in ranges.readings
+        (math.cos(angle), math.sin(angle), allowed_approach_speed(rng, cfg) + max(0.0, away))
+        for (angle, rng), away in zip(ranges.readings, receding, strict=True)
         if rng is not None
     ]
     vx, vy = _nearest_allowed((cmd.vx, cmd.vy), constraints)

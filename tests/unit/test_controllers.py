@@ -282,3 +282,14 @@ def test_leading_robot_drives_an_arc_when_the_user_rotates(turn_deg: int) -> Non
     yaw_change = math.degrees(wrap(trace.robot_yaw[-1][0] - trace.robot_yaw[0][0]))
     assert yaw_change == pytest.approx(turn_deg, abs=15)
     assert min(trace.user_distance) > 0.8 and max(trace.user_distance) < 1.2
+
+
+def test_safety_lets_a_robot_follow_closely_what_drives_away_but_not_what_stands():
+    cfg = PetControllerConfig()
+    ahead = ((0.0, 0.32),)  # 7 cm beyond the stop distance
+    standing = safety(MotorCommand(0.8, 0.0, 0.0), Ranges(ahead), cfg)
+    assert standing.vx == pytest.approx(allowed_approach_speed(0.32, cfg))
+    driving_on = safety(MotorCommand(0.8, 0.0, 0.0), Ranges(ahead, receding_mps=(0.6,)), cfg)
+    assert driving_on.vx == pytest.approx(allowed_approach_speed(0.32, cfg) + 0.6)
+    coming = safety(MotorCommand(0.8, 0.0, 0.0), Ranges(ahead, receding_mps=(-0.5,)), cfg)
+    assert coming.vx == pytest.approx(standing.vx)  # something approaching gives no extra room
