@@ -7,6 +7,7 @@ fixes of the master, the master's DriveState broadcasts, its AHRS and ultrasonic
 from __future__ import annotations
 
 import json
+import math
 import subprocess
 import sys
 import time
@@ -87,3 +88,60 @@ def test_another_users_belt_does_not_wake_the_robot(make_air, tmp_path: Path) ->
     two = air.cmd(2, "status")
     assert two["driving"]["owner"] == "alice2" and two["state"] == "command-waiting"
     assert air.cmd(1, "status")["driving"]["owner"] is None
+
+
+def _run_scenario(name: str, record: Path, seed: int) -> dict:
+    argv = [sys.executable, "-m", "cli", "run", str(ROOT / "scenarios" / f"{name}.toml"), "--seed", str(seed)]
+    done = subprocess.run([*argv, "--json", "--record", str(record)], capture_output=True, text=True, timeout=200)
+    summary = json.loads(done.stdout)
+    assert done.returncode == 0, summary["problems"]
+    return summary
+
+
+def _track(record: Path, body: str) -> list[dict]:
+    return [b for tick in read_world(record / "world.jsonl") for b in tick["bodies"] if b["id"] == body]
+
+
+@pytest.mark.timeout(240)
+def test_leading_the_robot_drives_an_arc_when_the_user_turns(tmp_path: Path) -> None:
+    record = tmp_path / "run"
+    summary = _run_scenario("leading-arcs", record, seed=2)
+    driving = summary["driving"]
+    assert driving["collisions"] == 0
+    left, right = driving["reactions"]  # the user turns 90 degrees left, later 90 degrees right
+    for turn in (left, right):
+        assert turn["master"] == "robot-1" and turn["master_s"] is not None and turn["master_s"] < 1.0, turn
+    turn_at = left["user_turn_at_s"]
+    timed = [
+        (tick["t_us"] / 1e6, b)
+        for tick in read_world(record / "world.jsonl")
+        for b in tick["bodies"]
+        if b["id"] == "robot-1"
+    ]
+    before = next(b for t, b in timed if t >= turn_at)
+    after = next(b for t, b in timed if t >= turn_at + 3.0)
+    # an arc: the heading turned with the user and the robot moved sideways round them, not in place
+    turned = math.degrees(math.atan2(math.sin(after["yaw"] - before["yaw"]), math.cos(after["yaw"] - before["yaw"])))
+    assert 60 < turned < 120, turned
+    assert math.hypot(after["x"] - before["x"], after["y"] - before["y"]) > 0.8
+
+
+@pytest.mark.timeout(240)
+def test_turn_about_switches_following_to_leading_with_the_master_per_table_3(tmp_path: Path) -> None:
+    record = tmp_path / "run"
+    summary = _run_scenario("turn-about", record, seed=4)
+    assert summary["driving"]["collisions"] == 0
+    events = [json.loads(line) for line in (record / "events" / "robot-1.jsonl").read_text().splitlines()]
+    [change] = [e for e in events if e["kind"] == "mode_change"]
+    # Table 3, following -> leading without a master-change request: the master stays, the references change
+    assert change["frm"] == "following" and change["to"] == "leading" and change["applied"] == "no-change"
+    assert any(e["kind"] == "turn_about_done" for e in events)
+    dispersed = next(e for e in events if e["kind"] == "state" and e["frm"] == "master-driving")
+    assert dispersed["to"] == "leading"  # dispersed into the mode the user chose
+    # every robot turned round, and the swarm then led the user south
+    for rid in (1, 2, 3):
+        track = _track(record, f"robot-{rid}")
+        assert math.sin(track[0]["yaw"]) > 0.9 and math.sin(track[-1]["yaw"]) < -0.9, rid
+    user = _track(record, "user")
+    assert user[-1]["y"] < 0.5  # the user walked back south
+    assert all(_track(record, f"robot-{rid}")[-1]["y"] < user[-1]["y"] for rid in (1, 2, 3))  # ahead of the user
