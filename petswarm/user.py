@@ -43,6 +43,8 @@ class UserConfig:
     world: str
     duration_s: float
     seed: int = 0
+    beacon: bool = False
+    """The person wears an IR beacon (surround scenarios): the surround robots see him by it."""
 
 
 class User:
@@ -65,6 +67,15 @@ class User:
         self._pairs: dict[int, dict[str, float]] = {}
         self._t0 = 0.0
         self._rotation_reported: float | None = None
+
+    async def wear_beacon(self) -> None:
+        """Switch the IR module to beacon mode, and again after a restarted hub (it forgets IR modes)."""
+        await self.client.set_ir_mode("beacon")
+        self.log.record("beacon_on", role="user")
+        self.client.on_reattach.append(self._beacon_again)
+
+    def _beacon_again(self) -> None:
+        asyncio.get_running_loop().create_task(self.client.set_ir_mode("beacon"))
 
     def now(self) -> float:
         """Seconds since the user process started its scenario."""
@@ -184,6 +195,13 @@ async def run_user(config: UserConfig, log: EventLog, attach_timeout: float = 15
             print(f"user: {err}", file=sys.stderr)
             return 2
     user = User(config, client, log)
+    if config.beacon:
+        try:
+            await user.wear_beacon()
+        except (HubUnavailable, RadioError) as err:
+            print(f"user: cannot switch on the IR beacon: {err}", file=sys.stderr)
+            await client.close()
+            return 2
     print(f"user {plan.node_id}: walking (owner robot {plan.owner})", file=sys.stderr, flush=True)
     try:
         await user.run()
