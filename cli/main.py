@@ -175,7 +175,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=surround_config,
         default=None,
         metavar="JSON",
-        help='surround: law settings as a JSON object, e.g. \'{"stiffness": 8}\' (default: the documented gains)',
+        help="surround: law settings as a JSON object, e.g. '{\"stiffness\": 8}' (default: the documented gains)",
     )
 
     swarm = sub.add_parser("swarm", help="ask a running robot to organize or disperse a swarm (the watch's requests)")
