@@ -71,6 +71,15 @@ def beacon_points(beacons: dict[str, np.ndarray], ir: IrConfig, method: str = "l
     return {n: points[i] for i, n in enumerate(names) if found.valid[i]}
 
 
+def dead_reckon(points: dict[str, np.ndarray], velocity: np.ndarray, dt: float) -> dict[str, np.ndarray]:
+    """Beacon points ``dt`` seconds on, between sweeps: the robot moved by ``velocity`` (its own frame, from
+    odometry; it does not turn), the beacons are taken to stand still (their own motion shows at the next sweep)."""
+    if not dt >= 0:
+        raise ValueError(f"dt must be >= 0, not {dt!r}")
+    shift = np.asarray(velocity, dtype=float) * dt
+    return {n: np.asarray(p, dtype=float) - shift for n, p in points.items()}
+
+
 def echo_points(ranges_m: np.ndarray, angles_rad: np.ndarray, robot_radius_m: float) -> np.ndarray:
     """The points (m, 2) the echoes came from, from the robot's centre; sensors without an echo (nan) give none."""
     ranges = np.asarray(ranges_m, dtype=float)
