@@ -5,16 +5,19 @@ The asyncio shell over ``surround_sensing`` (what the robot senses) and ``surrou
 beacon (robots and the human's) separately, 20 sweeps a second; its ultrasonic ring and wheel odometry
 come with its own-body sensors. No radio message is involved: the paper's swarm needs none.
 
-The law runs at its own rate, 50 Hz (``SurroundConfig.dt_s``, the paper's step), not at the 20 Hz of the
-beacon sweeps: between sweeps the beacons' points are dead-reckoned with the robot's own odometry (they
-are taken to stand still; their motion shows at the next sweep), and the echoes come fresh with the body
-sensors (25 Hz). Why: stepping the law only at each sweep (every 50 ms) made the swarm bounce (the
-repulsion Q / d^2 is stiff near contact, and a 50 ms step behind it oscillates): in a process-like
-simulation (the hub's world and beacon model, this driver's sensing) the corridor run had 35 contacts
-without any sensing noise at 20 Hz, 4-6 at 50 Hz with dead reckoning. The command goes out as
-(vx, vy, 0): the law assumes a fixed heading, so the robot never turns. A robot that gets no new sweep for
-``STALE_AFTER_S`` (alone, or the hub's sweeps stopped) forgets the beacons and steps on its echoes alone,
-so it still keeps off walls and slows to a stop rather than coasting on its last command.
+The law steps on every body-sensor sample (25 Hz: fresh odometry and echoes), with the model time
+between samples as dt, not only on the 20 Hz beacon sweeps: between sweeps the beacons' points are
+dead-reckoned with the robot's own odometry (they are taken to stand still; their motion shows at the
+next sweep). Why: stepping the law only at each sweep made the swarm bounce (the repulsion Q / d^2 is
+stiff near contact, and a 50 ms step behind it oscillates): in a process-like simulation (the hub's world
+and beacon model, this driver's sensing) the corridor had 35 contacts at 20 Hz without any sensing noise,
+about 5 with IR noise when stepped on every sensor sample. The law's own velocity is the fresh odometry
+of that sample. Stepping faster than odometry comes (at 50 Hz on the latest, often stale, sample) lost
+the velocity increments of the stale steps and the swarm never kept up with its human; stepping on the
+last command instead let the law's velocity drift from the real one (pushes, the drive's ramp) and the
+robots collided. The command goes out as (vx, vy, 0): the law assumes a fixed heading, so the robot never
+turns. A robot that gets no new sweep for ``STALE_AFTER_S`` (alone, or the hub's sweeps stopped) forgets
+the beacons and steps on its echoes alone, so it still keeps off walls and slows to a stop.
 
 The formation forms round a person: a robot holds still (sends no command) until it first sees the
 human's beacon, then runs the law from then on, whether it sees him or not (without him, f_G is zero and
@@ -40,8 +43,10 @@ from radio_hub.interface import HubUnavailable, IrConfig, OwnSensors, RadioClien
 
 STALE_AFTER_S = 0.2
 """Four sweep periods (the hub sweeps beacons at 20 Hz) without a new sweep: nothing is seen any more."""
-TELEMETRY_EVERY = 25
-"""Control steps between telemetry messages (2 Hz at 50 Hz, as the swarm driver's)."""
+SENSOR_PERIOD_S = 0.04
+"""The hub sends body sensors at 25 Hz: the first step's dt."""
+TELEMETRY_EVERY = 12
+"""Control steps between telemetry messages (about 2 Hz, as the swarm driver's)."""
 
 
 @dataclass(frozen=True)
@@ -77,7 +82,6 @@ class SurroundDriver:
         """True once the human's beacon was seen: the robot drives from then on."""
         self._sweep_t_us = 0
         self._sweep_at = -math.inf
-        self._last_step = time.monotonic()
 
     def tasks(self) -> list[Any]:
         """The coroutines the robot runs in surround mode."""
@@ -89,19 +93,22 @@ class SurroundDriver:
 
     async def _control_loop(self) -> None:
         await self._beacon_mode()
-        period = self.config.law.dt_s
+        fresh = asyncio.Event()
+        self.radio.on_sensors.append(lambda _sensors: fresh.set())
         tick = 0
         points: dict[str, np.ndarray] = {}
-        due = time.monotonic()
+        last_us: int | None = None
         while True:
-            # a fixed rate, not a fixed pause: the step's own time must not stretch the period
-            due = max(due + period, time.monotonic())
-            await asyncio.sleep(due - time.monotonic())
-            now = time.monotonic()
-            dt, self._last_step = now - self._last_step, now
+            await fresh.wait()
+            fresh.clear()
             sensors = self.radio.sensors
             if sensors is None:
-                continue  # no body sensors yet: the hub has not ticked the world for us
+                continue
+            dt = SENSOR_PERIOD_S if last_us is None else (sensors.t_us - last_us) / 1e6
+            last_us = sensors.t_us
+            if dt <= 0:
+                continue  # the hub restarted (its clock began again): wait for the next sample
+            now = time.monotonic()
             t_us, beacons = self.radio.beacons
             if t_us != self._sweep_t_us:
                 self._sweep_t_us, self._sweep_at = t_us, now
@@ -111,7 +118,7 @@ class SurroundDriver:
                 self.counters["stale_steps"] += 1
             else:
                 points = dead_reckon(points, np.array(sensors.odometry[:2]), dt)
-            self._step(points, sensors, max(dt, 1e-3))
+            self._step(points, sensors, dt)
             tick += 1
             if tick % TELEMETRY_EVERY == 0:
                 self._telemetry()
