@@ -3,8 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import json
 import math
 from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from petswarm.surround import SurroundConfig
 
 
 def int_auto(text: str) -> int:
@@ -57,3 +62,14 @@ def robot_id(text: str) -> int:
     if not 1 <= value <= 0xFFFD:
         raise argparse.ArgumentTypeError(f"robot id {value} is outside 1..65533 (it is the 16-bit short address)")
     return value
+
+
+def surround_config(text: str) -> SurroundConfig:
+    """A JSON object of surround law settings (``SurroundConfig`` fields; the others keep their defaults)."""
+    from petswarm.surround import SurroundConfig
+
+    try:
+        data = json.loads(text)
+        return SurroundConfig.from_dict(data)
+    except (json.JSONDecodeError, ValueError, TypeError) as err:
+        raise argparse.ArgumentTypeError(f"surround config {text!r}: {err}") from None

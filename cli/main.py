@@ -10,7 +10,7 @@ import signal
 import sys
 from typing import Any
 
-from cli.args import bounded, int_auto, position, robot_id, seed
+from cli.args import bounded, int_auto, position, robot_id, seed, surround_config
 
 EPILOG = """examples:
   petswarm run --robots 5 --duration 5          a hub and 5 robots pinging each other; prints a summary
@@ -156,6 +156,26 @@ def build_parser() -> argparse.ArgumentParser:
         choices=("paper", "slotted"),
         default="paper",
         help="organizing protocol when this robot is master (default paper)",
+    )
+    robot.add_argument(
+        "--formation",
+        choices=("swarm", "surround"),
+        default="swarm",
+        help="swarm: the leader-follower middleware; surround: the surround law on IR beacons and echoes "
+        "(default swarm)",
+    )
+    robot.add_argument(
+        "--surround-human",
+        default="user",
+        metavar="ID",
+        help="surround: node id of the human's IR beacon (default %(default)s)",
+    )
+    robot.add_argument(
+        "--surround-config",
+        type=surround_config,
+        default=None,
+        metavar="JSON",
+        help="surround: law settings as a JSON object, e.g. '{\"stiffness\": 8}' (default: the documented gains)",
     )
 
     swarm = sub.add_parser("swarm", help="ask a running robot to organize or disperse a swarm (the watch's requests)")
@@ -372,7 +392,7 @@ def _user(args: argparse.Namespace) -> int:
         print(f"petswarm user: {args.scenario} has no [user] table", file=sys.stderr)
         return 2
     duration = args.duration or scenario.duration_s
-    config = UserConfig(scenario.user, args.hub, args.world, duration, args.seed)
+    config = UserConfig(scenario.user, args.hub, args.world, duration, args.seed, beacon=scenario.surround_enabled)
     sink = open(args.record, "a") if args.record else None  # noqa: SIM115 (closed below)
     try:
         return asyncio.run(run_user(config, EventLog(sink=sink)))
@@ -386,6 +406,8 @@ def _robot(args: argparse.Namespace) -> int:
     from petswarm.formation import FormationConfig
     from petswarm.relative_location import TokenConfig
     from petswarm.robot import RobotConfig, run_robot
+    from petswarm.surround import SurroundConfig
+    from petswarm.surround_driver import SurroundDriverConfig
 
     timing = StepTiming(args.step_deadline, args.step_retries)
     formation = FormationConfig(protocol=args.protocol, step=timing, min_rssi_dbm=args.region_rssi)
@@ -405,6 +427,8 @@ def _robot(args: argparse.Namespace) -> int:
         ),
         heading_deg=args.heading,
         record=args.record,
+        formation_mode=args.formation,
+        surround=SurroundDriverConfig(law=args.surround_config or SurroundConfig(), human_id=args.surround_human),
     )
     return asyncio.run(run_robot(config))
 

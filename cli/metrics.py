@@ -21,6 +21,8 @@ REACTION_OMEGA_RPS = 0.3
 idle corrections (a few hundredths of a rad/s), well below a 60 deg/s user turn."""
 USER_TURN_RPS = 0.1
 REACTION_WINDOW_S = 5.0
+END_TICKS = 50
+"""The extent 'at the end' is its mean over the last 50 world ticks (1 s): one tick's r jitters with every push."""
 
 
 def read_world(path: str | Path) -> list[dict[str, Any]]:
@@ -66,6 +68,8 @@ def driving_metrics(world: list[dict[str, Any]], sight_m: float = 1.0) -> dict[s
         "reactions": reactions(world),
         "extent_m": _percentiles([r for _, r, _ in extents]),
         "connected_fraction": round(float(np.mean([c for _, _, c in extents])), 4) if extents else None,
+        "connected_at_end": bool(extents[-1][2]) if extents else None,
+        "extent_end_m": round(float(np.mean([r for _, r, _ in extents[-END_TICKS:]])), 4) if extents else None,
     }
 
 

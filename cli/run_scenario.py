@@ -10,6 +10,7 @@ collisions, swarm extent and connectivity) computed from the ground truth.
 
 from __future__ import annotations
 
+import json
 import time
 from dataclasses import replace
 from typing import Any
@@ -53,6 +54,7 @@ def _drive(ctx: RunContext, scenario: Scenario) -> dict[str, Any]:
     for rid, (x, y, heading) in enumerate(scenario.robot_poses, start=1):
         args = ["robot", "--id", str(rid), "--hub", endpoint, "--world", world, f"--pos={x},{y}"]
         args += ["--heading", str(heading), "--seed", str(opts.seed), "--protocol", opts.protocol]
+        args += _surround_args(scenario)
         ctx.sup.spawn(f"robot-{rid}", [*args, "--record", str(ctx.record.events_of(f"robot-{rid}"))])
     _wait_for_robots(ctx.sup, ctx.session, ctx.keys, scenario.robot_count, opts.startup_timeout)
     if scenario.user is not None:
@@ -66,6 +68,17 @@ def _drive(ctx: RunContext, scenario: Scenario) -> dict[str, Any]:
     summary.update(scenario=scenario.name, faults=timeline.applied, duration_s=scenario.duration_s)
     summary["ok"] = not summary["problems"]
     return summary
+
+
+def _surround_args(scenario: Scenario) -> list[str]:
+    """Robot flags for a surround scenario: the formation, the human's beacon id and the law's settings."""
+    if not scenario.surround_enabled:
+        return []
+    args = ["--formation", "surround"]
+    if scenario.user is not None:
+        args += ["--surround-human", scenario.user.node_id]
+    law = scenario.surround_law()
+    return [*args, "--surround-config", json.dumps(law)] if law else args
 
 
 def _follow(sup: Supervisor, session: zenoh.Session, keys: Keys, duration: float, timeline: FaultTimeline) -> None:

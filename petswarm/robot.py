@@ -28,6 +28,7 @@ from petswarm.messages import Blob, Ping, Pong, SwarmMessage
 from petswarm.relative_location import IrModuleManager, IrTokenSchedule, RelativeLocationManager, TokenConfig
 from petswarm.rf import Incoming, RfCommunicationManager
 from petswarm.sequence import EventLog, RobotState, SequenceManager, TransitionError
+from petswarm.surround_driver import SurroundDriver, SurroundDriverConfig
 from petswarm.user_link import robot_node
 from radio_hub.interface import (
     BROADCAST,
@@ -48,6 +49,9 @@ EXT_ADDR_BASE = 0x00124B0000000000
 COMMANDS = ("status", "ping", "send", "configure", "received", "organize", "disperse", "connect", "events", "stop")
 AUTO_ID = 0
 """``--id auto``: claim the lowest id no live robot of the world uses."""
+FORMATIONS = ("swarm", "surround")
+"""``swarm``: the leader-follower middleware (organize, token IR, master and slaves); ``surround``: every
+robot runs the surround law on its own beacons and echoes (spec/surround-swarm.md)."""
 _GRID_SPACING_M = 1.5
 _GRID_ROW = 5
 
@@ -82,6 +86,14 @@ class RobotConfig:
     """A JSON-lines file that gets every event as it happens (the run record)."""
     attach_timeout: float = 15.0
     """How long a robot waits for its hub at start (a hub started at the same moment needs a second)."""
+    formation_mode: str = "swarm"
+    """One of ``FORMATIONS``: which controller drives the robot."""
+    surround: SurroundDriverConfig = field(default_factory=SurroundDriverConfig)
+    """The surround law's gains and the human's beacon id (used in ``surround`` mode)."""
+
+    def __post_init__(self) -> None:
+        if self.formation_mode not in FORMATIONS:
+            raise ValueError(f"formation_mode must be one of {FORMATIONS}, not {self.formation_mode!r}")
 
     def identity(self) -> RadioIdentity:
         """The robot's radio at start-up: short address = robot id."""
@@ -127,6 +139,9 @@ class Robot:
         )
 
         self.driver = Driver(config.robot_id, self.rf, self.sequence, self.formation, self.locations, self.log)
+        self.surround = (
+            SurroundDriver(radio, self.ir, self.log, config.surround) if config.formation_mode == "surround" else None
+        )
         radio.on_reattach.append(self._reattached)
         self.log.record(
             "start", robot_id=config.robot_id, state=self.sequence.state.label, user=config.user, seed=config.seed
@@ -153,7 +168,7 @@ class Robot:
                 self.formation.watch(),
                 self.ir.run(),
                 self.schedule.watch(),
-                *self.driver.tasks(),
+                *(self.driver.tasks() if self.surround is None else self.surround.tasks()),
             )
         ]
         if self.config.ping_interval > 0:
@@ -370,6 +385,7 @@ class Robot:
                 **self.driver.counters,
             },
             "relative_location": self.locations.snapshot(),
+            "surround": None if self.surround is None else self.surround.status(),
         }
 
 

@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from petswarm.motion import wrap
+from petswarm.surround import SurroundConfig
 
 REQUESTS = ("follow", "lead", "remote", "cancel", "organize", "disperse", "mode", "return", "gesture")
 """Watch requests: select a main operation, cancel it, organize/disperse a swarm, change driving mode,
@@ -125,6 +126,15 @@ class Scenario:
     surround: dict[str, Any] = field(default_factory=dict)
     raw: dict[str, Any] = field(default_factory=dict)
 
+    @property
+    def surround_enabled(self) -> bool:
+        """True when the robots run the surround formation (and the user wears an IR beacon)."""
+        return bool(self.surround.get("enabled", False))
+
+    def surround_law(self) -> dict[str, Any]:
+        """The ``[surround]`` table's law settings (``SurroundConfig`` fields), ``enabled`` left out."""
+        return {k: v for k, v in self.surround.items() if k != "enabled"}
+
     def hub_tables(self) -> dict[str, Any]:
         """The hub's config tables with the obstacles, as ``radio_hub.hub.environment_from_dict`` takes them."""
         return {**self.hub, "obstacles": self.obstacles}
@@ -171,9 +181,20 @@ def parse(data: dict[str, Any], path: Path | None = None) -> Scenario:
         robot_poses=poses[:count],
         formation=str(robots.get("formation", "column")),
         faults=list(data.get("faults", [])),
-        surround=dict(data.get("surround", {})),
+        surround=_surround(data.get("surround", {})),
         raw=data,
     )
+
+
+def _surround(table: Any) -> dict[str, Any]:
+    """``[surround]``: ``enabled`` and any ``SurroundConfig`` field (the law's gains), checked here."""
+    if not isinstance(table, dict):
+        raise ValueError("surround must be a table")
+    enabled = table.get("enabled", False)
+    if not isinstance(enabled, bool):
+        raise ValueError(f"surround.enabled must be true or false, not {enabled!r}")
+    SurroundConfig.from_dict({k: v for k, v in table.items() if k != "enabled"})  # raises naming the key
+    return dict(table)
 
 
 def _user(table: dict[str, Any]) -> UserPlan:

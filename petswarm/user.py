@@ -43,6 +43,8 @@ class UserConfig:
     world: str
     duration_s: float
     seed: int = 0
+    beacon: bool = False
+    """The person wears an IR beacon (surround scenarios): the surround robots see him by it."""
 
 
 class User:
@@ -65,6 +67,15 @@ class User:
         self._pairs: dict[int, dict[str, float]] = {}
         self._t0 = 0.0
         self._rotation_reported: float | None = None
+        self._beacon_task: asyncio.Task[None] | None = None
+
+    async def wear_beacon(self) -> None:
+        """Switch the IR module to beacon mode, and again after a restarted hub (it forgets IR modes)."""
+        await self.client.set_ir_mode("beacon")
+        self.client.on_reattach.append(self._beacon_again)
+
+    def _beacon_again(self) -> None:
+        self._beacon_task = asyncio.get_running_loop().create_task(self.client.set_ir_mode("beacon"))
 
     def now(self) -> float:
         """Seconds since the user process started its scenario."""
@@ -73,7 +84,9 @@ class User:
     async def run(self) -> None:
         """Walk, listen and request until the scenario's duration is over."""
         self._t0 = asyncio.get_running_loop().time()
-        self.log.record("start", role="user", owner=self.owner, turns_at=self.plan.turn_starts())
+        self.log.record(
+            "start", role="user", owner=self.owner, turns_at=self.plan.turn_starts(), beacon=self.config.beacon
+        )
         tasks = [
             asyncio.create_task(self._walk()),
             asyncio.create_task(self._belt_lf()),
@@ -184,6 +197,13 @@ async def run_user(config: UserConfig, log: EventLog, attach_timeout: float = 15
             print(f"user: {err}", file=sys.stderr)
             return 2
     user = User(config, client, log)
+    if config.beacon:
+        try:
+            await user.wear_beacon()
+        except (HubUnavailable, RadioError) as err:
+            print(f"user: cannot switch on the IR beacon: {err}", file=sys.stderr)
+            await client.close()
+            return 2
     print(f"user {plan.node_id}: walking (owner robot {plan.owner})", file=sys.stderr, flush=True)
     try:
         await user.run()

@@ -1,0 +1,125 @@
+"""What a surround robot senses, in its own frame: neighbours and the human from IR beacons, obstacles from
+ultrasonic echoes. Pure: readings in, points out (the robot process's ``surround_driver`` is the shell).
+
+- Every beacon the IR module demodulates (one sweep of 12 readings per source) goes through the IR
+  estimator (``ir_estimator.estimate_many``) to a distance and bearing, hence a point (x forward, y left).
+  The human's beacon (his node id) gives the human G; every other beacon is a neighbour robot.
+- The human is an obstacle too (the spec: keep him out of collisions): his obstacle point is the surface
+  of his body facing the robot, his estimated centre brought ``person_radius_m`` closer, as the
+  simulation (``surround_sim``) senses him.
+- An ultrasonic echo at range r (measured from the robot's skin) on the sensor at angle a is the point
+  (robot_radius + r) (cos a, sin a) from the robot's centre: where the echo came from.
+- Echoes also come off neighbours and the human, who are already in the law (a neighbour as its centre,
+  the human as his surface point). Counting them again would double their repulsion, and only when they
+  happen to sit in one of the eight cones, so an echo that lies within a beacon's body (its radius plus
+  ``echo_match_m``) is dropped as explained by that beacon. What is left is walls and other obstacles.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from petswarm.ir_estimator import estimate_many
+from radio_hub.light import IrConfig
+
+
+@dataclass(frozen=True)
+class SensingConfig:
+    """The robot's knowledge of bodies around it, used to read its sensors.
+
+    - ``robot_radius_m`` 0.1: the surround paper's robots (a neighbour's body is taken to be as big as one's own).
+    - ``person_radius_m`` 0.25: a person seen from above, shoulders included (the world's default user disc);
+      a smaller guess would let robots brush him, a larger one only keeps them a little further off.
+    - ``echo_match_m`` 0.1: slack on a beacon's body when deciding an echo came off it: the IR estimate's
+      distance error (about 1-3 % out to 1 m, a few cm) and the cone's 15 degree half width (an echo from
+      the side of a robot 0.3 m away reads up to ~4 cm off its surface), with margin.
+    """
+
+    robot_radius_m: float = 0.1
+    person_radius_m: float = 0.25
+    echo_match_m: float = 0.1
+
+    def __post_init__(self) -> None:
+        for name in ("robot_radius_m", "person_radius_m", "echo_match_m"):
+            value = getattr(self, name)
+            if not isinstance(value, int | float) or not np.isfinite(value) or value < 0:
+                raise ValueError(f"{name} must be a finite number >= 0, not {value!r}")
+
+
+@dataclass(frozen=True)
+class SurroundSensing:
+    """One control step's view, in the robot's frame: neighbour centres (k, 2), obstacle points (m, 2) (echoes
+    not explained by a beacon, and the human's body), and the human's centre (None when his beacon is unseen)."""
+
+    neighbours: np.ndarray
+    obstacles: np.ndarray
+    human: np.ndarray | None
+    echoes_dropped: int = 0
+    """Echoes taken to come off a neighbour or the human."""
+
+
+def beacon_points(beacons: dict[str, np.ndarray], ir: IrConfig, method: str = "lsq") -> dict[str, np.ndarray]:
+    """Each visible beacon's estimated position (2,) in the robot's frame; sources without signal are left out."""
+    if not beacons:
+        return {}
+    names = list(beacons)
+    readings = np.stack([np.asarray(beacons[n], dtype=float) for n in names])
+    found = estimate_many(readings, ir, method)
+    points = np.stack([np.cos(found.bearing_rad), np.sin(found.bearing_rad)], axis=1) * found.distance_m[:, None]
+    return {n: points[i] for i, n in enumerate(names) if found.valid[i]}
+
+
+def dead_reckon(points: dict[str, np.ndarray], velocity: np.ndarray, dt: float) -> dict[str, np.ndarray]:
+    """Beacon points ``dt`` seconds on, between sweeps: the robot moved by ``velocity`` (its own frame, from
+    odometry; it does not turn), the beacons are taken to stand still (their own motion shows at the next sweep)."""
+    if not dt >= 0:
+        raise ValueError(f"dt must be >= 0, not {dt!r}")
+    shift = np.asarray(velocity, dtype=float) * dt
+    return {n: np.asarray(p, dtype=float) - shift for n, p in points.items()}
+
+
+def echo_points(ranges_m: np.ndarray, angles_rad: np.ndarray, robot_radius_m: float) -> np.ndarray:
+    """The points (m, 2) the echoes came from, from the robot's centre; sensors without an echo (nan) give none."""
+    ranges = np.asarray(ranges_m, dtype=float)
+    angles = np.asarray(angles_rad, dtype=float)
+    if ranges.shape != angles.shape:
+        raise ValueError(f"ranges_m {ranges.shape} and angles_rad {angles.shape} must match")
+    heard = np.isfinite(ranges)
+    reach = robot_radius_m + ranges[heard]
+    return np.stack([np.cos(angles[heard]), np.sin(angles[heard])], axis=1) * reach[:, None]
+
+
+def sense(
+    beacon_xy: dict[str, np.ndarray],
+    echoes: np.ndarray,
+    human_id: str,
+    config: SensingConfig,
+) -> SurroundSensing:
+    """Sort beacons into neighbours and the human, add the human's body to the obstacles, and drop the echoes
+    that a beacon explains."""
+    human = beacon_xy.get(human_id)
+    others = [np.asarray(p, dtype=float) for n, p in beacon_xy.items() if n != human_id]
+    neighbours = np.array(others, dtype=float).reshape(-1, 2)
+    echoes = np.asarray(echoes, dtype=float).reshape(-1, 2)
+    bodies = [(p, config.robot_radius_m) for p in neighbours]
+    if human is not None:
+        bodies.append((np.asarray(human, dtype=float), config.person_radius_m))
+    explained = np.zeros(len(echoes), dtype=bool)
+    for centre, radius in bodies:
+        explained |= np.linalg.norm(echoes - centre, axis=1) <= radius + config.echo_match_m
+    obstacles = [echoes[~explained]]
+    if human is not None:
+        obstacles.append(_surface_toward_me(np.asarray(human, dtype=float), config.person_radius_m)[None])
+    return SurroundSensing(neighbours, np.concatenate(obstacles), human, int(explained.sum()))
+
+
+def _surface_toward_me(centre: np.ndarray, radius: float) -> np.ndarray:
+    """The point of a disc's surface nearest the robot; a centre estimated inside the disc's radius (the robot
+    pressed against him, or a short estimate) puts it a hair in front of the robot, pushing straight away."""
+    distance = float(np.linalg.norm(centre))
+    if distance <= 1e-9:
+        return np.zeros(2)
+    reach = max(distance - radius, 0.01)
+    return centre * (reach / distance)

@@ -1,0 +1,88 @@
+"""The surround robot's sensing: beacons through the IR estimator, echoes to points, echoes a beacon explains."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from petswarm.surround_sensing import SensingConfig, beacon_points, dead_reckon, echo_points, sense
+from radio_hub.light import IrConfig, receiver_gains, strength_at
+from radio_hub.light import sense as light_sense
+
+
+def _sweep(x: float, y: float, config: IrConfig, rng: np.random.Generator) -> np.ndarray:
+    """One beacon's 12 readings at (x, y) in the receiving robot's frame, from the hub's light model."""
+    distance = math.hypot(x, y)
+    light = strength_at(np.array([distance]), config)[:, None] * receiver_gains(np.array([math.atan2(y, x)]))
+    return light_sense(light, config, rng)[0]
+
+
+def test_beacons_become_points_in_the_robots_frame_within_the_ir_noise() -> None:
+    config = IrConfig()
+    rng = np.random.default_rng(3)
+    truth = {"robot-2": (0.4, 0.3), "user": (-0.6, -0.2), "robot-9": (0.1, -0.9)}
+    points = beacon_points({n: _sweep(*p, config, rng) for n, p in truth.items()}, config)
+    assert set(points) == set(truth)
+    for name, (x, y) in truth.items():
+        assert np.linalg.norm(points[name] - (x, y)) < 0.05, (name, points[name])
+
+
+def test_a_source_below_the_detection_threshold_gives_no_point() -> None:
+    config = IrConfig()
+    dark = np.full(12, config.ambient_counts)
+    assert beacon_points({"robot-3": dark}, config) == {}
+
+
+def test_an_echo_is_the_point_it_came_from_measured_from_the_robots_centre() -> None:
+    points = echo_points(np.array([0.3, np.nan, 0.1]), np.radians([0.0, 45.0, 90.0]), robot_radius_m=0.1)
+    assert np.allclose(points, [[0.4, 0.0], [0.0, 0.2]])
+    with pytest.raises(ValueError, match="must match"):
+        echo_points(np.zeros(3), np.zeros(2), 0.1)
+
+
+def test_echoes_off_a_neighbour_or_the_human_are_dropped_and_a_wall_is_kept() -> None:
+    beacons = {"robot-2": np.array([0.5, 0.0]), "user": np.array([0.0, 0.6])}
+    echoes = np.array([[0.42, 0.0], [0.0, 0.33], [0.0, -0.35]])  # robot-2's skin, the human's body, a wall
+    seen = sense(beacons, echoes, "user", SensingConfig())
+    assert np.allclose(seen.neighbours, [[0.5, 0.0]])
+    assert seen.human is not None and np.allclose(seen.human, [0.0, 0.6])
+    assert seen.echoes_dropped == 2
+    # the wall's echo, and the human's body surface (his centre brought 0.25 m closer)
+    assert np.allclose(seen.obstacles, [[0.0, -0.35], [0.0, 0.35]])
+
+
+def test_without_the_humans_beacon_there_is_no_human_and_no_body_point() -> None:
+    seen = sense({"robot-4": np.array([0.0, -0.7])}, np.zeros((0, 2)), "user", SensingConfig())
+    assert seen.human is None and len(seen.obstacles) == 0 and len(seen.neighbours) == 1
+
+
+def test_a_human_estimated_inside_his_own_radius_still_pushes_straight_away() -> None:
+    seen = sense({"user": np.array([0.2, 0.0])}, np.zeros((0, 2)), "user", SensingConfig())
+    [point] = seen.obstacles
+    assert point[0] > 0 and abs(point[1]) < 1e-12 and np.linalg.norm(point) < 0.05
+
+
+def test_dead_reckoning_moves_still_beacons_against_the_robots_own_motion() -> None:
+    moved = dead_reckon({"robot-2": np.array([1.0, 0.0])}, np.array([0.5, -0.25]), 0.04)
+    assert np.allclose(moved["robot-2"], [0.98, 0.01])
+    with pytest.raises(ValueError, match="dt"):
+        dead_reckon({}, np.zeros(2), -1.0)
+
+
+def test_bad_settings_are_refused_naming_the_field() -> None:
+    with pytest.raises(ValueError, match="person_radius_m"):
+        SensingConfig(person_radius_m=-0.1)
+
+
+def test_a_scenarios_surround_table_is_checked_and_passes_the_law_settings() -> None:
+    from petswarm.scenario import parse
+
+    scenario = parse({"surround": {"enabled": True, "drag": 0.6}})
+    assert scenario.surround_enabled and scenario.surround_law() == {"drag": 0.6}
+    assert not parse({}).surround_enabled
+    with pytest.raises(ValueError, match="unknown keys"):
+        parse({"surround": {"enabled": True, "stifness": 8}})
+    with pytest.raises(ValueError, match=r"surround\.enabled"):
+        parse({"surround": {"enabled": "yes"}})
