@@ -44,6 +44,8 @@ def driving_metrics(world: list[dict[str, Any]], sight_m: float = 1.0) -> dict[s
     errors: dict[str, list[tuple[float, float]]] = {}
     user_master: list[tuple[float, float]] = []
     extents: list[tuple[float, float, bool]] = []
+    centre_to_user: list[float] = []
+    """How far the swarm's centre is from the user: a surrounding swarm keeps it small."""
     for tick in world:
         t = tick["t_us"] / 1e6
         bodies = {b["id"]: b for b in tick["bodies"]}
@@ -57,6 +59,8 @@ def driving_metrics(world: list[dict[str, Any]], sight_m: float = 1.0) -> dict[s
         robots = np.array([(b["x"], b["y"]) for b in bodies.values() if b["kind"] == "robot"]).reshape(-1, 2)
         if len(robots) > 1:
             extents.append((t, swarm_extent(robots), is_connected(robots, sight_m)))
+            if user is not None:
+                centre_to_user.append(float(np.hypot(*(robots.mean(axis=0) - (user["x"], user["y"])))))
     return {
         "ticks": len(world),
         "duration_s": round((world[-1]["t_us"] - world[0]["t_us"]) / 1e6, 2),
@@ -69,6 +73,8 @@ def driving_metrics(world: list[dict[str, Any]], sight_m: float = 1.0) -> dict[s
         "extent_m": _percentiles([r for _, r, _ in extents]),
         "connected_fraction": round(float(np.mean([c for _, _, c in extents])), 4) if extents else None,
         "connected_at_end": bool(extents[-1][2]) if extents else None,
+        "centre_to_user_m": _percentiles(centre_to_user),
+        "centre_to_user_end_m": round(centre_to_user[-1], 3) if centre_to_user else None,
         "extent_end_m": round(float(np.mean([r for _, r, _ in extents[-END_TICKS:]])), 4) if extents else None,
     }
 

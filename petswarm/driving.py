@@ -118,7 +118,7 @@ class Driver:
         self.drive_state: m.DriveState | None = None
         self.drive_state_at = -math.inf
         self.tracker = RelativeTracker()
-        self._echoes: deque[OwnSensors] = deque(maxlen=6)
+        self._echoes = EchoRanges()
         self.opening_rate: float | None = None
         """How fast the LF distance to the user grows (m/s, smoothed over fixes)."""
         self.turn_to: float | None = None
@@ -429,28 +429,7 @@ class Driver:
 
     def _ranges(self) -> Ranges:
         sensors: OwnSensors | None = self.radio.sensors
-        if sensors is None:
-            return Ranges()
-        readings = tuple(
-            (float(a), None if math.isnan(r) else float(r))
-            for a, r in zip(sensors.angles_rad, sensors.ranges_m, strict=True)
-        )
-        return Ranges(readings, receding_mps=self._receding(sensors))
-
-    def _receding(self, sensors: OwnSensors) -> tuple[float, ...]:
-        """How fast each echo moves away along its beam: its range rate over the last ~0.2 s (one 25 Hz
-        step would turn 1 cm of ranging noise into 0.35 m/s) plus the robot's own speed along the beam."""
-        history = self._echoes
-        if not history or history[-1].t_us != sensors.t_us:
-            history.append(sensors)
-        oldest = history[0]
-        dt = (sensors.t_us - oldest.t_us) / 1e6
-        if dt < 0.1 or len(oldest.ranges_m) != len(sensors.ranges_m):
-            return ()
-        rates = (sensors.ranges_m - oldest.ranges_m) / dt
-        vx, vy, _ = sensors.odometry
-        own = vx * np.cos(sensors.angles_rad) + vy * np.sin(sensors.angles_rad)
-        return tuple(0.0 if math.isnan(r) else float(r + o) for r, o in zip(rates, own, strict=True))
+        return Ranges() if sensors is None else self._echoes.ranges(sensors)
 
     # -- the swarm -------------------------------------------------------------------------------
 
@@ -572,3 +551,33 @@ class Driver:
             self.radio.telemetry(state.label, role, master, slot, str(self.mode))
         except Exception as err:  # telemetry is for viewers: never let it stop the controller
             self.log.record("error", where="telemetry", error=str(err))
+
+
+class EchoRanges:
+    """The ultrasonic ring as the safety stage reads it: each echo's range and how fast it moves away."""
+
+    def __init__(self) -> None:
+        self._history: deque[OwnSensors] = deque(maxlen=6)
+
+    def ranges(self, sensors: OwnSensors) -> Ranges:
+        """The latest readings (nan = no echo) with their receding speeds."""
+        readings = tuple(
+            (float(a), None if math.isnan(r) else float(r))
+            for a, r in zip(sensors.angles_rad, sensors.ranges_m, strict=True)
+        )
+        return Ranges(readings, receding_mps=self._receding(sensors))
+
+    def _receding(self, sensors: OwnSensors) -> tuple[float, ...]:
+        """Each echo's range rate over the last ~0.2 s (one 25 Hz step would turn 1 cm of ranging noise
+        into 0.35 m/s) plus the robot's own speed along the beam."""
+        history = self._history
+        if not history or history[-1].t_us != sensors.t_us:
+            history.append(sensors)
+        oldest = history[0]
+        dt = (sensors.t_us - oldest.t_us) / 1e6
+        if dt < 0.1 or len(oldest.ranges_m) != len(sensors.ranges_m):
+            return ()
+        rates = (sensors.ranges_m - oldest.ranges_m) / dt
+        vx, vy, _ = sensors.odometry
+        own = vx * np.cos(sensors.angles_rad) + vy * np.sin(sensors.angles_rad)
+        return tuple(0.0 if math.isnan(r) else float(r + o) for r, o in zip(rates, own, strict=True))

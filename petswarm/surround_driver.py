@@ -35,6 +35,9 @@ from typing import Any
 
 import numpy as np
 
+from petswarm.driving import EchoRanges
+from petswarm.motion import DriveLimits, MotorCommand
+from petswarm.pet_controller import PetControllerConfig, safety
 from petswarm.relative_location import IrModuleManager
 from petswarm.sequence import EventLog
 from petswarm.surround import SurroundConfig, SurroundController
@@ -47,6 +50,11 @@ SENSOR_PERIOD_S = 0.04
 """The hub sends body sensors at 25 Hz: the first step's dt."""
 TELEMETRY_EVERY = 12
 """Control steps between telemetry messages (about 2 Hz, as the swarm driver's)."""
+
+
+SAFETY = PetControllerConfig(stop_distance_m=0.04, limits=DriveLimits(max_speed=1.5, max_omega=1.5))
+"""The safety stage for a swarm packed a few cm apart: stop 4 cm short (the Pet-Bot's 25 cm would freeze it).
+Measured (corridor, seed 1): contacts 21 without it, 1 with it; 2 cm with a harder brake gave 9."""
 
 
 @dataclass(frozen=True)
@@ -77,6 +85,7 @@ class SurroundDriver:
         self.config = config
         self.controller = SurroundController(config.law)
         self.command = np.zeros(2)
+        self._echoes = EchoRanges()
         self.counters = {"steps": 0, "stale_steps": 0, "human_seen": 0, "echoes_dropped": 0, "beacons": 0}
         self.engaged = False
         """True once the human's beacon was seen: the robot drives from then on."""
@@ -144,7 +153,10 @@ class SurroundDriver:
             self.engaged = True
             self.log.record("surround_engaged", beacons=len(points))
         velocity = np.array(sensors.odometry[:2], dtype=float)
-        self.command = self.controller.step(seen.neighbours, seen.obstacles, seen.human, velocity, dt)
+        wanted = self.controller.step(seen.neighbours, seen.obstacles, seen.human, velocity, dt)
+        # the law's repulsion acts on IR estimates a sweep old; the ultrasonic ring is the last word
+        safe = safety(MotorCommand(float(wanted[0]), float(wanted[1]), 0.0), self._echoes.ranges(sensors), SAFETY)
+        self.command = np.array([safe.vx, safe.vy])
         self.radio.drive(float(self.command[0]), float(self.command[1]), 0.0)
         self.counters["steps"] += 1
         self.counters["human_seen"] += seen.human is not None
