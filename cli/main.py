@@ -301,6 +301,11 @@ def build_parser() -> argparse.ArgumentParser:
     from cli.bench_ir import add_arguments as add_bench_ir_arguments
 
     add_bench_ir_arguments(bench_sub.add_parser("ir", help="IR relative-location accuracy per estimator"))
+    from cli.bench_reaction import add_arguments as add_bench_reaction_arguments
+
+    add_bench_reaction_arguments(
+        bench_sub.add_parser("reaction", help="reaction time of master and slaves to the user's rotation (CDFs)")
+    )
     return parser
 
 
@@ -520,6 +525,10 @@ def _bench(args: argparse.Namespace) -> int:
         from cli.bench_ir import bench_ir
 
         return bench_ir(args)
+    if args.bench == "reaction":
+        from cli.bench_reaction import bench_reaction
+
+        return bench_reaction(args)
     if args.bench == "organize":
         from cli.bench_organize import bench_organize
 
