@@ -30,11 +30,19 @@ from petswarm import messages as m
 from petswarm import user_link
 from petswarm.activity import Activity, Movement
 from petswarm.formation import FormationError, NetworkFormation
-from petswarm.formation_shapes import Mode, mode_change, neighbours, slots
+from petswarm.formation_shapes import (
+    STANDARD_DISTANCE_M,
+    Mode,
+    handover_chain,
+    kept_slots,
+    mode_change,
+    neighbours,
+    slots,
+)
 from petswarm.formation_shapes import master_target_distance as formation_distance
 from petswarm.gestures import Gesture, combine
 from petswarm.lf_location import UserFix, locate
-from petswarm.motion import MotorCommand, wrap
+from petswarm.motion import MotorCommand, Vec, wrap
 from petswarm.pet_controller import PetControllerConfig, Ranges, UserObservation, follow, lead, obstacle_ahead, safety
 from petswarm.relative_location import RelativeLocationManager
 from petswarm.rf import Incoming, RfCommunicationManager
@@ -112,6 +120,10 @@ class Driver:
         self.shape = self.config.shape
         self.spacing = self.config.spacing_m
         self.mirrored = False
+        self.kept: dict[int, Vec] | None = None
+        """After a master handover (Table 3, Change): every robot's slot by short address in the current
+        master's frame, each robot having kept its place. None: the references are the shape's slots."""
+        self._announce_on_fix = False
         self.exception_from: RobotState | None = None
         self.remote = MotorCommand()
         self.remote_until = 0.0
@@ -207,6 +219,9 @@ class Driver:
         else:
             self.opening_rate = None
         self.fix, self.fix_at = fix, now
+        if self._announce_on_fix:  # a new master's first fix: the belt has re-paired with us by now
+            self._announce_on_fix = False
+            self._tell_owner()
 
     def _user_behind(self) -> bool:
         # leading: the user walks behind the robot (front/back is ambiguous for LF)
@@ -260,27 +275,36 @@ class Driver:
         self.remote_until = time.monotonic() + REMOTE_HOLD_S
 
     def _change_mode(self, mode: Mode, change_master: bool) -> None:
-        """Table 3 as the master applies it. The master keeps its role (the No-change column): handing the
-        master's duties to another robot is not built, so a requested change is recorded and answered as
-        No change."""
+        """Table 3 as the master applies it. No change: the master keeps its role and the slots are mirrored
+        to its other side. Change (``change_master``): the robot ``mode_change`` chooses takes the master's
+        role (``_hand_over``) and every robot keeps its place; when Table 3 chooses the master itself, or the
+        handover fails, the No-change column applies."""
         if mode == self.mode:
             return
         self._start_turn_about()
         swarm = self.formation.swarm
         if self.sequence.state == RobotState.MASTER_DRIVING and swarm is not None:
-            members = list(range(len(swarm.members) + 1))
-            layout = slots(self.shape, len(members), self.spacing)
-            distances = {k: 1.0 + abs(layout[k][0]) for k in members}
+            chain = (swarm.master, *swarm.members)
+            layout = self._reference(chain, self.shape, self.spacing, self.mirrored, self.kept is not None)
+            members = list(range(len(chain)))
+            distances = self._user_distances(layout)
             outcome = mode_change(self.mode, mode, change_master, members, distances, layout)
+            handing_over = change_master and outcome.new_master != 0
             self.log.record(
                 "mode_change",
                 frm=str(self.mode),
                 to=str(mode),
                 change_master_requested=change_master,
                 table3_master=outcome.new_master,
-                applied="no-change",
+                distances={str(chain[k]): round(d, 3) for k, d in distances.items()},
+                applied="change" if handing_over else "no-change",
             )
-            self.mirrored = not self.mirrored
+            if handing_over:
+                kept = kept_slots(dict(zip(chain, layout, strict=True)), chain[outcome.new_master])
+                new_chain = handover_chain(kept, chain[outcome.new_master])
+                asyncio.get_running_loop().create_task(self._hand_over(new_chain, mode))
+            else:
+                self.mirrored = not self.mirrored
             # dispersing restores the driving state the user has now chosen, not the one before the swarm
             self.sequence.previous_driving = RobotState.LEADING if mode == Mode.LEADING else RobotState.FOLLOWING
         else:
@@ -289,6 +313,64 @@ class Driver:
             if self.sequence.state in (RobotState.FOLLOWING, RobotState.LEADING):
                 self.sequence.transition(target, cause="mode")
         self.mode = mode
+
+    def _user_distances(self, layout: list[Vec]) -> dict[int, float]:
+        """Each robot's distance to the user as the master estimates it: its slot in the master's frame
+        against the user's position from the master's LF fix. The master has no fix of its slaves (IR fixes
+        are each measuring robot's own), so it takes them at their slots; without an LF fix, the user is at
+        the standard distance ahead (following) or behind (leading)."""
+        if self.fix is not None:
+            ux, uy = self.fix.forward_m, self.fix.left_m
+        else:
+            ux, uy = (STANDARD_DISTANCE_M if self.mode == Mode.FOLLOWING else -STANDARD_DISTANCE_M), 0.0
+        return {k: math.hypot(x - ux, y - uy) for k, (x, y) in enumerate(layout)}
+
+    async def _hand_over(self, chain: tuple[int, ...], mode: Mode) -> None:
+        """The old master's side of Table 3's Change column; the formation does the radio part and calls
+        ``on_handover`` back once the new master has accepted."""
+        owner = self.owner or ""
+        flags = int(self.mirrored), int(self.kept is not None)
+        try:
+            done = await self.formation.hand_over(chain, str(mode), self.shape, self.spacing, *flags, owner)
+        except (FormationError, RadioError, HubUnavailable, TransitionError) as err:
+            self.log.record("handover_refused", error=f"{type(err).__name__}: {err}")
+            done = False
+        if not done and self.sequence.state == RobotState.MASTER_DRIVING:
+            self.mirrored = not self.mirrored  # the master keeps its role: Table 3's No-change column
+            self.log.record("mode_change_fallback", applied="no-change")
+
+    def on_handover(self, old_chain: tuple[int, ...], msg: m.MasterHandover | None) -> None:
+        """The master's role moved (formation's callback): turn every slot into the new master's frame, each
+        robot keeping its place; the new master takes the owner and the mode, the old one gives them up and
+        re-pairs the user's belt with the new master (over BLE: the project's choice, the paper has none)."""
+        swarm = self.formation.swarm
+        if swarm is None:
+            return
+        ds = self.drive_state
+        if msg is not None:
+            shape, spacing, mirrored, kept = msg.shape, msg.spacing, bool(msg.mirrored), bool(msg.kept)
+        elif ds is not None:
+            shape, spacing, mirrored, kept = ds.shape, ds.spacing, bool(ds.mirrored), bool(ds.kept)
+        else:
+            shape, spacing, mirrored, kept = self.shape, self.spacing, self.mirrored, self.kept is not None
+        old = dict(zip(old_chain, self._reference(old_chain, shape, spacing, mirrored, kept), strict=True))
+        self.kept = kept_slots(old, swarm.master)
+        self.mirrored = False
+        self.shape, self.spacing = shape, spacing
+        self.tracker, self._fix_seen, self.drive_state = RelativeTracker(), None, None
+        if msg is not None:
+            self.mode = Mode(msg.mode)
+        if swarm.number == 0 and msg is not None:
+            self.owner = msg.owner or None
+            self.formation.user = zlib.crc32(msg.owner.encode()) & 0xFFFF or 1
+            self.fix, self.opening_rate, self.exception_from = None, None, None
+            self._start_turn_about()
+            self._announce_on_fix = True
+            self._tell_owner()
+        elif swarm.number and self.owner is not None:
+            self.radio.ble_send(self.owner, user_link.encode("pair", robot=swarm.master))
+            self.log.record("owner_handed_over", owner=self.owner, to=swarm.master)
+            self.owner, self.fix, self.turn_to, self.exception_from = None, None, None, None
 
     def _start_turn_about(self) -> None:
         """Following and leading face opposite ways relative to the user: a mode change that comes with
@@ -314,6 +396,7 @@ class Driver:
         return MotorCommand(0.0, 0.0, max(-limit, min(limit, TURN_GAIN * error)))
 
     async def _organize(self, count: int) -> None:
+        self.kept = None
         try:
             result = await self.formation.organize(count)
             self.log.record("watch_organized", members=result.get("members"))
@@ -326,7 +409,7 @@ class Driver:
             await self.formation.disperse()
         except (FormationError, RadioError, HubUnavailable, TransitionError) as err:
             self.log.record("watch_disperse_failed", error=str(err))
-        self.mirrored = False
+        self.mirrored, self.kept = False, None
         self._tell_owner()
 
     def _tell_owner(self) -> None:
@@ -419,13 +502,18 @@ class Driver:
 
     def _target_distance(self) -> float:
         swarm = self.formation.swarm
-        count = 1 if swarm is None else len(swarm.members) + 1
-        layout = self._layout(count)
+        chain = (self.formation.me,) if swarm is None else (swarm.master, *swarm.members)
+        layout = self._reference(chain, self.shape, self.spacing, self.mirrored, self.kept is not None)
         return formation_distance(self.mode, layout)
 
-    def _layout(self, count: int) -> list[tuple[float, float]]:
-        layout = slots(self.shape, count, self.spacing)
-        return [(-x, y) for x, y in layout] if self.mirrored else layout
+    def _reference(self, chain: tuple[int, ...], shape: str, spacing: float, mirrored: bool, kept: bool) -> list[Vec]:
+        """Every robot's slot in the master's frame, by member number: the robots' kept places after a
+        handover (when this robot knows them all), else the shape's slots; mirrored by No-change."""
+        if kept and self.kept is not None and all(a in self.kept for a in chain):
+            layout = [self.kept[a] for a in chain]
+        else:
+            layout = slots(shape, len(chain), spacing)
+        return [(-x, y) for x, y in layout] if mirrored else layout
 
     def _ranges(self) -> Ranges:
         sensors: OwnSensors | None = self.radio.sensors
@@ -459,6 +547,7 @@ class Driver:
                 0.0 if fix is None else fix.forward_m,
                 0.0 if fix is None else fix.left_m,
                 int(self.mirrored),
+                int(self.kept is not None),
             )
             try:
                 await self.rf.send(BROADCAST, state, ack=False)
@@ -505,16 +594,11 @@ class Driver:
         if self.tracker.pose is None:
             return MotorCommand()
         pose = (self.tracker.pose[0], self.tracker.pose[1], heading_rel)
-        count = len(swarm.members) + 1
-        layout = (
-            [(-x, y) for x, y in slots(state.shape, count, state.spacing)]
-            if state.mirrored
-            else slots(state.shape, count, state.spacing)
-        )
+        chain = (swarm.master, *swarm.members)
+        layout = self._reference(chain, state.shape, state.spacing, bool(state.mirrored), bool(state.kept))
         number = swarm.number
         near = neighbours(state.shape, number)
         neighbour_fix, neighbour_ref = None, None
-        chain = (swarm.master, *swarm.members)
         if near and near[0] != 0:
             other = self.locations.table.get(chain[near[0]])
             if other is not None and other.fixed_at is not None and other.distance_m is not None:
@@ -544,9 +628,8 @@ class Driver:
             master = user_link.robot_node(swarm.master)
             if role == "slave" and self.drive_state is not None:
                 ds = self.drive_state
-                layout = slots(ds.shape, len(swarm.members) + 1, ds.spacing)
-                x, y = layout[swarm.number]
-                slot = (-x if ds.mirrored else x, y)
+                chain = (swarm.master, *swarm.members)
+                slot = self._reference(chain, ds.shape, ds.spacing, bool(ds.mirrored), bool(ds.kept))[swarm.number]
         try:
             self.radio.telemetry(state.label, role, master, slot, str(self.mode))
         except Exception as err:  # telemetry is for viewers: never let it stop the controller

@@ -27,6 +27,7 @@ from petswarm.exchange import MessageProcessingManager, StepResult, StepTiming
 from petswarm.rf import Incoming, RfCommunicationManager
 from petswarm.sequence import DRIVING, EventLog, RobotState, SequenceManager
 from radio_hub.interface import BROADCAST
+from radio_hub.mac import max_payload
 
 PROTOCOLS = ("paper", "slotted")
 MAX_MEMBERS = 32
@@ -125,6 +126,12 @@ class NetworkFormation:
         self.swarm: Swarm | None = None
         self.on_change = on_change
         """Called with the swarm whenever this robot joins one, its members change, or it leaves (None)."""
+        self.on_handover: Callable[[tuple[int, ...], m.MasterHandover | None], None] = lambda chain, msg: None
+        """Called after the master's role moved within this robot's swarm (this robot gave it, took it, or
+        saw it move), with the chain before the handover and the handover message (None when a missed
+        handover was learned from the new master's roster)."""
+        self._former_masters: set[int] = set()
+        """Masters of this swarm that handed over: their late rosters must not take the role back."""
         self.candidate_of: tuple[int, int] | None = None
         """(session, master) while this robot said 'available' and waits for the result."""
         self.organizations: list[dict[str, Any]] = []
@@ -279,6 +286,86 @@ class NetworkFormation:
             except Exception as err:  # keep announcing: members leave after 2 s without a roster
                 self.log.record("error", where="roster", error=f"{type(err).__name__}: {err}")
             await asyncio.sleep(self.config.roster_interval_s)
+
+    async def hand_over(
+        self, chain: tuple[int, ...], mode: str, shape: str, spacing: float, mirrored: int, kept: int, owner: str
+    ) -> bool:
+        """Table 3's Change column, the old master's side: make ``chain[0]`` the master of this swarm, with
+        ``chain[1:]`` as its members in order. A step of the message-processing manager takes the handover
+        to the new master (deadline, retries, recorded) and waits for its acceptance; then a broadcast tells
+        every member (one that misses it learns from the new master's rosters) and this robot becomes a
+        slave. False when the new master never accepted: nothing changed, this robot is still the master."""
+        async with self._busy:
+            swarm = self.swarm
+            if swarm is None or swarm.number or self.sequence.state != RobotState.MASTER_DRIVING:
+                raise FormationError(f"robot is {self.sequence.state.label}, not the master of a swarm")
+            if sorted(chain) != sorted((swarm.master, *swarm.members)) or chain[0] == self.me:
+                raise FormationError(f"handover chain {list(chain)} is not a reordering of the swarm with a new master")
+            msg = m.MasterHandover(swarm.session, swarm.pan_id, chain, mode, shape, spacing, mirrored, kept, owner)
+            if len(msg.encode()) > max_payload(pan_compressed=False):
+                raise FormationError(f"a handover of {len(chain)} robots does not fit one frame")
+            new = chain[0]
+
+            async def send(_: set[int] | None) -> None:
+                await self.rf.send(new, msg, dst_pan=BROADCAST)
+
+            step = await self.mpm.step("handover", swarm.session, (m.HandoverAccepted,), send, {new}, self.config.step)
+            if new not in step.responses:
+                self.log.record("handover_failed", session=swarm.session, to=new, retries=step.retries)
+                return False
+            if self._roster_task is not None:
+                self._roster_task.cancel()
+            try:
+                await self.rf.send(BROADCAST, msg, ack=False)
+            except Exception as err:  # the members will learn it from the new master's rosters
+                self.log.record("error", where="handover_broadcast", error=f"{type(err).__name__}: {err}")
+            self._follow_handover(swarm, msg, retries=step.retries)
+            return True
+
+    def _follow_handover(self, swarm: Swarm, msg: m.MasterHandover | None, **detail: Any) -> None:
+        """Take the new order of a handover as a member (the old master, or a member told or learning it)."""
+        chain = msg.chain if msg is not None else (swarm.master, *swarm.members)
+        old_chain = (swarm.master, *swarm.members) if msg is not None else detail.pop("old_chain")
+        old_master = old_chain[0]
+        self._former_masters = (self._former_masters | {old_master}) - {chain[0]}
+        swarm.master, swarm.members, swarm.number = chain[0], chain[1:], chain.index(self.me)
+        self._misses = {}
+        self._deadline = time.monotonic() + self.config.master_silence_s
+        self.log.record("handover", session=swarm.session, frm=old_master, to=chain[0], number=swarm.number, **detail)
+        if self.sequence.state == RobotState.MASTER_DRIVING:
+            self.sequence.transition(RobotState.SLAVE_DRIVING, cause="handover", master=chain[0], number=swarm.number)
+        self.on_change(swarm)
+        self.on_handover(old_chain, msg)
+
+    async def _on_handover(self, incoming: Incoming) -> None:
+        """Member side: the master hands its role over (to us: take it and accept; to another: follow)."""
+        msg: m.MasterHandover = incoming.message  # type: ignore[assignment]
+        swarm = self.swarm
+        if swarm is None or swarm.session != msg.session or self.me not in msg.chain:
+            return
+        if msg.chain[0] == self.me:
+            if swarm.number and incoming.sender == swarm.master:
+                self._take_over(swarm, msg)
+            if not swarm.number and not incoming.rx.frame.is_broadcast:
+                await self.rf.send(incoming.sender, m.HandoverAccepted(msg.session), dst_pan=swarm.pan_id)
+        elif swarm.number and incoming.sender == swarm.master:
+            self._follow_handover(swarm, msg)
+
+    def _take_over(self, swarm: Swarm, msg: m.MasterHandover) -> None:
+        """Become the swarm's master: its rosters, member tracking and dispersal are ours from now."""
+        old_chain = (swarm.master, *swarm.members)
+        self._former_masters = (self._former_masters | {swarm.master}) - {self.me}
+        swarm.master, swarm.members, swarm.number = self.me, msg.chain[1:], 0
+        self._misses = {}
+        self.sequence.transition(
+            RobotState.MASTER_DRIVING, cause="handover", frm=old_chain[0], members=list(swarm.members)
+        )
+        # dispersal returns the new master to the driving mode the user has just chosen
+        self.sequence.previous_driving = RobotState.LEADING if msg.mode == "leading" else RobotState.FOLLOWING
+        self.log.record("handover", session=swarm.session, frm=old_chain[0], to=self.me, number=0)
+        self.on_change(swarm)
+        self.on_handover(old_chain, msg)
+        self._roster_task = asyncio.get_running_loop().create_task(self._announce_roster())
 
     async def disperse(self, protocol: str | None = None) -> dict[str, Any]:
         """End the swarm: every member back to waiting, this robot back to its driving state."""
@@ -439,6 +526,18 @@ class NetworkFormation:
         swarm = self.swarm
         if swarm is None or swarm.session != msg.session or not swarm.number:
             return
+        if incoming.sender != swarm.master:
+            if incoming.sender in self._former_masters or incoming.sender not in swarm.members:
+                return  # a late roster of a master that handed over, or not of this swarm's robots
+            # the master's role moved while we missed the handover: the roster's sender has it now
+            old_chain = (swarm.master, *swarm.members)
+            swarm.master = incoming.sender
+            swarm.members = tuple(a for a in msg.members)
+            if self.me not in msg.members:
+                await self._leave(reason="not in the new master's roster")
+                return
+            self._follow_handover(swarm, None, old_chain=old_chain, learned="roster")
+            return
         if self.me not in msg.members:
             await self._leave(reason="not in the master's roster")
             return
@@ -526,8 +625,9 @@ _MEMBER_HANDLERS = {
     m.Roster: NetworkFormation._on_roster,
     m.Disperse: NetworkFormation._on_disperse,
     m.Dispersed: NetworkFormation._on_member_left,
+    m.MasterHandover: NetworkFormation._on_handover,
 }
-RESPONSES = (m.ScanReply, m.JoinAvailable, m.JoinUnavailable, m.Joined, m.Dispersed)
+RESPONSES = (m.ScanReply, m.JoinAvailable, m.JoinUnavailable, m.Joined, m.Dispersed, m.HandoverAccepted)
 """Messages that only ever answer a master's step; outside a step they are late."""
 
 

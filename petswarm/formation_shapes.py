@@ -186,9 +186,29 @@ def mode_change(
         return ModeChange(master, current, mirrored=False)
     if change_master:
         new_master = choose_master(new, {k: distances[k] for k in members})
-        nx, ny = current[new_master]
-        # the new frame is the old one turned by pi about the new master: (dx, dy) -> (-dx, -dy)
-        return ModeChange(new_master, {k: (nx - x, ny - y) for k, (x, y) in current.items()}, mirrored=False)
+        return ModeChange(new_master, kept_slots(current, new_master), mirrored=False)
     mx, my = current[master]
     # turned by pi (-dx, -dy), then mirrored across the master's lateral axis: (dx, -dy)
     return ModeChange(master, {k: (x - mx, my - y) for k, (x, y) in current.items()}, mirrored=True)
+
+
+def kept_slots(slot_list: Sequence[Vec] | Mapping[int, Vec], new_master: int) -> dict[int, Vec]:
+    """Table 3's Change column: every robot keeps its place, its slot re-expressed in the frame of
+    ``new_master`` after the turn-about (the old frame turned by pi about the new master:
+    (dx, dy) -> (-dx, -dy)). Keys are whatever names the robots (member numbers or addresses)."""
+    by_member = _as_mapping(slot_list)
+    if new_master not in by_member:
+        raise ValueError(f"new master {new_master!r} has no slot")
+    nx, ny = by_member[new_master]
+    return {k: (nx - x, ny - y) for k, (x, y) in by_member.items()}
+
+
+def handover_chain(kept: Mapping[int, Vec], new_master: int) -> tuple[int, ...]:
+    """The swarm's new member order after a handover: the new master, then the others by their distance
+    from it (closest first, ties in the old order), as organizing numbers members closest first. A column
+    whose last robot takes over comes out reversed, so the shape's own slot list still describes it."""
+    if new_master not in kept:
+        raise ValueError(f"new master {new_master!r} has no slot")
+    order = list(kept)
+    others = sorted((k for k in order if k != new_master), key=lambda k: (math.hypot(*kept[k]), order.index(k)))
+    return (new_master, *others)

@@ -43,6 +43,8 @@ class MessageType(enum.IntEnum):
     SYNC = 34
     HEADING = 35
     DRIVE_STATE = 40
+    MASTER_HANDOVER = 41
+    HANDOVER_ACCEPTED = 42
 
 
 @dataclass(frozen=True)
@@ -282,6 +284,37 @@ class DriveState(SwarmMessage):
     user_y: float
     mirrored: int
     """1 when Table 3's No-change column put the slots on the master's other side."""
+    kept: int
+    """1 after a master handover (Table 3's Change column): every robot keeps the place it had, so the
+    references are each robot's own kept slots (``formation_shapes.kept_slots``), not the shape's list."""
+
+
+@dataclass(frozen=True)
+class MasterHandover(SwarmMessage):
+    """Old master -> new master (unicast, answered by ``HandoverAccepted``), then -> swarm (broadcast): from
+    now on ``chain[0]`` is the master and ``chain[1:]`` the members by number. What the new master needs to
+    drive: the new ``mode``, the formation (``shape``, ``spacing``, the old layout's ``mirrored`` and ``kept``
+    flags, from which every robot turns its slot into the new master's frame) and the user's node id
+    (``owner``), whose belt the old master re-pairs with the new one."""
+
+    TYPE: ClassVar[MessageType] = MessageType.MASTER_HANDOVER
+    session: int
+    pan_id: int
+    chain: tuple[int, ...]
+    mode: str
+    shape: str
+    spacing: float
+    mirrored: int
+    kept: int
+    owner: str
+
+
+@dataclass(frozen=True)
+class HandoverAccepted(SwarmMessage):
+    """New master -> old master: I have taken the master's role."""
+
+    TYPE: ClassVar[MessageType] = MessageType.HANDOVER_ACCEPTED
+    session: int
 
 
 _BY_TYPE: dict[int, type[SwarmMessage]] = {
@@ -308,6 +341,8 @@ _BY_TYPE: dict[int, type[SwarmMessage]] = {
         Sync,
         Heading,
         DriveState,
+        MasterHandover,
+        HandoverAccepted,
     )
 }
 _FIELD_TYPES: dict[str, type | tuple[type, ...]] = {"int": int, "bytes": bytes, "str": str, "float": (int, float)}

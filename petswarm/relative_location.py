@@ -209,6 +209,14 @@ class IrTokenSchedule:
         """The roster changed."""
         self.chain, self.neighbours = chain, neighbours
 
+    def rejoin(self, chain: tuple[int, ...], neighbours: tuple[int, ...], is_master: bool) -> None:
+        """The master's role moved within the running swarm (a handover): the new chain and master flag.
+        The round count is kept (members ignore start signs of older rounds) and the token keeps passing
+        where it is; only who regenerates a lost token changes."""
+        self.chain, self.neighbours, self.is_master = chain, neighbours, is_master
+        self.last_activity = time.monotonic()
+        self.log.record("ir_schedule", session=self.session, chain=list(chain), master=is_master, rejoined=True)
+
     async def leave(self) -> None:
         """The swarm is over: stop holding, module off, forget the table."""
         self.session = 0

@@ -139,6 +139,7 @@ class Robot:
         )
 
         self.driver = Driver(config.robot_id, self.rf, self.sequence, self.formation, self.locations, self.log)
+        self.formation.on_handover = self.driver.on_handover
         self.surround = (
             SurroundDriver(radio, self.ir, self.log, config.surround) if config.formation_mode == "surround" else None
         )
@@ -242,6 +243,8 @@ class Robot:
         chain = (swarm.master, *swarm.members)
         if self.schedule.session != swarm.session:
             self.schedule.join(swarm.session, chain, swarm.neighbours, swarm.number == 0)
+        elif self.schedule.is_master != (swarm.number == 0):
+            self.schedule.rejoin(chain, swarm.neighbours, swarm.number == 0)
         else:
             self.schedule.update_members(chain, swarm.neighbours)
 

@@ -52,8 +52,9 @@ _ALLOWED: dict[RobotState, frozenset[RobotState]] = {
     RobotState.ORGANIZING: frozenset(
         {RobotState.WAITING, RobotState.SLAVE_DRIVING, RobotState.MASTER_DRIVING, *DRIVING}
     ),
-    RobotState.SLAVE_DRIVING: frozenset({RobotState.WAITING}),
-    RobotState.MASTER_DRIVING: DRIVING,
+    # the master's role passes between members of a running swarm on a driving-mode change (Table 3, Change)
+    RobotState.SLAVE_DRIVING: frozenset({RobotState.WAITING, RobotState.MASTER_DRIVING}),
+    RobotState.MASTER_DRIVING: frozenset({*DRIVING, RobotState.SLAVE_DRIVING}),
     **{s: frozenset({RobotState.ORGANIZING, RobotState.WAITING, *DRIVING} - {s}) for s in DRIVING},
 }
 

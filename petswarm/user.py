@@ -8,6 +8,8 @@
   emulated from the walk, feeds the activity recognizer; the activity goes to the owner every gyro
   sample (70 ms).
 - The watch: the scenario's requests, sent over BLE to the owner at their times.
+- Re-pairing: when the owner hands the master's role to another robot it says so over BLE (``pair``); the
+  belt then wakes on the new robot's pattern and reports to it (the project's protocol; the paper has none).
 
 Everything is recorded as structured events (``EventLog``), flushed per event.
 """
@@ -168,7 +170,20 @@ class User:
                 continue
             if body["k"] == "state" and message.src == self.owner:
                 self.owned = body.get("state") not in ("waiting", None)
+            if body["k"] == "pair" and message.src == self.owner and not self._repair(body.get("robot")):
+                continue
             self.log.record(f"ble_{body['k']}", src=message.src, **{k: v for k, v in body.items() if k != "k"})
+
+    def _repair(self, robot: object) -> bool:
+        """The owner handed the master's role to ``robot``: wake on its pattern and report to it from now.
+        False (counted as bad BLE) when ``robot`` is not a robot id."""
+        if not isinstance(robot, int) or isinstance(robot, bool) or not 0 < robot <= 0xFFFF:
+            self.counters["bad_ble"] += 1
+            return False
+        self.log.record("repaired", frm=self.owner, to=user_link.robot_node(robot))
+        self.owner, self.register = user_link.robot_node(robot), wake_pattern(robot)
+        self._pairs.clear()
+        return True
 
     async def _watch(self) -> None:
         for request in self.plan.watch:

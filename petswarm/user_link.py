@@ -6,7 +6,10 @@ BLE messages are msgpack maps with a kind ``k``:
 - belt -> robot ``lf`` (``seq``, ``dl``, ``dr``: metres from the left and right antenna);
 - belt -> robot ``activity`` (``Activity.to_dict()`` plus ``t``: the belt's time of the sample);
 - watch -> robot ``request`` (``request`` and its arguments, as in a scenario's watch list);
-- robot -> belt ``alert`` (``reason``) and ``state`` (``state``: the robot's state after a request).
+- robot -> belt ``alert`` (``reason``) and ``state`` (``state``: the robot's state after a request);
+- robot -> belt ``pair`` (``robot``: a robot id): the master handed its role to that robot (Table 3,
+  Change); the belt loads that robot's pattern into its wake-up register and takes it as its owner. The
+  paper gives no re-pairing protocol: this message is the project's choice.
 
 An LF burst's 4 data bytes: the robot's id (2 bytes, big endian), a sequence number, and the purpose
 (0 = wake-up while waiting for a user, 1 = tracking its owner).
@@ -18,7 +21,7 @@ from typing import Any
 
 import msgpack
 
-KINDS = ("owner", "lf", "activity", "request", "alert", "state")
+KINDS = ("owner", "lf", "activity", "request", "alert", "state", "pair")
 LF_WAKE, LF_TRACK = 0, 1
 
 

@@ -77,7 +77,18 @@ def test_impossible_transitions_are_refused():
     seq.transition(RobotState.ORGANIZING)
     seq.transition(RobotState.SLAVE_DRIVING)
     with pytest.raises(TransitionError):
-        seq.transition(RobotState.MASTER_DRIVING)
+        seq.transition(RobotState.FOLLOWING)  # a slave drives with no user of its own
+    assert not seq.user_connected
+
+
+def test_the_master_role_passes_between_slave_and_master_driving():
+    # Table 3's Change column: a slave takes over as master, the old master becomes a slave
+    seq = SequenceManager(EventLog())
+    seq.transition(RobotState.ORGANIZING)
+    seq.transition(RobotState.SLAVE_DRIVING)
+    seq.transition(RobotState.MASTER_DRIVING, cause="handover")
+    assert seq.user_connected
+    seq.transition(RobotState.SLAVE_DRIVING, cause="handover")
     assert not seq.user_connected
 
 
