@@ -124,6 +124,9 @@ class Driver:
         """After a master handover (Table 3, Change): every robot's slot by short address in the current
         master's frame, each robot having kept its place. None: the references are the shape's slots."""
         self._announce_on_fix = False
+        self._far_allowed_until = -math.inf
+        """Until then a fix beyond the LF's valid range does not mean the user is lost: a master that leads
+        a swarm keeps the formation's depth beyond 1 m, and after dispersing it first closes in."""
         self.exception_from: RobotState | None = None
         self.remote = MotorCommand()
         self.remote_until = 0.0
@@ -190,7 +193,7 @@ class Driver:
         if kind == "owner":
             self._on_owner(src, float(body["d"]))
         elif src != self.owner:
-            self.log.record("ble_ignored", src=src, kind=kind)  # only the owner's wearables count
+            self.log.record("ble_ignored", src=src, message=kind)  # only the owner's wearables count
         elif kind == "lf":
             self._on_lf(float(body["dl"]), float(body["dr"]))
         elif kind == "activity":
@@ -409,6 +412,8 @@ class Driver:
             await self.formation.disperse()
         except (FormationError, RadioError, HubUnavailable, TransitionError) as err:
             self.log.record("watch_disperse_failed", error=str(err))
+        if self.sequence.state in STEERED:
+            self._far_allowed_until = time.monotonic() + LOST_AFTER_S
         self.mirrored, self.kept = False, None
         self._tell_owner()
 
@@ -488,7 +493,8 @@ class Driver:
     def _lost(self, now: float, state: RobotState) -> bool:
         """Emergency per the spec: no reliable LF fix for LOST_AFTER_S; back when one comes again."""
         # lost = too far (the LF fix's valid range is 2 m) or no fix at all; a user off the axis is not lost
-        fresh = self.fix is not None and self.fix.distance_m <= LF_VALID_RANGE_M and now - self.fix_at < LOST_AFTER_S
+        in_range = self.fix is not None and (self.fix.distance_m <= LF_VALID_RANGE_M or now < self._far_allowed_until)
+        fresh = in_range and now - self.fix_at < LOST_AFTER_S
         if state in (RobotState.FOLLOWING, RobotState.LEADING) and not fresh and self.fix_at > -math.inf:
             self.exception_from = state
             self.sequence.transition(RobotState.EMERGENCY, cause="user lost")

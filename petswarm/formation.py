@@ -354,12 +354,13 @@ class NetworkFormation:
     def _take_over(self, swarm: Swarm, msg: m.MasterHandover) -> None:
         """Become the swarm's master: its rosters, member tracking and dispersal are ours from now."""
         old_chain = (swarm.master, *swarm.members)
+        # the transition first: if Fig. 4 refused it, the swarm view must stay as it was
+        self.sequence.transition(
+            RobotState.MASTER_DRIVING, cause="handover", old_master=old_chain[0], members=list(msg.chain[1:])
+        )
         self._former_masters = (self._former_masters | {swarm.master}) - {self.me}
         swarm.master, swarm.members, swarm.number = self.me, msg.chain[1:], 0
         self._misses = {}
-        self.sequence.transition(
-            RobotState.MASTER_DRIVING, cause="handover", frm=old_chain[0], members=list(swarm.members)
-        )
         # dispersal returns the new master to the driving mode the user has just chosen
         self.sequence.previous_driving = RobotState.LEADING if msg.mode == "leading" else RobotState.FOLLOWING
         self.log.record("handover", session=swarm.session, frm=old_chain[0], to=self.me, number=0)
