@@ -73,6 +73,9 @@ RATE_WINDOW_S = 1.0
 TURN_GAIN = 2.0
 """Turn-about: omega per radian still to turn (1/s), capped by the base's limit."""
 TURN_DONE_RAD = math.radians(10)
+FAR_MARGIN_M = 0.5
+"""A dispersed master loses its user when the user is this much farther than the master's swarm distance
+(a user who steps away, not the gap the formation kept); chosen as about one step."""
 
 
 @dataclass
@@ -124,9 +127,10 @@ class Driver:
         """After a master handover (Table 3, Change): every robot's slot by short address in the current
         master's frame, each robot having kept its place. None: the references are the shape's slots."""
         self._announce_on_fix = False
-        self._far_allowed_until = -math.inf
-        """Until then a fix beyond the LF's valid range does not mean the user is lost: a master that leads
-        a swarm keeps the formation's depth beyond 1 m, and after dispersing it first closes in."""
+        self._far_limit_m: float | None = None
+        """After dispersing, the user distance beyond which the user is lost, until a fix inside the LF's
+        valid range comes: a master keeps the formation's depth beyond 1 m (2.2 m leading a column of 3),
+        and the robots it dispersed may stand between it and the user, so it may not close in at once."""
         self.exception_from: RobotState | None = None
         self.remote = MotorCommand()
         self.remote_until = 0.0
@@ -408,12 +412,13 @@ class Driver:
         self._tell_owner()
 
     async def _disperse(self) -> None:
+        far_limit = self._target_distance_of(self.mode) + FAR_MARGIN_M  # the swarm's geometry, before it ends
         try:
             await self.formation.disperse()
         except (FormationError, RadioError, HubUnavailable, TransitionError) as err:
             self.log.record("watch_disperse_failed", error=str(err))
         if self.sequence.state in STEERED:
-            self._far_allowed_until = time.monotonic() + LOST_AFTER_S
+            self._far_limit_m = far_limit
         self.mirrored, self.kept = False, None
         self._tell_owner()
 
@@ -493,8 +498,10 @@ class Driver:
     def _lost(self, now: float, state: RobotState) -> bool:
         """Emergency per the spec: no reliable LF fix for LOST_AFTER_S; back when one comes again."""
         # lost = too far (the LF fix's valid range is 2 m) or no fix at all; a user off the axis is not lost
-        in_range = self.fix is not None and (self.fix.distance_m <= LF_VALID_RANGE_M or now < self._far_allowed_until)
-        fresh = in_range and now - self.fix_at < LOST_AFTER_S
+        if self.fix is not None and self.fix.distance_m <= LF_VALID_RANGE_M:
+            self._far_limit_m = None  # back inside the LF's valid range: the single robot's rule again
+        limit = max(LF_VALID_RANGE_M, self._far_limit_m or 0.0)
+        fresh = self.fix is not None and self.fix.distance_m <= limit and now - self.fix_at < LOST_AFTER_S
         if state in (RobotState.FOLLOWING, RobotState.LEADING) and not fresh and self.fix_at > -math.inf:
             self.exception_from = state
             self.sequence.transition(RobotState.EMERGENCY, cause="user lost")
@@ -507,10 +514,13 @@ class Driver:
         return False
 
     def _target_distance(self) -> float:
+        return self._target_distance_of(self.mode)
+
+    def _target_distance_of(self, mode: Mode) -> float:
         swarm = self.formation.swarm
         chain = (self.formation.me,) if swarm is None else (swarm.master, *swarm.members)
         layout = self._reference(chain, self.shape, self.spacing, self.mirrored, self.kept is not None)
-        return formation_distance(self.mode, layout)
+        return formation_distance(mode, layout)
 
     def _reference(self, chain: tuple[int, ...], shape: str, spacing: float, mirrored: bool, kept: bool) -> list[Vec]:
         """Every robot's slot in the master's frame, by member number: the robots' kept places after a
