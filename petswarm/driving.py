@@ -228,6 +228,7 @@ class Driver:
         self.fix, self.fix_at = fix, now
         if self._announce_on_fix:  # a new master's first fix: the belt has re-paired with us by now
             self._announce_on_fix = False
+            self.log.record("owner_tracked", distance=round(fix.distance_m, 3), lf_fixes=self.counters["lf_fixes"])
             self._tell_owner()
 
     def _user_behind(self) -> bool:

@@ -516,7 +516,7 @@ async def run_robot(config: RobotConfig) -> int:
         print(f"robot {config.robot_id}: {err}", file=sys.stderr)
         return 3
     finally:
-        robot.log.record("stop")
+        robot.log.record("stop", driving=dict(robot.driver.counters))  # the run's record keeps the totals
         control.close()
         await radio.close()
         if robot.log.sink is not None:
