@@ -107,3 +107,13 @@ def test_the_largest_roster_and_query_fit_one_inter_pan_frame():
         JoinNotice(0xFFFF, 0xFFFF, 33, 32, 255),
     ):
         assert len(msg.encode()) <= limit
+
+
+def test_a_handover_of_a_16_robot_swarm_fits_one_inter_pan_frame():
+    from petswarm.messages import DriveState, MasterHandover, decode
+    from radio_hub.mac import max_payload
+
+    msg = MasterHandover(0xFFFF, 0xFFFF, (0xFFFD,) * 16, "following", "column", 0.6, 1, 1, "user-someone")
+    assert len(msg.encode()) <= max_payload(pan_compressed=False) and decode(msg.encode()) == msg
+    state = DriveState(0xFFFF, 0xFFFF, 0.1, 0.1, 0.1, 3.1, 2, 0.5, "following", "column", 0.6, 1.2, 0.1, 1, 1)
+    assert len(state.encode()) <= max_payload(pan_compressed=False)

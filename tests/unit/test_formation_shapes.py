@@ -141,3 +141,18 @@ def test_table3_with_change_keeps_every_robot_in_place_on_a_wedge() -> None:
 def test_mode_change_needs_a_slot_and_a_distance_for_every_member() -> None:
     with pytest.raises(ValueError, match="members"):
         mode_change("following", "leading", True, [0, 1, 7], FOLLOWING_DISTANCES, COLUMN)
+
+
+def test_kept_slots_turn_the_places_into_the_new_masters_frame_and_the_chain_follows_distance() -> None:
+    from petswarm.formation_shapes import handover_chain, kept_slots
+
+    column = dict(zip((11, 12, 13), slots("column", 3, 0.6), strict=True))  # robot 11 leads, 13 at the tail
+    kept = kept_slots(column, 13)
+    assert kept[13] == (0.0, 0.0) and kept[12] == pytest.approx((-0.6, 0.0)) and kept[11] == pytest.approx((-1.2, 0.0))
+    assert handover_chain(kept, 13) == (13, 12, 11)  # reversed: the column's own slot list describes it again
+    wedge = dict(enumerate(slots("wedge", 3, 0.6)))
+    kept = kept_slots(wedge, 1)
+    assert kept[2] == pytest.approx((0.0, 2 * 0.6 * math.sin(math.radians(45))))  # the other arm, beside it
+    assert handover_chain(kept, 1) == (1, 0, 2)
+    with pytest.raises(ValueError, match="new master"):
+        kept_slots(wedge, 7)
