@@ -121,7 +121,7 @@ class SurroundDriver:
             t_us, beacons = self.radio.beacons
             if t_us != self._sweep_t_us:
                 self._sweep_t_us, self._sweep_at = t_us, now
-                points = beacon_points(beacons, self.config.ir, self.config.estimator)
+                points = beacon_points(beacons, self.config.ir, self.config.estimator, self.config.human_id)
             elif now - self._sweep_at > STALE_AFTER_S:
                 points = {}
                 self.counters["stale_steps"] += 1

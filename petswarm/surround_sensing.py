@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from petswarm.ir_estimator import estimate_many
-from radio_hub.light import IrConfig
+from radio_hub.light import PERSON_BEACON_POWER, IrConfig
 
 
 @dataclass(frozen=True)
@@ -60,15 +60,24 @@ class SurroundSensing:
     """Echoes taken to come off a neighbour or the human."""
 
 
-def beacon_points(beacons: dict[str, np.ndarray], ir: IrConfig, method: str = "lsq") -> dict[str, np.ndarray]:
-    """Each visible beacon's estimated position (2,) in the robot's frame; sources without signal are left out."""
+def beacon_points(
+    beacons: dict[str, np.ndarray], ir: IrConfig, method: str = "lsq", person: str | None = None
+) -> dict[str, np.ndarray]:
+    """Each visible beacon's estimated position (2,) in the robot's frame; sources without signal are left out.
+    ``person``: the node id of the human's beacon, ``PERSON_BEACON_POWER`` times as bright as a robot's
+    module, so its distance comes from the correspondingly brighter calibration."""
     if not beacons:
         return {}
-    names = list(beacons)
-    readings = np.stack([np.asarray(beacons[n], dtype=float) for n in names])
-    found = estimate_many(readings, ir, method)
-    points = np.stack([np.cos(found.bearing_rad), np.sin(found.bearing_rad)], axis=1) * found.distance_m[:, None]
-    return {n: points[i] for i, n in enumerate(names) if found.valid[i]}
+    names = [n for n in beacons if n != person]
+    points: dict[str, np.ndarray] = {}
+    for group, config in ((names, ir), ([person] if person in beacons else [], ir.brighter(PERSON_BEACON_POWER))):
+        if not group:
+            continue
+        readings = np.stack([np.asarray(beacons[n], dtype=float) for n in group])
+        found = estimate_many(readings, config, method)
+        xy = np.stack([np.cos(found.bearing_rad), np.sin(found.bearing_rad)], axis=1) * found.distance_m[:, None]
+        points.update({n: xy[i] for i, n in enumerate(group) if found.valid[i]})
+    return points
 
 
 def dead_reckon(points: dict[str, np.ndarray], velocity: np.ndarray, dt: float) -> dict[str, np.ndarray]:

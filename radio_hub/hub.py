@@ -37,7 +37,7 @@ from radio_hub.config import MediumConfig
 from radio_hub.ir_air import IrAir
 from radio_hub.keys import Keys, check_name, reliable_publisher, session_config
 from radio_hub.lf import LfConfig, antenna_positions, lf_rssi
-from radio_hub.light import IrConfig
+from radio_hub.light import PERSON_BEACON_POWER, IrConfig
 from radio_hub.medium import Medium, Output, RadioNode, Reception, Transmission, TxReport, TxStatus
 from radio_hub.pcap import PcapWriter
 from radio_hub.world import Obstacle, World, WorldConfig, parse_obstacle
@@ -407,6 +407,8 @@ class RadioHub:
             self._send_down(node_id, wire.Error(reason=f"cannot attach: {err}"))
             return
         self._kinds[node_id] = msg.kind
+        if msg.kind == "user":
+            self.ir.power[node_id] = PERSON_BEACON_POWER
         self.counters.attaches += 1
         self._instances[node_id] = msg.instance
         if node_id not in self._pubs:
@@ -542,6 +544,7 @@ class RadioHub:
         self.medium.detach(node_id)
         self.ir.remove(node_id, self.now_us())
         self.world.remove(node_id)
+        self.ir.power.pop(node_id, None)
         self._kinds.pop(node_id, None)
         self._telemetry.pop(node_id, None)
         self.counters.detaches += 1

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from radio_hub.chaos import Chaos
-from radio_hub.light import IrConfig, IrMode, OverlapCounter, receiver_gains, receiver_readings, sense, strength_at
+from radio_hub.light import IrConfig, IrMode, OverlapCounter, receiver_gains, receiver_readings, sense
 
 Pose = tuple[float, float, float]
 """x (m), y (m), heading (rad)."""
@@ -26,6 +26,8 @@ class IrAir:
         self.counter = OverlapCounter()
         self.period_us = max(round(1e6 / config.sample_rate_hz), 1)
         self.sweeps = 0
+        self.power: dict[str, float] = {}
+        """Beacons brighter than a robot's module, by node (the person's: ``PERSON_BEACON_POWER``)."""
         self._next_us: int | None = None
 
     def set_mode(self, node_id: str, mode: str, now_us: int) -> None:
@@ -81,9 +83,7 @@ class IrAir:
         dy = at[None, :, 1] - at[:, None, 1]
         distance = np.hypot(dx, dy)
         np.fill_diagonal(distance, np.inf)  # a module does not see its own beacon
-        strength = np.where(
-            np.isfinite(distance), strength_at(np.where(np.isfinite(distance), distance, 0), self.config), 0
-        )
+        strength = self._beacon_strength(distance, names)
         light = strength[..., None] * receiver_gains(np.arctan2(dy, dx) - at[:, None, 2])
         seen = strength > 0
         out: dict[str, tuple[list[str], np.ndarray]] = {}
@@ -95,6 +95,15 @@ class IrAir:
                 readings = self._disturb(readings, [node] * len(readings), chaos)
             out[node] = ([n for n, s in zip(names, seen[row], strict=True) if s], readings.astype(np.float32))
         return out
+
+    def _beacon_strength(self, distance: np.ndarray, names: list[str]) -> np.ndarray:
+        """On-axis strength of every source (column) at every module (row): the module's inverse-square law,
+        times the source's power, out to the range that power reaches (the person's beacon is brighter)."""
+        config = self.config
+        power = np.array([self.power.get(n, 1.0) for n in names])[None, :]
+        near = np.maximum(distance, config.near_field_m)
+        reach = config.max_range_m * np.sqrt(power)
+        return np.where(distance <= reach, power * config.power_counts_at_1m / near**2, 0.0)
 
     def _disturb(self, readings: np.ndarray, receivers: list[str], chaos: Chaos) -> np.ndarray:
         for row, node in enumerate(receivers):

@@ -95,6 +95,15 @@ class IrConfig:
         """True when readings carry no random noise."""
         return self.relative_noise == 0 and self.noise_floor_counts == 0
 
+    def brighter(self, factor: float) -> IrConfig:
+        """The same receivers calibrated for an emitter ``factor`` times as bright: strength scales with it
+        and the range with its square root (the inverse-square signal reaches the same floor further out)."""
+        if not factor > 0:
+            raise ValueError(f"factor must be > 0, got {factor}")
+        return dataclasses.replace(
+            self, power_counts_at_1m=self.power_counts_at_1m * factor, max_range_m=self.max_range_m * factor**0.5
+        )
+
     def noise_free(self) -> IrConfig:
         """The same module with both noise terms off (ambient and saturation stay: they are not random)."""
         return dataclasses.replace(self, relative_noise=0.0, noise_floor_counts=0.0)
@@ -172,6 +181,13 @@ def _poses(poses: ArrayLike, columns: int) -> np.ndarray:
 
 
 # == who is transmitting ==============================================================================
+
+
+PERSON_BEACON_POWER = 9.0
+"""How much brighter the person's IR beacon is than a robot's module (surround formation): a belt-worn
+ring of high-power LEDs, so every robot of a 20-robot swarm sees its human (range 3 x 2.8 = 8.4 m) while
+robots see each other only within the module's 2.8 m. The surround law needs the human's direction at
+every robot; with the robots' own range the swarm's rear lost him and the swarm fell behind or split."""
 
 
 class IrMode(StrEnum):

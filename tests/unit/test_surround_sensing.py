@@ -86,3 +86,22 @@ def test_a_scenarios_surround_table_is_checked_and_passes_the_law_settings() -> 
         parse({"surround": {"enabled": True, "stifness": 8}})
     with pytest.raises(ValueError, match=r"surround\.enabled"):
         parse({"surround": {"enabled": "yes"}})
+
+
+def test_the_persons_beacon_reaches_every_robot_of_the_swarm_and_is_located_with_its_own_calibration() -> None:
+    from radio_hub.ir_air import IrAir
+    from radio_hub.light import PERSON_BEACON_POWER, IrMode
+
+    ir = IrConfig().noise_free()
+    air = IrAir(ir, np.random.default_rng(1))
+    poses = {"robot-1": (0.0, 0.0, 0.0), "robot-2": (5.0, 0.0, 0.0), "user": (0.0, 5.0, 0.0)}
+    for node in poses:
+        air.set_mode(node, IrMode.BEACON, 0)
+    air.power["user"] = PERSON_BEACON_POWER
+    sweeps = air.beacon_sweep(poses)
+    sources, readings = sweeps["robot-1"]
+    assert sources == ["user"]  # 5 m: beyond a robot's module (2.8 m), within the person's beacon (8.4 m)
+    points = beacon_points(dict(zip(sources, readings, strict=True)), ir, person="user")
+    assert points["user"] == pytest.approx([0.0, 5.0], abs=0.02)
+    robot_calibration = beacon_points(dict(zip(sources, readings, strict=True)), ir)
+    assert np.hypot(*robot_calibration["user"]) < 2.0  # read as a robot's module it would seem 3x nearer
