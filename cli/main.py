@@ -21,7 +21,7 @@ EPILOG = """examples:
   petswarm stats                                the hub's counters per node and per channel
   petswarm report runs/<time>-<seed>            a recorded run's summary and plots
   petswarm watch --world lab                    a web page drawing the world live (--replay RUN: a record)
-  petswarm bench hub|organize|ir                the benchmarks (figures, JSON and plots)
+  petswarm bench hub|organize|ir|reaction|surround   the benchmarks (figures, JSON and plots)
 
 start the hub before its robots (they wait up to 15 s for it); every process of one swarm uses the
 same --world and --hub endpoint.
@@ -306,6 +306,13 @@ def build_parser() -> argparse.ArgumentParser:
     add_bench_reaction_arguments(
         bench_sub.add_parser("reaction", help="reaction time of master and slaves to the user's rotation (CDFs)")
     )
+    from cli.bench_surround import add_arguments as add_bench_surround_arguments
+
+    add_bench_surround_arguments(
+        bench_sub.add_parser(
+            "surround", help="surround scenarios in model time through each robot's own pipeline (seeds, plot)"
+        )
+    )
     return parser
 
 
@@ -412,7 +419,7 @@ def _robot(args: argparse.Namespace) -> int:
     from petswarm.relative_location import TokenConfig
     from petswarm.robot import RobotConfig, run_robot
     from petswarm.surround import SurroundConfig
-    from petswarm.surround_driver import SurroundDriverConfig
+    from petswarm.surround_pilot import SurroundDriverConfig
 
     timing = StepTiming(args.step_deadline, args.step_retries)
     formation = FormationConfig(protocol=args.protocol, step=timing, min_rssi_dbm=args.region_rssi)
@@ -529,6 +536,10 @@ def _bench(args: argparse.Namespace) -> int:
         from cli.bench_reaction import bench_reaction
 
         return bench_reaction(args)
+    if args.bench == "surround":
+        from cli.bench_surround import bench_surround
+
+        return bench_surround(args)
     if args.bench == "organize":
         from cli.bench_organize import bench_organize
 

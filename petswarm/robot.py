@@ -28,7 +28,8 @@ from petswarm.messages import Blob, Ping, Pong, SwarmMessage
 from petswarm.relative_location import IrModuleManager, IrTokenSchedule, RelativeLocationManager, TokenConfig
 from petswarm.rf import Incoming, RfCommunicationManager
 from petswarm.sequence import EventLog, RobotState, SequenceManager, TransitionError
-from petswarm.surround_driver import SurroundDriver, SurroundDriverConfig
+from petswarm.surround_driver import SurroundDriver
+from petswarm.surround_pilot import SurroundDriverConfig
 from petswarm.user_link import robot_node
 from radio_hub.interface import (
     BROADCAST,

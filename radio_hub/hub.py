@@ -244,10 +244,9 @@ class RadioHub:
         for node_id, readings in self.ir.receive_sweep(poses, chaos).items():
             self._send_down(node_id, wire.IrSample(readings=readings.astype("<f4").tobytes(), t_us=now))
         if self.ir.sweeps % 5 == 0:  # beacons at 20 Hz: 20 robots x 19 sources at 100 Hz would swamp the nodes
-            for node_id, (sources, block) in self.ir.beacon_sweep(poses, chaos).items():
-                self._send_down(
-                    node_id, wire.IrBeacons(sources=sources, readings=block.astype("<f4").tobytes(), t_us=now)
-                )
+            for node_id, (sources, block, gains) in self.ir.beacon_sweep(poses, chaos).items():
+                readings = block.astype("<f4").tobytes()
+                self._send_down(node_id, wire.IrBeacons(sources=sources, readings=readings, t_us=now, gains=gains))
 
     def _tick_world(self) -> None:
         now = self.now_us()

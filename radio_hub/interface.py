@@ -34,6 +34,7 @@ __all__ = [
     "DEFAULT_ENDPOINT",
     "DEFAULT_WORLD",
     "MAX_PSDU",
+    "BeaconSweep",
     "BleMessage",
     "Frame",
     "FrameError",
@@ -124,6 +125,16 @@ class OwnSensors:
 
 
 @dataclass(frozen=True)
+class BeaconSweep:
+    """One beacon-mode sweep at model time ``t_us``: each coded beacon's 12 readings (counts) and the gain its
+    channel's AGC read them at (divide the light above ambient by it)."""
+
+    t_us: int
+    readings: dict[str, np.ndarray]
+    gains: dict[str, float]
+
+
+@dataclass(frozen=True)
 class BleMessage:
     """A BLE message from ``src`` (a user's wearable or a robot)."""
 
@@ -197,8 +208,8 @@ class RadioClient:
         self._lf: asyncio.Queue[LfBurstHeard] = asyncio.Queue()
         self.sensors: OwnSensors | None = None
         """The latest own-body sensors (robots; the hub sends them at 25 Hz)."""
-        self.beacons: tuple[int, dict[str, np.ndarray]] = (0, {})
-        """The latest beacon sweep: (model time, readings per source), in beacon mode."""
+        self.beacons = BeaconSweep(0, {}, {})
+        """The latest beacon sweep, in beacon mode."""
         self.on_sensors: list[Callable[[OwnSensors], None]] = []
         self._ultrasonic_rad = np.zeros(0)
         self._pending: dict[int, asyncio.Future[Any]] = {}
@@ -507,10 +518,15 @@ class RadioClient:
 
     def _on_beacons(self, msg: wire.IrBeacons) -> None:
         block = np.frombuffer(msg.readings, dtype="<f4").astype(float)
-        if block.size != len(msg.sources) * IR_RECEIVERS:
+        gains = msg.gains or [1.0] * len(msg.sources)
+        if block.size != len(msg.sources) * IR_RECEIVERS or len(gains) != len(msg.sources):
             self.malformed += 1
             return
-        self.beacons = (msg.t_us, dict(zip(msg.sources, block.reshape(-1, IR_RECEIVERS), strict=True)))
+        if not all(0 < g <= 1 for g in gains):
+            self.malformed += 1
+            return
+        readings = dict(zip(msg.sources, block.reshape(-1, IR_RECEIVERS), strict=True))
+        self.beacons = BeaconSweep(msg.t_us, readings, dict(zip(msg.sources, map(float, gains), strict=True)))
 
     def _on_hub_alive(self, sample: zenoh.Sample) -> None:
         # zenoh's thread: a hub appeared (again; a restarted hub knows nothing of us) or went away

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from radio_hub.chaos import Chaos
-from radio_hub.light import IrConfig, IrMode, OverlapCounter, receiver_gains, receiver_readings, sense
+from radio_hub.light import IrConfig, IrMode, OverlapCounter, beacon_gain, receiver_gains, receiver_readings, sense
 
 Pose = tuple[float, float, float]
 """x (m), y (m), heading (rad)."""
@@ -72,9 +72,10 @@ class IrAir:
 
     def beacon_sweep(
         self, poses: dict[str, Pose], chaos: Chaos | None = None
-    ) -> dict[str, tuple[list[str], np.ndarray]]:
-        """For every module in beacon mode: the beacons it sees (sources in range) and one demodulated
-        sweep per source, shape (sources, 12)."""
+    ) -> dict[str, tuple[list[str], np.ndarray, list[float]]]:
+        """For every module in beacon mode: the beacons it sees (sources in range), one demodulated sweep per
+        source, shape (sources, 12), read at the gain its channel's AGC chose (``light.beacon_gain``), and
+        those gains (the receiver divides by them)."""
         names = [n for n, mode in self.counter.modes.items() if mode is IrMode.BEACON and n in poses]
         if len(names) < 2:
             return {}
@@ -86,14 +87,17 @@ class IrAir:
         strength = self._beacon_strength(distance, names)
         light = strength[..., None] * receiver_gains(np.arctan2(dy, dx) - at[:, None, 2])
         seen = strength > 0
-        out: dict[str, tuple[list[str], np.ndarray]] = {}
+        out: dict[str, tuple[list[str], np.ndarray, list[float]]] = {}
         for row, node in enumerate(names):
             if not seen[row].any():
                 continue
-            readings = sense(light[row, seen[row]], self.config, self.rng)
+            lit = light[row, seen[row]]
+            gains = [beacon_gain(float(peak), self.config) for peak in lit.max(axis=1)]
+            readings = sense(lit * np.array(gains)[:, None], self.config, self.rng)
             if chaos is not None and chaos.faults:
                 readings = self._disturb(readings, [node] * len(readings), chaos)
-            out[node] = ([n for n, s in zip(names, seen[row], strict=True) if s], readings.astype(np.float32))
+            sources = [n for n, s in zip(names, seen[row], strict=True) if s]
+            out[node] = (sources, readings.astype(np.float32), gains)
         return out
 
     def _beacon_strength(self, distance: np.ndarray, names: list[str]) -> np.ndarray:

@@ -183,6 +183,29 @@ def _poses(poses: ArrayLike, columns: int) -> np.ndarray:
 # == who is transmitting ==============================================================================
 
 
+BEACON_GAINS = tuple(2.0**-k for k in range(7))
+"""The gains a beacon channel's automatic gain control steps through (1 down to 1/64, a factor 2 each)."""
+AGC_HEADROOM = 0.8
+"""The AGC keeps a channel's brightest reading below this fraction of full scale (noise and motion within
+a sweep must not clip it)."""
+
+
+def beacon_gain(peak_light: float, config: IrConfig) -> float:
+    """The gain a beacon channel's AGC picks for a source whose strongest receiver sees ``peak_light``: the
+    largest of ``BEACON_GAINS`` keeping ambient plus the gained light under ``AGC_HEADROOM`` of full scale.
+
+    Why: every beacon is demodulated on its own channel, so each can have its own gain, as IR receivers'
+    AGC does. Without it the person's beacon (9x a robot's) saturated every facing receiver within 0.74 m,
+    just where the surround formation holds its robots: the estimator could only say "0.74 m or nearer",
+    up to 0.44 m off. Gains reach down to 1/64, so even a beacon at the near field (0.1 m) stays readable.
+    """
+    limit = AGC_HEADROOM * config.saturation_counts - config.ambient_counts
+    for gain in BEACON_GAINS:
+        if gain * peak_light <= limit:
+            return gain
+    return BEACON_GAINS[-1]
+
+
 PERSON_BEACON_POWER = 9.0
 """How much brighter the person's IR beacon is than a robot's module (surround formation): a belt-worn
 ring of high-power LEDs, so every robot of a 20-robot swarm sees its human (range 3 x 2.8 = 8.4 m) while

@@ -165,12 +165,13 @@ class IrSample(Message):
 @dataclass
 class IrBeacons(Message):
     """Hub -> node in beacon mode: one sweep per coded beacon in sight, ``sources[i]`` lit ``readings[i]``
-    (len(sources) x 12 little-endian float32 counts)."""
+    (len(sources) x 12 little-endian float32 counts) read at its channel's AGC gain ``gains[i]`` (none: 1)."""
 
     TYPE: ClassVar[str] = "ir_beacons"
     sources: list[str] = field(default_factory=list)
     readings: bytes = b""
     t_us: int = 0
+    gains: list[float] = field(default_factory=list)
 
 
 @dataclass
@@ -320,8 +321,9 @@ _SCALARS: dict[str, tuple[type, ...]] = {
 }
 
 
-_LIST_LENGTHS = {"position": (2,), "slot": (2,), "odometry": (3,)}
-"""Lengths of the fixed-size number lists; any other number list holds at most 64 values."""
+_LIST_LENGTHS = {"position": (2,), "slot": (2,), "odometry": (3,), "gains": range(1025)}
+"""Lengths of the fixed-size number lists, and of the gains (one per beacon in sight); any other number list
+holds at most 64 values."""
 
 
 def _check_types(msg: Message) -> None:

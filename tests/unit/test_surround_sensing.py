@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from petswarm.surround_sensing import SensingConfig, beacon_points, dead_reckon, echo_points, sense
+from petswarm.surround_sensing import BeaconTracker, SensingConfig, beacon_points, echo_points, sense
 from radio_hub.light import IrConfig, receiver_gains, strength_at
 from radio_hub.light import sense as light_sense
 
@@ -64,11 +64,44 @@ def test_a_human_estimated_inside_his_own_radius_still_pushes_straight_away() ->
     assert point[0] > 0 and abs(point[1]) < 1e-12 and np.linalg.norm(point) < 0.05
 
 
-def test_dead_reckoning_moves_still_beacons_against_the_robots_own_motion() -> None:
-    moved = dead_reckon({"robot-2": np.array([1.0, 0.0])}, np.array([0.5, -0.25]), 0.04)
-    assert np.allclose(moved["robot-2"], [0.98, 0.01])
+def test_the_tracker_moves_still_beacons_against_the_robots_own_motion() -> None:
+    tracker = BeaconTracker()
+    tracker.update({"robot-2": np.array([1.0, 0.0])}, np.zeros(2))
+    tracker.predict(np.array([0.5, -0.25]), 0.04)
+    assert np.allclose(tracker.points["robot-2"], [0.98, 0.01])
     with pytest.raises(ValueError, match="dt"):
-        dead_reckon({}, np.zeros(2), -1.0)
+        tracker.predict(np.zeros(2), -1.0)
+
+
+def test_a_neighbour_driving_alongside_stays_put_between_sweeps_once_tracked() -> None:
+    """Both drive at 1 m/s; fixes come at 20 Hz with 1.5 cm of noise, steps at 25 Hz: the tracked neighbour
+    stays where it is relative to us, where taking it to stand still would lose 4 cm every step."""
+    rng = np.random.default_rng(5)
+    tracker = BeaconTracker()
+    own = np.array([1.0, 0.0])
+    truth = np.array([0.3, 0.2])
+    tracker.update({"robot-2": truth}, own)
+    errors = []
+    for step in range(100):
+        tracker.predict(own, 0.04)
+        if step * 40 // 50 != (step + 1) * 40 // 50:  # a 20 Hz sweep fell within this 25 Hz step
+            tracker.update({"robot-2": truth + rng.normal(0.0, 0.015, 2)}, own)
+        errors.append(np.linalg.norm(tracker.points["robot-2"] - truth))
+    assert np.mean(errors[20:]) < 0.015
+
+
+def test_the_tracker_follows_a_beacon_that_moves_and_forgets_one_out_of_sight() -> None:
+    tracker = BeaconTracker()
+    still = np.zeros(2)
+    for step in range(40):  # robot-3 drives away at 0.5 m/s, we stand still; a sweep every 50 ms
+        tracker.predict(still, 0.05)
+        tracker.update({"robot-3": np.array([0.5 + 0.5 * 0.05 * step, 0.0]), "user": np.array([0.0, 1.0])}, still)
+    tracker.predict(still, 0.05)
+    assert tracker.points["robot-3"][0] == pytest.approx(0.5 + 0.5 * 0.05 * 40, abs=0.01)  # predicted on
+    tracker.update({"user": np.array([0.0, 1.0])}, still)
+    assert set(tracker.points) == {"user"}
+    with pytest.raises(ValueError, match="alpha"):
+        BeaconTracker(alpha=0.0)
 
 
 def test_bad_settings_are_refused_naming_the_field() -> None:
@@ -99,9 +132,50 @@ def test_the_persons_beacon_reaches_every_robot_of_the_swarm_and_is_located_with
         air.set_mode(node, IrMode.BEACON, 0)
     air.power["user"] = PERSON_BEACON_POWER
     sweeps = air.beacon_sweep(poses)
-    sources, readings = sweeps["robot-1"]
+    sources, readings, gains = sweeps["robot-1"]
+    assert gains == [1.0]  # far off: the channel's AGC is at full gain
     assert sources == ["user"]  # 5 m: beyond a robot's module (2.8 m), within the person's beacon (8.4 m)
     points = beacon_points(dict(zip(sources, readings, strict=True)), ir, person="user")
     assert points["user"] == pytest.approx([0.0, 5.0], abs=0.02)
     robot_calibration = beacon_points(dict(zip(sources, readings, strict=True)), ir)
     assert np.hypot(*robot_calibration["user"]) < 2.0  # read as a robot's module it would seem 3x nearer
+
+
+@pytest.mark.parametrize("distance_m", [0.3, 0.45, 0.6, 0.75, 1.2])
+def test_the_agc_keeps_the_persons_beacon_readable_where_the_surround_robots_hold(distance_m: float) -> None:
+    """Without the per-channel AGC the person's beacon saturated every facing receiver within 0.74 m, and
+    robots 0.3-0.5 m from him read him 0.24-0.44 m too far: the distance of saturation, not his."""
+    from radio_hub.ir_air import IrAir
+    from radio_hub.light import PERSON_BEACON_POWER, IrMode
+
+    ir = IrConfig()
+    air = IrAir(ir, np.random.default_rng(7))
+    poses = {"robot-1": (-distance_m, 0.0, 2.0), "user": (0.0, 0.0, 0.0)}
+    for node in poses:
+        air.set_mode(node, IrMode.BEACON, 0)
+    air.power["user"] = PERSON_BEACON_POWER
+    truth = distance_m * np.array([math.cos(-2.0), math.sin(-2.0)])  # the user in robot-1's frame
+    errors = []
+    for _ in range(50):
+        sources, readings, gains = air.beacon_sweep(poses)["robot-1"]
+        assert readings.max() < ir.saturation_counts
+        points = beacon_points(
+            dict(zip(sources, readings, strict=True)), ir, person="user", gains=dict(zip(sources, gains, strict=True))
+        )
+        errors.append(np.linalg.norm(points["user"] - truth))
+    assert np.mean(errors) < 0.02, np.mean(errors)
+    if distance_m < 0.7:
+        assert gains[0] < 1.0
+        unscaled = beacon_points(dict(zip(sources, readings, strict=True)), ir, person="user")
+        assert np.hypot(*unscaled["user"]) > 1.2 * distance_m  # read at the wrong gain it seems farther
+
+
+def test_the_agc_steps_down_by_twos_until_the_peak_is_under_the_headroom() -> None:
+    from radio_hub.light import AGC_HEADROOM, BEACON_GAINS, beacon_gain
+
+    ir = IrConfig()
+    limit = AGC_HEADROOM * ir.saturation_counts - ir.ambient_counts
+    assert beacon_gain(limit, ir) == 1.0
+    assert beacon_gain(limit * 1.01, ir) == 0.5
+    assert beacon_gain(limit * 3.9, ir) == 0.25
+    assert beacon_gain(1e9, ir) == BEACON_GAINS[-1]

@@ -20,6 +20,7 @@ from radio_hub import wire
         wire.TxDone(token=9, status="no_ack", retries=3, n=4),
         wire.Received(psdu=b"x", rssi_dbm=-61.5, lqi=120, n=5),
         wire.Error(reason="nope", n=6),
+        wire.IrBeacons(sources=["robot-2", "user"], readings=b"\0" * 96, t_us=40_000, gains=[1.0, 0.125]),
     ],
 )
 def test_wire_messages_round_trip(msg):
@@ -34,6 +35,7 @@ def test_wire_messages_round_trip(msg):
         ({"v": 1, "t": "transmit", "token": "1"}, "wrong type"),
         ({"v": 1, "t": "transmit", "token": True}, "wrong type"),
         ({"v": 1, "t": "attach", "position": [1.0]}, "wrong type"),
+        ({"v": 1, "t": "ir_beacons", "gains": ["1"]}, "wrong type"),
         ({"v": 1, "t": "transmit", "colour": 1}, "bad transmit fields"),
     ],
 )
