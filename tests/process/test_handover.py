@@ -20,9 +20,10 @@ from radio_hub.interface import query_hub
 
 pytestmark = pytest.mark.process
 
-MODE_AT_S = 9.0
-"""When the user asks for leading mode with a master change (user time); the organize request comes at 2.5 s
-and the swarm has settled long before."""
+MODE_AT_S = 10.0
+"""When the user asks for leading mode with a master change (user time). Follow comes at 3 s: the belt must have
+paired with robot 1 (its LF wake-up, then BLE) first, which took over a second on a loaded machine; organize
+at 4.5 s, and the swarm has settled long before the mode change."""
 POSITIONS = ((0.0, -0.8, 90.0), (0.3, -1.5, 90.0), (-0.3, -2.1, 90.0))
 SCENARIO = f"""
 name = "handover-lost-acceptance"
@@ -31,11 +32,11 @@ duration_s = 20
 [user]
 owner = 1
 start = [0.0, 0.0, 90.0]
-walk_at = 5
+walk_at = 6
 path = [{{ stop = 1.0 }}, {{ turn = 180, rate = 90 }}, {{ stop = 12.0 }}]
 watch = [
-  {{ at = 1.0, request = "follow" }},
-  {{ at = 2.5, request = "organize", robots = 2, shape = "column", spacing = 0.6 }},
+  {{ at = 3.0, request = "follow" }},
+  {{ at = 4.5, request = "organize", robots = 2, shape = "column", spacing = 0.6 }},
   {{ at = {MODE_AT_S}, request = "mode", mode = "leading", change_master = true }},
 ]
 [robots]
