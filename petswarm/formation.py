@@ -323,6 +323,8 @@ class NetworkFormation:
             step = await self.mpm.step("handover", swarm.session, (m.HandoverAccepted,), send, {new}, self.config.step)
             if swarm.number:
                 return True  # the new master's roster came before its acceptance: followed already
+            if self.swarm is not swarm:
+                return False  # a rival master made this robot give the swarm up meanwhile
             if new not in step.responses:
                 self.log.record("handover_failed", session=swarm.session, to=new, retries=step.retries)
                 return False
