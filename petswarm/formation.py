@@ -5,7 +5,8 @@ each a step of the message-processing manager with deadlines and retries, then a
 on the new PAN; ``disperse()`` sends every member home. Member side: ``on_message`` answers the
 master's requests per Table 1 and switches PAN when chosen. A member that hears no roster for a while,
 or that is left out of one, returns to waiting: membership is never believed by a robot that the master
-does not count.
+does not count. A master that hears a roster of its own swarm from another robot settles which of the
+two stays master (``decisions.rival_master``).
 
 Frames to a particular robot use the broadcast PAN ID (0xFFFF) with its short address, so they reach it
 whether it is still on the waiting PAN or already on the swarm's; answers go to the sender's PAN.
@@ -22,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from petswarm import messages as m
-from petswarm.decisions import choose_pan, may_join, reply_delay_s, select_members
+from petswarm.decisions import Rival, choose_pan, may_join, reply_delay_s, rival_master, select_members
 from petswarm.exchange import MessageProcessingManager, StepResult, StepTiming
 from petswarm.rf import Incoming, RfCommunicationManager
 from petswarm.sequence import DRIVING, EventLog, RobotState, SequenceManager
@@ -132,6 +133,12 @@ class NetworkFormation:
         handover was learned from the new master's roster)."""
         self._former_masters: set[int] = set()
         """Masters of this swarm that handed over: their late rosters must not take the role back."""
+        self._unaccepted: m.MasterHandover | None = None
+        """The last handover this master sent and saw no acceptance of (yet): if its target's roster comes,
+        the target took the role and only the acceptance was lost, so this robot follows it after all."""
+        self._attempted_at = 0.0
+        self._outranked: set[tuple[int, int]] = set()
+        """(session, rival) of rival masters this master outranks and has already recorded."""
         self.candidate_of: tuple[int, int] | None = None
         """(session, master) while this robot said 'available' and waits for the result."""
         self.organizations: list[dict[str, Any]] = []
@@ -294,7 +301,9 @@ class NetworkFormation:
         ``chain[1:]`` as its members in order. A step of the message-processing manager takes the handover
         to the new master (deadline, retries, recorded) and waits for its acceptance; then a broadcast tells
         every member (one that misses it learns from the new master's rosters) and this robot becomes a
-        slave. False when the new master never accepted: nothing changed, this robot is still the master."""
+        slave. False when the new master never accepted: this robot is still the master; if the new master
+        took the role all the same (only its acceptance was lost), its first roster heard here makes this
+        robot follow the handover after all (``_on_rival_roster``)."""
         async with self._busy:
             swarm = self.swarm
             if swarm is None or swarm.number or self.sequence.state != RobotState.MASTER_DRIVING:
@@ -309,7 +318,13 @@ class NetworkFormation:
             async def send(_: set[int] | None) -> None:
                 await self.rf.send(new, msg, dst_pan=BROADCAST)
 
+            # remembered before the first send: the target may take the role however the step ends
+            self._unaccepted, self._attempted_at = msg, time.monotonic()
             step = await self.mpm.step("handover", swarm.session, (m.HandoverAccepted,), send, {new}, self.config.step)
+            if swarm.number:
+                return True  # the new master's roster came before its acceptance: followed already
+            if self.swarm is not swarm:
+                return False  # a rival master made this robot give the swarm up meanwhile
             if new not in step.responses:
                 self.log.record("handover_failed", session=swarm.session, to=new, retries=step.retries)
                 return False
@@ -328,6 +343,7 @@ class NetworkFormation:
         old_chain = (swarm.master, *swarm.members) if msg is not None else detail.pop("old_chain")
         old_master = old_chain[0]
         self._former_masters = (self._former_masters | {old_master}) - {chain[0]}
+        self._unaccepted = None
         swarm.master, swarm.members, swarm.number = chain[0], chain[1:], chain.index(self.me)
         self._misses = {}
         self._deadline = time.monotonic() + self.config.master_silence_s
@@ -450,9 +466,9 @@ class NetworkFormation:
         if swarm.members:
             self.on_change(swarm)
         else:  # the last member is gone: the swarm is over, the master drives with its user again
-            self._dissolving = asyncio.get_running_loop().create_task(self._dissolve(swarm))
+            self._dissolving = asyncio.get_running_loop().create_task(self._dissolve(swarm, "every member is gone"))
 
-    async def _dissolve(self, swarm: Swarm) -> None:
+    async def _dissolve(self, swarm: Swarm, reason: str) -> None:
         async with self._busy:
             if self.swarm is not swarm:
                 return
@@ -460,7 +476,7 @@ class NetworkFormation:
             self.on_change(None)
             if self._roster_task is not None:
                 self._roster_task.cancel()
-            self.sequence.restore_driving(session=swarm.session, reason="every member is gone")
+            self.sequence.restore_driving(session=swarm.session, reason=reason)
             try:
                 await self.rf.radio.configure(pan_id=self.config.waiting_pan)
             except Exception as err:  # the hub may be away; the wanted PAN applies when it is back
@@ -525,8 +541,10 @@ class NetworkFormation:
     async def _on_roster(self, incoming: Incoming) -> None:
         msg: m.Roster = incoming.message  # type: ignore[assignment]
         swarm = self.swarm
-        if swarm is None or swarm.session != msg.session or not swarm.number:
+        if swarm is None or swarm.session != msg.session:
             return
+        if not swarm.number and not self._on_rival_roster(swarm, incoming.sender, msg):
+            return  # our own roster, or a master this robot need not follow: it stays the master
         if incoming.sender != swarm.master:
             if incoming.sender in self._former_masters or incoming.sender not in swarm.members:
                 return  # a late roster of a master that handed over, or not of this swarm's robots
@@ -548,6 +566,39 @@ class NetworkFormation:
         if changed:
             self.on_change(swarm)
         self._deadline = time.monotonic() + self.config.master_silence_s
+
+    def _on_rival_roster(self, swarm: Swarm, sender: int, roster: m.Roster) -> bool:
+        """Master side: another robot announces a roster of our session, so the swarm has two masters
+        (``rival_master`` decides which one stays). True when this robot gave up the role for the sender's
+        and is now a member that takes the roster as any member does."""
+        if self._dissolving is not None and not self._dissolving.done():
+            return False  # already giving the role up
+        unaccepted = self._unaccepted
+        attempt = unaccepted if unaccepted is not None and unaccepted.session == swarm.session else None
+        target = attempt.chain[0] if attempt else None
+        listed = self.me in roster.members
+        verdict = rival_master(self.me, sender, swarm.members, self._former_masters, target, listed)
+        if verdict is Rival.IGNORE or (verdict is Rival.KEEP and (swarm.session, sender) in self._outranked):
+            return False
+        since = round(time.monotonic() - self._attempted_at, 3) if attempt else None
+        self.log.record(
+            "two_masters", session=swarm.session, rival=sender, verdict=verdict.value, since_handover_s=since
+        )
+        if verdict is Rival.KEEP:
+            self._outranked.add((swarm.session, sender))
+            return False
+        if self._roster_task is not None:
+            self._roster_task.cancel()
+        if verdict is Rival.LEAVE:
+            self._dissolving = asyncio.get_running_loop().create_task(self._dissolve(swarm, "a rival master"))
+            return False
+        if attempt is not None and verdict is Rival.FOLLOW:
+            self._follow_handover(swarm, attempt, learned="roster")
+        else:
+            old_chain = (swarm.master, *swarm.members)
+            swarm.master, swarm.members = sender, roster.members
+            self._follow_handover(swarm, None, old_chain=old_chain, learned="rival_roster")
+        return True
 
     async def _on_disperse(self, incoming: Incoming) -> None:
         msg: m.Disperse = incoming.message  # type: ignore[assignment]

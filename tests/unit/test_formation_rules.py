@@ -1,9 +1,9 @@
-"""Tables 1 and 2, the PAN choice, answer slots and the robot state machine."""
+"""Tables 1 and 2, the PAN choice, answer slots, two masters of one swarm and the robot state machine."""
 
 import numpy as np
 import pytest
 
-from petswarm.decisions import SWARM_PANS, choose_pan, may_join, reply_delay_s, select_members
+from petswarm.decisions import SWARM_PANS, Rival, choose_pan, may_join, reply_delay_s, rival_master, select_members
 from petswarm.messages import Refusal
 from petswarm.sequence import EventLog, RobotState, SequenceManager, TransitionError
 
@@ -117,3 +117,30 @@ def test_a_handover_of_a_16_robot_swarm_fits_one_inter_pan_frame():
     assert len(msg.encode()) <= max_payload(pan_compressed=False) and decode(msg.encode()) == msg
     state = DriveState(0xFFFF, 0xFFFF, 0.1, 0.1, 0.1, 3.1, 2, 0.5, "following", "column", 0.6, 1.2, 0.1, 1, 1)
     assert len(state.encode()) <= max_payload(pan_compressed=False)
+
+
+def test_a_master_follows_the_target_of_its_unaccepted_handover_whatever_the_addresses():
+    # robot 1 handed over to 3, the acceptance was lost; 3's roster says it took the role
+    assert rival_master(1, 3, (2, 3), set(), handed_to=3, listed=True) is Rival.FOLLOW
+    # also when 1 already stopped counting 3 (it missed 3's answers meanwhile), or 3 does not count 1
+    assert rival_master(1, 3, (2,), set(), handed_to=3, listed=False) is Rival.FOLLOW
+    # another robot's roster is judged by the general rule, not taken as the handover
+    assert rival_master(5, 2, (2, 3), set(), handed_to=3, listed=True) is Rival.YIELD
+
+
+def test_a_master_ignores_its_own_rosters_former_masters_and_strangers():
+    assert rival_master(4, 4, (2, 3), set(), None, True) is Rival.IGNORE
+    assert rival_master(4, 1, (2, 3, 1), {1}, None, True) is Rival.IGNORE  # a late roster of a former master
+    assert rival_master(4, 1, (2, 3), set(), None, True) is Rival.IGNORE  # not a robot of this swarm
+
+
+def test_of_two_masters_exactly_one_yields_the_lower_address_keeps_the_role():
+    for a, b in ((2, 7), (7, 2), (0x10, 0xFFFD)):
+        verdicts = {rival_master(a, b, (b, 9), set(), None, True), rival_master(b, a, (a, 9), set(), None, True)}
+        assert verdicts == {Rival.KEEP, Rival.YIELD}, (a, b)
+        assert rival_master(max(a, b), min(a, b), (min(a, b),), set(), None, True) is Rival.YIELD
+
+
+def test_an_outranked_master_that_the_rival_does_not_count_leaves_the_swarm():
+    assert rival_master(7, 2, (2, 3), set(), None, listed=False) is Rival.LEAVE
+    assert rival_master(2, 7, (7, 3), set(), None, listed=False) is Rival.KEEP
