@@ -151,19 +151,35 @@ def summarise(world: list[dict[str, Any]]) -> dict[str, Any]:
             [round(state["t_us"] / 1e6, 2), round(float(np.hypot(*(robots.mean(axis=0) - (user["x"], user["y"])))), 3)]
         )
     keys = ("collisions", "connected_fraction", "centre_to_user_m", "centre_to_user_end_m", "extent_end_m")
-    return {**{k: figures[k] for k in keys}, "centre_to_user_series": series}
+    ahead = _ahead_while_walking(world)
+    return {**{k: figures[k] for k in keys}, "ahead_while_walking": ahead, "centre_to_user_series": series}
+
+
+def _ahead_while_walking(world: list[dict[str, Any]]) -> float | None:
+    """The mean fraction of robots ahead of the human (past him along his heading) while he walks faster than
+    0.5 m/s: a swarm that surrounds him keeps some ahead; one that trails him as a tail keeps none."""
+    fractions = []
+    for state in world:
+        user = next(b for b in state["bodies"] if b["kind"] == "user")
+        if math.hypot(user["vx"], user["vy"]) < 0.5:
+            continue
+        heading = np.array([math.cos(user["yaw"]), math.sin(user["yaw"])])
+        robots = np.array([(b["x"], b["y"]) for b in state["bodies"] if b["kind"] == "robot"])
+        fractions.append(float(np.mean((robots - (user["x"], user["y"])) @ heading > 0)))
+    return round(float(np.mean(fractions)), 3) if fractions else None
 
 
 def table(results: dict[str, Any]) -> list[str]:
     """One line per run."""
     head = f"{'scenario':20s} {'seed':>4s} {'contacts':>8s} {'connected':>9s} {'centre-human median':>19s}"
-    lines = [f"{head} {'end':>6s} {'r end':>6s}"]
+    lines = [f"{head} {'end':>6s} {'r end':>6s} {'ahead walking':>13s}"]
     for name, runs in results["runs"].items():
         for run in runs:
             median = (run["centre_to_user_m"] or {}).get("median", float("nan"))
             lines.append(
                 f"{name:20s} {run['seed']:4d} {run['collisions']:8d} {run['connected_fraction']:9.3f} "
-                f"{median:19.2f} {run['centre_to_user_end_m']:6.2f} {run['extent_end_m']:6.3f}"
+                f"{median:19.2f} {run['centre_to_user_end_m']:6.2f} {run['extent_end_m']:6.3f} "
+                f"{run['ahead_while_walking'] if run['ahead_while_walking'] is not None else float('nan'):13.2f}"
             )
     return lines
 

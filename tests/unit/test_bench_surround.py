@@ -1,0 +1,42 @@
+"""``petswarm bench surround``: the surround scenarios in model time, through each robot's own SurroundPilot."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+from cli.bench_surround import model_time_run, summarise
+from cli.main import main
+from petswarm.scenario import load
+
+ROOT = Path(__file__).resolve().parents[2]
+CYLINDER = ROOT / "scenarios" / "surround-cylinder.toml"
+
+
+def test_past_the_cylinder_in_model_time_no_robot_touches_and_the_swarm_stays_whole(tmp_path: Path, capsys) -> None:
+    """The pipeline a robot process runs (AGC'd beacons, the tracker, the law, the safety stage), on the hub's
+    own world and IR models: seed 1 passes the cylinder without a contact, always connected, back at r*."""
+    assert main(["bench", "surround", str(CYLINDER), "--seeds", "1", "--out", str(tmp_path), "--json"]) == 0
+    results = json.loads(capsys.readouterr().out)
+    (run,) = results["runs"]["surround-cylinder"]
+    assert run["collisions"] == 0
+    assert run["connected_fraction"] == 1.0
+    assert run["extent_end_m"] == pytest.approx(0.65, abs=0.1)  # r*, with the human's body in the middle
+    assert (tmp_path / "bench_surround.png").stat().st_size > 10_000
+    assert json.loads((tmp_path / "bench_surround.json").read_text())["runs"] == results["runs"]
+
+
+def test_a_model_time_run_is_reproducible_from_its_seed() -> None:
+    scenario = replace(load(CYLINDER), duration_s=4.0)
+    first, again = (summarise(model_time_run(scenario, 5)) for _ in range(2))
+    assert first == again
+    assert summarise(model_time_run(scenario, 6))["centre_to_user_series"] != first["centre_to_user_series"]
+
+
+def test_a_scenario_without_the_surround_formation_is_refused(tmp_path: Path, capsys) -> None:
+    following = ROOT / "scenarios" / "following-turn.toml"
+    assert main(["bench", "surround", str(following), "--seeds", "1", "--out", str(tmp_path)]) == 2
+    assert "not a surround scenario" in capsys.readouterr().err
