@@ -27,6 +27,7 @@ from cli.metrics import driving_metrics
 from petswarm.scenario import Scenario, load
 from petswarm.surround import SurroundConfig
 from petswarm.surround_pilot import SurroundDriverConfig, SurroundPilot
+from petswarm.surround_sim import surround_figures
 from radio_hub.interface import BeaconSweep, IrConfig, OwnSensors
 from radio_hub.ir_air import IrAir
 from radio_hub.light import PERSON_BEACON_POWER
@@ -54,6 +55,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seeds", type=bounded(int, 1, 1000), default=3, help="runs per scenario (default 3)")
     parser.add_argument("--seed", type=seed, default=1, help="seed of the first run (default %(default)s)")
     parser.add_argument("--out", default="bench-results", help="directory for JSON and plots (default %(default)s)")
+    parser.add_argument(
+        "--paper",
+        action="store_true",
+        help="also the pure simulation of the paper's setups (exact sensing, no hub): r* from both lattices, "
+        "thin- and solid-walled corridor and cylinder, each also with noisy sensing",
+    )
     parser.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
 
 
@@ -71,6 +78,9 @@ def bench_surround(args: argparse.Namespace) -> int:
             world = model_time_run(scenario, seed)
             runs.append({"seed": seed, **summarise(world)})
         results["runs"][scenario.name] = runs
+    if args.paper:
+        print("[bench surround] the paper's setups, pure simulation", file=sys.stderr)
+        results["pure_simulation"] = surround_figures(args.seed)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     save(results, out, "bench_surround", plot)
@@ -181,6 +191,16 @@ def table(results: dict[str, Any]) -> list[str]:
                 f"{median:19.2f} {run['centre_to_user_end_m']:6.2f} {run['extent_end_m']:6.3f} "
                 f"{run['ahead_while_walking'] if run['ahead_while_walking'] is not None else float('nan'):13.2f}"
             )
+    pure = results.get("pure_simulation")
+    if pure:
+        lines.append(f"pure simulation (seed {pure['seed']}): r* {pure['r_star']}")
+        for name, fig in pure.items():
+            if isinstance(fig, dict) and "trailing_m" in fig:
+                contacts = fig["robot_robot_contacts"] + fig["robot_obstacle_contacts"] + fig["robot_human_contacts"]
+                lines.append(
+                    f"  {name:24s} contacts {contacts:4d}  connected {fig['connected_fraction']:.3f}  "
+                    f"centre-human end {fig['trailing_m']:.2f} m  r after {fig['r_after_m']:.3f}"
+                )
     return lines
 
 

@@ -7,7 +7,7 @@ human's position. Truth, or truth with Gaussian distance and bearing noise. Robo
 drawn per robot from the seed (so frames really differ) and move holonomically within the speed and
 acceleration limits. Occlusion is not modelled: a robot sees every neighbour within S.
 
-Used by the unit tests and by ``surround_figures`` (the paper's setups, for ``petswarm bench surround``).
+Used by the unit tests and by ``surround_figures`` (the paper's setups, for ``petswarm bench surround --paper``).
 """
 
 from __future__ import annotations
@@ -312,7 +312,7 @@ def _noisy(points: np.ndarray, rng: np.random.Generator) -> np.ndarray:
 
 
 def surround_figures(seed: int, config: SurroundConfig | None = None) -> dict[str, Any]:
-    """The paper's setups and their figures, for ``petswarm bench surround``.
+    """The paper's setups and their figures, for ``petswarm bench surround --paper``.
 
     ``r_star``: the extent under local forces alone from the 0.8 m and the 0.2 m lattice. For each obstacle
     scenario (thin-walled corridor, solid-walled corridor, cylinder; each also with noisy sensing):
