@@ -354,7 +354,7 @@ class RadioHub:
             return
         if isinstance(msg, wire.Attach) and msg.exclusive and node_id in self._kinds:
             # a refused claim must not touch the live node's sequence numbering
-            self._send_down(node_id, wire.Error(reason=f"node id {node_id} is taken"))
+            self._send_down(node_id, wire.Error(reason=f"node id {node_id} is taken", instance=msg.instance))
             return
         self._check_sequence(node_id, msg)
         if isinstance(msg, wire.Attach):
@@ -532,6 +532,7 @@ class RadioHub:
             heading_deg=math.degrees(float(pose[2])),
             now_us=self.now_us(),
             ultrasonic_deg=list(self.world.config.ultrasonic_angles_deg),
+            instance=self._instances.get(node_id, ""),
         )
 
     def _on_alive(self, node_id: str, instance: str, kind: zenoh.SampleKind) -> None:

@@ -463,6 +463,8 @@ class RadioClient:
         except wire.WireError:
             self.malformed += 1
             return
+        if isinstance(msg, (wire.Attached, wire.Error)) and msg.instance not in ("", self.instance):
+            return  # another process claiming our id at the same moment: its answer, not ours
         if isinstance(msg, wire.Attached) and msg.token == 0:
             self._down_seq = msg.n - 1  # the hub numbers afresh on every attach
         if msg.n > self._down_seq + 1:

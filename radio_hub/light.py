@@ -180,9 +180,6 @@ def _poses(poses: ArrayLike, columns: int) -> np.ndarray:
     return array
 
 
-# == who is transmitting ==============================================================================
-
-
 BEACON_GAINS = tuple(2.0**-k for k in range(7))
 """The gains a beacon channel's automatic gain control steps through (1 down to 1/64, a factor 2 each)."""
 AGC_HEADROOM = 0.8
@@ -204,6 +201,9 @@ def beacon_gain(peak_light: float, config: IrConfig) -> float:
         if gain * peak_light <= limit:
             return gain
     return BEACON_GAINS[-1]
+
+
+# == who is transmitting ==============================================================================
 
 
 PERSON_BEACON_POWER = 9.0

@@ -106,6 +106,9 @@ class Attached(Message):
     now_us: int = 0
     ultrasonic_deg: list[float] = field(default_factory=list)
     """Where the robot's ultrasonic sensors look (degrees from its heading), in ``Sensors.ranges`` order."""
+    instance: str = ""
+    """The attached node's liveliness instance: two processes claiming one id hear each other's answers on
+    the id's key, and only the named one may take this as its own."""
 
 
 @dataclass
@@ -142,6 +145,8 @@ class Error(Message):
     TYPE: ClassVar[str] = "error"
     token: int = 0
     reason: str = ""
+    instance: str = ""
+    """For a refused claim: the claimant's instance (the id's holder hears the refusal too, and ignores it)."""
 
 
 @dataclass

@@ -153,7 +153,8 @@ def test_robots_started_with_id_auto_claim_distinct_ids(make_air):
         if len(attached) == 3:
             break
         time.sleep(0.1)
-    assert attached == ["robot-1", "robot-2", "robot-3"]
+    logs = {f"auto-{n}": air.sup.log_tail(f"auto-{n}") for n in range(3)}
+    assert attached == ["robot-1", "robot-2", "robot-3"], logs
     assert not air.sup.dead()
     assert air.stats()["hub"]["detaches"] == 0  # a refused claim did not knock out the robot that holds the id
     assert air.cmd(1, "ping", wait=0.3)["tx"]["status"] == "success"

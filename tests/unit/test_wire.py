@@ -20,6 +20,8 @@ from radio_hub import wire
         wire.TxDone(token=9, status="no_ack", retries=3, n=4),
         wire.Received(psdu=b"x", rssi_dbm=-61.5, lqi=120, n=5),
         wire.Error(reason="nope", n=6),
+        wire.Error(reason="node id robot-2 is taken", instance="9f3a", n=7),
+        wire.Attached(token=0, short_addr=2, instance="9f3a", n=1),
         wire.IrBeacons(sources=["robot-2", "user"], readings=b"\0" * 96, t_us=40_000, gains=[1.0, 0.125]),
     ],
 )
