@@ -143,7 +143,7 @@ def _step_world(
 
 
 def _beacon_sweeps(world: World, ir: IrAir, t_us: int) -> dict[str, BeaconSweep]:
-    poses = {n: (float(b.pose[0]), float(b.pose[1]), float(b.pose[2])) for n, b in world.bodies.items()}
+    poses = world.poses()
     return {
         node: BeaconSweep(t_us, dict(zip(sources, block, strict=True)), dict(zip(sources, gains, strict=True)))
         for node, (sources, block, gains) in ir.beacon_sweep(poses).items()

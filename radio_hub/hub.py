@@ -239,7 +239,7 @@ class RadioHub:
         now = self.now_us()
         if not self.ir.take_due(now):
             return
-        poses = {n: (float(b.pose[0]), float(b.pose[1]), float(b.pose[2])) for n, b in self.world.bodies.items()}
+        poses = self.world.poses()
         chaos = self.medium.chaos
         for node_id, readings in self.ir.receive_sweep(poses, chaos).items():
             self._send_down(node_id, wire.IrSample(readings=readings.astype("<f4").tobytes(), t_us=now))

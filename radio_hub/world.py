@@ -330,6 +330,10 @@ class World:
                 out[i] = nearest
         return out
 
+    def poses(self) -> dict[str, tuple[float, float, float]]:
+        """Every body's pose (x, y, yaw) as plain floats, by id (for the IR light and the radio ranges)."""
+        return {n: (float(b.pose[0]), float(b.pose[1]), float(b.pose[2])) for n, b in self.bodies.items()}
+
     def snapshot(self) -> list[dict[str, Any]]:
         """Every body's truth as plain values (for the world publication and records)."""
         return [
