@@ -168,6 +168,10 @@ REQUEST_TIMEOUT_S = 5.0
 _ENDPOINT = re.compile(r"^(tcp|udp|tls|quic)/(\[[0-9a-fA-F:.]+\]|[A-Za-z0-9_.-]+):\d{1,5}$")
 
 
+RESEND_S = 0.5
+"""An idempotent request (re-attach, configure, IR mode) unanswered this long is sent again."""
+
+
 def open_session(mode: str, endpoint: str) -> zenoh.Session:
     """Open a zenoh session, turning zenoh's error into HubUnavailable with the endpoint in it."""
     if not _ENDPOINT.match(endpoint):
@@ -313,7 +317,7 @@ class RadioClient:
     async def set_ir_mode(self, mode: str) -> None:
         """Switch the IR module: ``idle``, ``receive`` or ``transmit``; returns once the hub has it."""
         token = next(self._tokens)
-        await self._request(token, wire.SetIrMode(token=token, mode=mode))
+        await self._request(token, wire.SetIrMode(token=token, mode=mode), resend_s=RESEND_S)
 
     async def ir_sample(self) -> IrSweep:
         """The next sweep of the 12 phototransistors (arrives only while receiving and something shines)."""
@@ -392,7 +396,7 @@ class RadioClient:
         # what we want is our identity from now on: an attach to a restarted hub in the meantime applies it
         self.identity = replace(before, **wanted)
         try:
-            self._adopt(await self._request(token, msg))
+            self._adopt(await self._request(token, msg, resend_s=RESEND_S))
         except RadioError as err:
             if str(err) != wire.NOT_ATTACHED:
                 self.identity = before  # refused: the radio stays as it was
@@ -436,19 +440,27 @@ class RadioClient:
         msg.n = next(self._up_seq)
         self._pub.put(msg.encode())
 
-    async def _request(self, token: int, msg: wire.Message) -> Any:
+    async def _request(self, token: int, msg: wire.Message, resend_s: float | None = None) -> Any:
+        """Send ``msg`` and wait up to ``request_timeout`` for the hub's answer to ``token``. With ``resend_s``
+        (idempotent requests only) the message goes again every ``resend_s`` until answered: one sent just
+        as the hub restarted, or answered before the router had our subscription back, is lost without a
+        trace, and waiting out the whole timeout left a robot deaf for 5 s after a hub restart."""
         fut: asyncio.Future[Any] = self._loop.create_future()
         self._pending[token] = fut
         self._pending_types[token] = msg.TYPE
+        deadline = self._loop.time() + self.request_timeout
         try:
-            self._put(msg)
-            # asyncio.timeout, not wait_for: on 3.11 wait_for can swallow a cancellation that races the answer
-            async with asyncio.timeout(self.request_timeout):
-                return await fut
-        except TimeoutError:
-            raise HubUnavailable(
-                f"no answer from the hub of world {self.keys.world!r} within {self.request_timeout} s"
-            ) from None
+            while True:
+                self._put(msg)
+                left = deadline - self._loop.time()
+                # asyncio.wait leaves the future alone on a timeout, so a resend can still be answered
+                done, _ = await asyncio.wait({fut}, timeout=left if resend_s is None else min(resend_s, left))
+                if done:
+                    return fut.result()
+                if self._loop.time() >= deadline:
+                    raise HubUnavailable(
+                        f"no answer from the hub of world {self.keys.world!r} within {self.request_timeout} s"
+                    )
         finally:
             self._pending.pop(token, None)
             self._pending_types.pop(token, None)
@@ -566,7 +578,7 @@ class RadioClient:
 
     async def _reattach(self) -> None:
         orphans = [token for token in self._pending if token]  # sent before this attach: to the dead hub
-        attached = await self._request(0, self._attach_message())
+        attached = await self._request(0, self._attach_message(), resend_s=RESEND_S)
 
         self._adopt(attached)
         self.reattaches += 1
