@@ -67,11 +67,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def bench_surround(args: argparse.Namespace) -> int:
     """Run every scenario for ``--seeds`` seeds in model time; print, save JSON and the plot."""
     results: dict[str, Any] = {"first_seed": args.seed, "runs": {}}
-    for path in args.scenarios:
-        scenario = load(path)
+    try:  # every file is read before the long runs start
+        scenarios = [load(path) for path in args.scenarios]
+    except ValueError as err:
+        print(f"petswarm bench surround: {err}", file=sys.stderr)
+        return 2
+    for path, scenario in zip(args.scenarios, scenarios, strict=True):
         if not scenario.surround_enabled:
             print(f"petswarm bench surround: {path} is not a surround scenario ([surround] enabled)", file=sys.stderr)
             return 2
+    for scenario in scenarios:
         runs = []
         for seed in range(args.seed, args.seed + args.seeds):
             print(f"[bench surround] {scenario.name} seed {seed}", file=sys.stderr)

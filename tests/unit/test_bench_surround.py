@@ -40,3 +40,8 @@ def test_a_scenario_without_the_surround_formation_is_refused(tmp_path: Path, ca
     following = ROOT / "scenarios" / "following-turn.toml"
     assert main(["bench", "surround", str(following), "--seeds", "1", "--out", str(tmp_path)]) == 2
     assert "not a surround scenario" in capsys.readouterr().err
+
+
+def test_a_missing_scenario_file_is_a_clear_error(tmp_path: Path, capsys) -> None:
+    assert main(["bench", "surround", str(tmp_path / "nosuch.toml"), "--out", str(tmp_path)]) == 2
+    assert "no scenario file" in capsys.readouterr().err
