@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import asyncio
 import math
-import time
 import zlib
 from collections import deque
 from dataclasses import dataclass, field
@@ -26,8 +25,8 @@ from typing import Any
 
 import numpy as np
 
+from petswarm import clock, user_link
 from petswarm import messages as m
-from petswarm import user_link
 from petswarm.activity import Activity, Movement
 from petswarm.formation import FormationError, NetworkFormation
 from petswarm.formation_shapes import (
@@ -144,7 +143,7 @@ class Driver:
         """AHRS yaw a turn-about is turning to."""
         self._fix_seen: float | None = None
         self._seq = 0
-        self._last_control = time.monotonic()
+        self._last_control = clock.now()
         self.counters = {"wake_bursts": 0, "track_bursts": 0, "lf_fixes": 0, "lf_rejected": 0, "drive_states": 0}
 
     # -- tasks -----------------------------------------------------------------------------------
@@ -219,7 +218,7 @@ class Driver:
             self.counters["lf_rejected"] += 1
             return
         self.counters["lf_fixes"] += 1
-        now = time.monotonic()
+        now = clock.now()
         if self.fix is not None and 0 < now - self.fix_at < RATE_WINDOW_S:
             rate = (fix.distance_m - self.fix.distance_m) / (now - self.fix_at)
             self.opening_rate = rate if self.opening_rate is None else 0.5 * (self.opening_rate + rate)
@@ -280,7 +279,7 @@ class Driver:
         vx_sign, vy_sign, turn_deg = combine([gesture])
         omega = math.radians(turn_deg) / REMOTE_HOLD_S
         self.remote = MotorCommand(vx_sign * REMOTE_SPEED_MPS, vy_sign * REMOTE_SPEED_MPS, omega)
-        self.remote_until = time.monotonic() + REMOTE_HOLD_S
+        self.remote_until = clock.now() + REMOTE_HOLD_S
 
     def _change_mode(self, mode: Mode, change_master: bool) -> None:
         """Table 3 as the master applies it. No change: the master keeps its role and the slots are mirrored
@@ -397,7 +396,7 @@ class Driver:
             return None
         error = wrap(self.turn_to - sensors.yaw_rad)
         if abs(error) < TURN_DONE_RAD:
-            self.turn_to, self.fix, self.fix_at, self.opening_rate = None, None, time.monotonic(), None
+            self.turn_to, self.fix, self.fix_at, self.opening_rate = None, None, clock.now(), None
             self.log.record("turn_about_done")
             return None
         limit = self.config.pet.limits.max_omega
@@ -434,7 +433,7 @@ class Driver:
         tick = 0
         while True:
             await asyncio.sleep(CONTROL_PERIOD_S)
-            now = time.monotonic()
+            now = clock.now()
             dt, self._last_control = now - self._last_control, now
             self.command = self._decide(now, dt)
             self.radio.drive(self.command.vx, self.command.vy, self.command.omega)
@@ -592,7 +591,7 @@ class Driver:
             or (msg.user_rate != 0) != (self.drive_state.user_rate != 0)
         ):
             self.log.record("user_activity_heard", movement=msg.movement, user_rate=round(msg.user_rate, 3))
-        self.drive_state, self.drive_state_at = msg, time.monotonic()
+        self.drive_state, self.drive_state_at = msg, clock.now()
 
     def _slave(self, now: float, dt: float, ranges: Ranges) -> MotorCommand:
         swarm, state = self.formation.swarm, self.drive_state

@@ -15,13 +15,13 @@ whether it is still on the waiting PAN or already on the swarm's; answers go to 
 from __future__ import annotations
 
 import asyncio
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from petswarm import clock
 from petswarm import messages as m
 from petswarm.decisions import Rival, choose_pan, may_join, reply_delay_s, rival_master, select_members
 from petswarm.exchange import MessageProcessingManager, StepResult, StepTiming
@@ -177,7 +177,7 @@ class NetworkFormation:
     async def _organize(self, count: int, protocol: str) -> dict[str, Any]:
         session = int(self.rng.integers(1, 0xFFFF))
         slot = self.config.slot(protocol)
-        t0 = time.monotonic()
+        t0 = clock.now()
         self.sequence.transition(RobotState.ORGANIZING, session=session, requested=count, protocol=protocol)
         steps: dict[str, StepResult] = {}
         try:
@@ -199,7 +199,7 @@ class NetworkFormation:
         except BaseException:
             await self._abandon(session)
             raise
-        elapsed = _last_arrival(steps["notice"], t0) if members else time.monotonic() - t0
+        elapsed = _last_arrival(steps["notice"], t0) if members else clock.now() - t0
         if not members:
             await self.rf.radio.configure(pan_id=self.config.waiting_pan)
         figures = {
@@ -319,7 +319,7 @@ class NetworkFormation:
                 await self.rf.send(new, msg, dst_pan=BROADCAST)
 
             # remembered before the first send: the target may take the role however the step ends
-            self._unaccepted, self._attempted_at = msg, time.monotonic()
+            self._unaccepted, self._attempted_at = msg, clock.now()
             step = await self.mpm.step("handover", swarm.session, (m.HandoverAccepted,), send, {new}, self.config.step)
             if swarm.number:
                 return True  # the new master's roster came before its acceptance: followed already
@@ -346,7 +346,7 @@ class NetworkFormation:
         self._unaccepted = None
         swarm.master, swarm.members, swarm.number = chain[0], chain[1:], chain.index(self.me)
         self._misses = {}
-        self._deadline = time.monotonic() + self.config.master_silence_s
+        self._deadline = clock.now() + self.config.master_silence_s
         self.log.record("handover", session=swarm.session, frm=old_master, to=chain[0], number=swarm.number, **detail)
         if self.sequence.state == RobotState.MASTER_DRIVING:
             self.sequence.transition(RobotState.SLAVE_DRIVING, cause="handover", master=chain[0], number=swarm.number)
@@ -391,7 +391,7 @@ class NetworkFormation:
             if swarm is None or self.sequence.state != RobotState.MASTER_DRIVING:
                 raise FormationError(f"robot is {self.sequence.state.label}, not the master of a swarm")
             slot = self.config.slot(protocol)
-            t0 = time.monotonic()
+            t0 = clock.now()
 
             async def send(missing: set[int] | None) -> None:
                 for addr in swarm.members:
@@ -411,7 +411,7 @@ class NetworkFormation:
             await self.rf.radio.configure(pan_id=self.config.waiting_pan)
             figures = {
                 "session": swarm.session,
-                "disperse_time_s": round(time.monotonic() - t0, 6),
+                "disperse_time_s": round(clock.now() - t0, 6),
                 "retries": step.retries,
                 "members": list(swarm.members),
                 "unconfirmed": sorted(step.missing),
@@ -507,7 +507,7 @@ class NetworkFormation:
         if refusal is not None:
             return m.JoinUnavailable(msg.session, int(refusal))
         self.candidate_of = (msg.session, incoming.sender)
-        self._deadline = time.monotonic() + self.config.candidate_timeout_s
+        self._deadline = clock.now() + self.config.candidate_timeout_s
         self.sequence.transition(RobotState.ORGANIZING, session=msg.session, master=incoming.sender)
         return m.JoinAvailable(msg.session, rssi)
 
@@ -521,7 +521,7 @@ class NetworkFormation:
             return  # not our master's notice (or we gave up waiting): no answer, the master will release
         self.candidate_of = None
         self.swarm = Swarm(msg.session, msg.pan_id, incoming.sender, msg.number)
-        self._deadline = time.monotonic() + self.config.master_silence_s
+        self._deadline = clock.now() + self.config.master_silence_s
         self.sequence.transition(RobotState.SLAVE_DRIVING, session=msg.session, pan_id=msg.pan_id, number=msg.number)
         await self.rf.radio.configure(pan_id=msg.pan_id)
         self.on_change(self.swarm)
@@ -565,7 +565,7 @@ class NetworkFormation:
         swarm.number = msg.members.index(self.me) + 1
         if changed:
             self.on_change(swarm)
-        self._deadline = time.monotonic() + self.config.master_silence_s
+        self._deadline = clock.now() + self.config.master_silence_s
 
     def _on_rival_roster(self, swarm: Swarm, sender: int, roster: m.Roster) -> bool:
         """Master side: another robot announces a roster of our session, so the swarm has two masters
@@ -580,7 +580,7 @@ class NetworkFormation:
         verdict = rival_master(self.me, sender, swarm.members, self._former_masters, target, listed)
         if verdict is Rival.IGNORE or (verdict is Rival.KEEP and (swarm.session, sender) in self._outranked):
             return False
-        since = round(time.monotonic() - self._attempted_at, 3) if attempt else None
+        since = round(clock.now() - self._attempted_at, 3) if attempt else None
         self.log.record(
             "two_masters", session=swarm.session, rival=sender, verdict=verdict.value, since_handover_s=since
         )
@@ -646,9 +646,9 @@ class NetworkFormation:
             waiting_for_master = self.candidate_of is not None or (self.swarm is not None and self.swarm.number)
             if not self.rf.radio.hub_present:
                 # no air at all (the hub died or restarts): the master's silence means nothing yet
-                self._deadline = max(self._deadline, time.monotonic() + self.config.master_silence_s)
+                self._deadline = max(self._deadline, clock.now() + self.config.master_silence_s)
                 continue
-            if not waiting_for_master or time.monotonic() <= self._deadline:
+            if not waiting_for_master or clock.now() <= self._deadline:
                 continue
 
             try:
@@ -662,7 +662,7 @@ class NetworkFormation:
             await self._leave(reason="no result notice")
             return
         swarm = self.swarm
-        if swarm is None or not swarm.number or time.monotonic() <= self._deadline:
+        if swarm is None or not swarm.number or clock.now() <= self._deadline:
             return
         await self._leave(reason="master silent")
         # tell the master, in case only its rosters were lost: it must stop counting us

@@ -21,13 +21,13 @@ from __future__ import annotations
 
 import asyncio
 import math
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from petswarm import clock
 from petswarm import messages as m
 from petswarm.decisions import reply_delay_s
 from petswarm.exchange import MessageProcessingManager, StepTiming
@@ -62,13 +62,13 @@ class RelativeLocationManager:
         """A new bearing and distance of ``addr``."""
         entry = self.table.setdefault(addr, NeighbourFix())
         entry.bearing_rad, entry.distance_m = float(fix.bearing_rad), float(fix.distance_m)
-        entry.fixed_at = time.monotonic()
+        entry.fixed_at = clock.now()
         entry.fixes += 1
 
     def record_heading(self, addr: int, heading_deg: float) -> None:
         """``addr`` told us its heading."""
         entry = self.table.setdefault(addr, NeighbourFix())
-        entry.heading_deg, entry.heading_at = heading_deg, time.monotonic()
+        entry.heading_deg, entry.heading_at = heading_deg, clock.now()
 
     def clear(self) -> None:
         """Forget everyone (the swarm ended)."""
@@ -76,7 +76,7 @@ class RelativeLocationManager:
 
     def snapshot(self) -> dict[str, dict[str, Any]]:
         """The table with ages in seconds, bearings in degrees; keys are short addresses as text."""
-        now = time.monotonic()
+        now = clock.now()
         out = {}
         for addr, e in self.table.items():
             out[str(addr)] = {
@@ -182,7 +182,7 @@ class IrTokenSchedule:
         self.rounds_held = 0
         self.fixes = 0
         self.regenerations = 0
-        self.last_activity = time.monotonic()
+        self.last_activity = clock.now()
         self._window_of: tuple[int, int] | None = None
         self._holding: asyncio.Task[None] | None = None
 
@@ -200,7 +200,7 @@ class IrTokenSchedule:
         """Take part in the schedule of a swarm (the master starts the first round)."""
         self.session, self.chain, self.neighbours, self.is_master = session, chain, neighbours, is_master
         self.round = 0
-        self.last_activity = time.monotonic()
+        self.last_activity = clock.now()
         self.log.record("ir_schedule", session=session, chain=list(chain), master=is_master)
         if is_master:
             self._hold(1)
@@ -214,7 +214,7 @@ class IrTokenSchedule:
         The round count is kept (members ignore start signs of older rounds) and the token keeps passing
         where it is; only who regenerates a lost token changes."""
         self.chain, self.neighbours, self.is_master = chain, neighbours, is_master
-        self.last_activity = time.monotonic()
+        self.last_activity = clock.now()
         self.log.record("ir_schedule", session=self.session, chain=list(chain), master=is_master, rejoined=True)
 
     async def leave(self) -> None:
@@ -243,7 +243,7 @@ class IrTokenSchedule:
 
     async def _round(self, round_: int) -> None:
         session, others = self.session, set(self.chain) - {self.me}
-        self.last_activity = time.monotonic()
+        self.last_activity = clock.now()
 
         async def start(_: set[int] | None) -> None:
             await self.rf.send(BROADCAST, m.IrStart(session, round_), ack=False)
@@ -256,7 +256,7 @@ class IrTokenSchedule:
         if others and not alive:
             # nobody heard us: we may be the deaf one while the others pass the token; never shine blind
             self.log.record("ir_unheard", round=round_)
-            self.last_activity = time.monotonic()
+            self.last_activity = clock.now()
             return
         try:
             await self.ir.set_mode("transmit")
@@ -273,7 +273,7 @@ class IrTokenSchedule:
         if self.round != round_ or not self.active:
             return
         await self.rf.send(BROADCAST, m.Sync(session, round_ + 1, nxt), ack=False)
-        self.last_activity = time.monotonic()
+        self.last_activity = clock.now()
         if nxt == self.me:
             self._hold(round_ + 1)
 
@@ -289,7 +289,7 @@ class IrTokenSchedule:
         msg = incoming.message
         if not self.active or msg.session_id != self.session:
             return
-        self.last_activity = time.monotonic()
+        self.last_activity = clock.now()
         if isinstance(msg, m.IrStart):
             await self._on_start(incoming, msg)
         elif isinstance(msg, m.Token):
@@ -373,9 +373,9 @@ class IrTokenSchedule:
         while True:
             await asyncio.sleep(0.05)
             if not self.rf.radio.hub_present:
-                self.last_activity = time.monotonic()  # no air, no token to lose
+                self.last_activity = clock.now()  # no air, no token to lose
                 continue
-            silent = time.monotonic() - self.last_activity > self.config.regen_timeout_s
+            silent = clock.now() - self.last_activity > self.config.regen_timeout_s
 
             if self.active and self.is_master and silent:
                 self.regenerations += 1

@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-import time
 from collections import Counter
 from dataclasses import dataclass, field
 
+from petswarm import clock
 from petswarm.messages import MessageError, SwarmMessage, decode
 from radio_hub.interface import BROADCAST, RadioClient, RxFrame, TxResult
 
@@ -16,7 +16,7 @@ class Incoming:
 
     message: SwarmMessage
     rx: RxFrame
-    received_at: float = field(default_factory=time.monotonic)
+    received_at: float = field(default_factory=clock.now)
     """Monotonic seconds when the robot got it."""
 
     @property

@@ -11,7 +11,6 @@ import math
 import os
 import signal
 import sys
-import time
 from collections import Counter, deque
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
@@ -20,6 +19,7 @@ import msgpack
 import numpy as np
 import zenoh
 
+from petswarm import clock
 from petswarm.control import all_robots_key, robot_key
 from petswarm.driving import Driver
 from petswarm.exchange import MessageProcessingManager
@@ -149,7 +149,7 @@ class Robot:
             "start", robot_id=config.robot_id, state=self.sequence.state.label, user=config.user, seed=config.seed
         )
 
-        self.started = time.monotonic()
+        self.started = clock.now()
         self.pings_sent = 0
         self.pings_answered = 0
         self.heard_from: Counter[int] = Counter()
@@ -207,7 +207,7 @@ class Robot:
             self.heard_from[incoming.sender] += 1
             waiter = self._waiting.get(msg.nonce)
             if waiter is not None:
-                waiter.put_nowait((incoming.sender, time.monotonic()))
+                waiter.put_nowait((incoming.sender, clock.now()))
 
     async def _answer(self, dst: int, nonce: int) -> None:
         result = await self.rf.send(dst, Pong(nonce))
@@ -283,7 +283,7 @@ class Robot:
         nonce = self._nonce
         replies: asyncio.Queue[tuple[int, float]] = asyncio.Queue()
         self._waiting[nonce] = replies
-        start = time.monotonic()
+        start = clock.now()
         try:
             result = await self.rf.send(dst, Ping(nonce))
             self.pings_sent += 1
@@ -363,7 +363,7 @@ class Robot:
             "robot_id": self.config.robot_id,
             "pid": os.getpid(),
             "radio": _identity_dict(radio.identity),
-            "uptime_s": round(time.monotonic() - self.started, 3),
+            "uptime_s": round(clock.now() - self.started, 3),
             "pings_sent": self.pings_sent,
             "pings_answered": self.pings_answered,
             "heard_from": dict(self.heard_from),
@@ -449,13 +449,13 @@ class ControlServer:
 
 async def attach(config: RobotConfig) -> tuple[RobotConfig, RadioClient]:
     """Put the robot on the air, waiting up to ``attach_timeout`` for a hub that is still starting."""
-    deadline = time.monotonic() + config.attach_timeout
+    deadline = clock.now() + config.attach_timeout
     told = False
     while True:
         try:
             return await _attach_once(config)
         except HubUnavailable:
-            if time.monotonic() >= deadline:
+            if clock.now() >= deadline:
                 raise
             if not told:
                 print(

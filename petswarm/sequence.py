@@ -9,10 +9,11 @@ from __future__ import annotations
 
 import enum
 import json
-import time
 from collections import deque
 from dataclasses import dataclass, field
 from typing import IO, Any
+
+from petswarm import clock
 
 
 class RobotState(enum.IntEnum):
@@ -75,8 +76,8 @@ class EventLog:
     sink: IO[str] | None = None
 
     def record(self, kind: str, **detail: Any) -> dict[str, Any]:
-        """Append an event stamped with wall time and monotonic time (seconds)."""
-        event = {"t": round(time.time(), 6), "mono": round(time.monotonic(), 6), "kind": kind, **detail}
+        """Append an event stamped with wall time and monotonic time (seconds; both model time in model time)."""
+        event = {"t": round(clock.wall_time(), 6), "mono": round(clock.now(), 6), "kind": kind, **detail}
         self.events.append(event)
         if self.sink is not None:
             # flushed per event: a robot killed outright loses at most the event being written

@@ -10,9 +10,9 @@ to the hub's motors.
 from __future__ import annotations
 
 import asyncio
-import time
 from typing import Any
 
+from petswarm import clock
 from petswarm.relative_location import IrModuleManager
 from petswarm.sequence import EventLog
 from petswarm.surround_pilot import SurroundDriverConfig, SurroundPilot
@@ -53,7 +53,7 @@ class SurroundDriver:
             if sensors is None:
                 continue
             engaged = self.pilot.engaged
-            command = self.pilot.step(sensors, self.radio.beacons, time.monotonic())
+            command = self.pilot.step(sensors, self.radio.beacons, clock.now())
             if command is None:
                 continue
             if not engaged:

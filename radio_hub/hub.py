@@ -1,8 +1,8 @@
-"""The radio hub process: a zenoh router whose one job thread owns the ``Medium``.
+"""The radio hub process: a zenoh router whose one job thread drives the ``Environment`` on the wall clock.
 
 Zenoh callbacks only hand samples to an inbox queue. The job thread takes them in arrival order,
-stamps each with the model clock (microseconds since the hub started), feeds the medium, and sleeps
-until the next model event with a timed wait. A plain thread is used rather than asyncio because
+stamps each with the model clock (microseconds since the hub started), feeds the environment, and sleeps
+until the environment's next event with a timed wait. A plain thread is used rather than asyncio because
 epoll's millisecond timeouts would add up to a millisecond of lag to every delivery; a timed queue
 wait overshoots by tens of microseconds.
 
@@ -15,98 +15,70 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import json
-import math
 import os
 import queue
 import sys
 import threading
 import time
-import tomllib
-from collections import deque
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import msgpack
-import numpy as np
 import zenoh
 
-from radio_hub import wire
-from radio_hub.ble import BleAir, BleConfig
 from radio_hub.config import MediumConfig
-from radio_hub.ir_air import IrAir
-from radio_hub.keys import Keys, check_name, reliable_publisher, session_config
-from radio_hub.lf import LfConfig, antenna_positions, lf_rssi
-from radio_hub.light import PERSON_BEACON_POWER, IrConfig
-from radio_hub.medium import Medium, Output, RadioNode, Reception, Transmission, TxReport, TxStatus
-from radio_hub.pcap import PcapWriter
-from radio_hub.world import Obstacle, World, WorldConfig, parse_obstacle
+from radio_hub.environment import (
+    Environment,
+    EnvironmentConfig,
+    environment_from_dict,
+    load_config,
+)
+from radio_hub.keys import Keys, reliable_publisher, session_config
+from radio_hub.light import IrConfig
+
+__all__ = ["Environment", "EnvironmentConfig", "RadioHub", "environment_from_dict", "load_config", "ready_line"]
 
 _IDLE_WAKE_US = 200_000
 _SPIN_US = 100
 """Sleep until this close to the next model event, then spin: deliveries land within a few us of model time."""
 
 _PR_SET_TIMERSLACK = 29
-_SENSORS_EVERY = 2
-"""World ticks per robot sensor message (50 Hz ticks: sensors at 25 Hz)."""
-_PUBLISH_EVERY = 5
-"""World ticks per world publication for viewers (10 Hz)."""
 
 
-@dataclass
-class Environment:
-    """Everything a hub emulates besides the 802.15.4 medium's own tables: the IR light, the world,
-    the obstacles of a scenario, the BLE links and the LF field."""
+class _ZenohDownlink:
+    """The environment's messages to nodes, on one reliable publisher per node."""
 
-    medium: MediumConfig = field(default_factory=MediumConfig)
-    ir: IrConfig = field(default_factory=IrConfig)
-    world: WorldConfig = field(default_factory=WorldConfig)
-    ble: BleConfig = field(default_factory=BleConfig)
-    lf: LfConfig = field(default_factory=LfConfig)
-    obstacles: list[Obstacle] = field(default_factory=list)
+    def __init__(self, keys: Keys) -> None:
+        self.keys = keys
+        self.session: zenoh.Session | None = None
+        self.world_pub: zenoh.Publisher | None = None
+        self._pubs: dict[str, zenoh.Publisher] = {}
 
-    def to_dict(self) -> dict[str, Any]:
-        """Plain values for stats and run records."""
-        return {
-            "medium": self.medium.to_dict(),
-            "ir": self.ir.to_dict(),
-            "world": self.world.to_dict(),
-            "ble": self.ble.to_dict(),
-            "lf": self.lf.to_dict(),
-            "obstacles": [o.to_dict() for o in self.obstacles],
-        }
+    def send(self, node_id: str, data: bytes) -> None:
+        if self.session is None:
+            return
+        try:
+            pub = self._pubs.get(node_id)
+            if pub is None:
+                pub = self._pubs[node_id] = reliable_publisher(self.session, self.keys.down(node_id))
+            pub.put(data)
+        except zenoh.ZError as err:
+            print(f"hub: cannot reach {node_id}: {err}", file=sys.stderr)
 
+    def forget(self, node_id: str) -> None:
+        pub = self._pubs.pop(node_id, None)
+        if pub is not None:
+            with contextlib.suppress(zenoh.ZError):
+                pub.undeclare()
 
-@dataclass
-class HubCounters:
-    """Anything that is not a radio outcome: bad input and transport anomalies."""
-
-    malformed: int = 0
-    unattached: int = 0
-    transport_gaps: int = 0
-    config_errors: int = 0
-    attaches: int = 0
-    detaches: int = 0
-    lag_us: deque[int] = field(default_factory=lambda: deque(maxlen=20000))
-
-    def to_dict(self) -> dict[str, Any]:
-        """Counts plus the delivery lag percentiles (actual minus model delivery time)."""
-        lags = np.array(self.lag_us) if self.lag_us else np.zeros(1)
-        return {
-            "malformed": self.malformed,
-            "unattached": self.unattached,
-            "transport_gaps": self.transport_gaps,
-            "config_errors": self.config_errors,
-            "attaches": self.attaches,
-            "detaches": self.detaches,
-            "lag_p50_us": float(np.percentile(lags, 50)),
-            "lag_p99_us": float(np.percentile(lags, 99)),
-            "lag_samples": len(self.lag_us),
-        }
+    def publish_world(self, state: dict[str, Any]) -> None:
+        if self.world_pub is not None:
+            with contextlib.suppress(zenoh.ZError):
+                self.world_pub.put(msgpack.packb(state, use_bin_type=True))
 
 
 class RadioHub:
-    """The emulated air of one world, served over zenoh."""
+    """The emulated environment of one world, served over zenoh on the wall clock."""
 
     def __init__(
         self,
@@ -116,7 +88,7 @@ class RadioHub:
         seed: int = 0,
         ir_config: IrConfig | None = None,
         pcap_path: str | Path | None = None,
-        environment: Environment | None = None,
+        environment: EnvironmentConfig | None = None,
         world_log: str | Path | None = None,
     ) -> None:
         """Raises OSError when ``pcap_path`` or ``world_log`` is given and cannot be opened for writing.
@@ -124,49 +96,38 @@ class RadioHub:
         ``environment`` gives every table at once (``config`` and ``ir_config`` override its medium and IR);
         ``world_log`` receives one JSON line per world tick (the ground truth a run's metrics come from).
         """
-        env = environment or Environment()
-        config = config or env.medium
-        ir_config = ir_config or env.ir
-        self.environment = Environment(config, ir_config, env.world, env.ble, env.lf, env.obstacles)
+        env = environment or EnvironmentConfig()
+        tables = EnvironmentConfig(config or env.medium, ir_config or env.ir, env.world, env.ble, env.lf, env.obstacles)
         self.endpoint = endpoint
         self.keys = Keys(world)
         self.seed = seed
-        self.pcap_path = None if pcap_path is None else Path(pcap_path)
-        self._pcap = None if self.pcap_path is None else PcapWriter(self.pcap_path)
-        self._pcap_records = 0
-        self._pcap_error = ""
-        self.medium = Medium(
-            config or MediumConfig(),
-            np.random.default_rng(seed),
-            on_air_end=None if self._pcap is None else self._write_pcap,
+        self._downlink = _ZenohDownlink(self.keys)
+        self._t0_ns = time.perf_counter_ns()
+        self.env = Environment(
+            tables,
+            seed,
+            self._downlink,
+            wall_epoch_us=time.time_ns() // 1000,
+            pcap_path=pcap_path,
+            world_log=world_log,
         )
-        self.counters = HubCounters()
         self._inbox: queue.SimpleQueue[tuple[Any, ...]] = queue.SimpleQueue()
         self._stop = threading.Event()
-        self._pubs: dict[str, zenoh.Publisher] = {}
-        self._up_seq: dict[str, int] = {}
-        self._instances: dict[str, str] = {}
-        self.ir = IrAir(ir_config, np.random.default_rng([seed, 1]))
-        self.world = World(env.world, env.obstacles)
-        self.ble = BleAir(env.ble, np.random.default_rng([seed, 2]))
-        self._body_rng = np.random.default_rng([seed, 3])
-        self._lf_rng = np.random.default_rng([seed, 4])
-        self.lf_counters = {"bursts": 0, "heard": 0}
-        self._kinds: dict[str, str] = {}
-        """Attached nodes and their kind (robot or user)."""
-        self._telemetry: dict[str, dict[str, Any]] = {}
-        self._ticks = 0
-        self._next_tick_us = 0
-        self._world_log = None if world_log is None else open(world_log, "w")  # noqa: SIM115 (closed in close())
-        self._world_pub: zenoh.Publisher | None = None
-        self._down_seq: dict[str, int] = {}
-        self._t0_ns = time.perf_counter_ns()
-        self._t0_wall_us = time.time_ns() // 1000
         self._session: zenoh.Session | None = None
         self._decls: list[Any] = []
 
+    @property
+    def medium(self) -> Any:
+        """The environment's 802.15.4 medium."""
+        return self.env.medium
+
+    @property
+    def environment(self) -> EnvironmentConfig:
+        """The environment's tables."""
+        return self.env.config
+
     def now_us(self) -> int:
-        """The model clock."""
+        """The model clock: microseconds of wall time since the hub opened."""
         return (time.perf_counter_ns() - self._t0_ns) // 1000
 
     def open(self) -> None:
@@ -186,10 +147,11 @@ class RadioHub:
             session.declare_queryable(keys.world_query, lambda q: put(("world", q))),
             session.liveliness().declare_token(keys.hub_alive),
         ]
-        self._world_pub = session.declare_publisher(keys.world_state)
-        self._decls.append(self._world_pub)
+        self._downlink.world_pub = session.declare_publisher(keys.world_state)
+        self._decls.append(self._downlink.world_pub)
+        self._downlink.session = session
         self._t0_ns = time.perf_counter_ns()
-        self._t0_wall_us = time.time_ns() // 1000
+        self.env.wall_epoch_us = time.time_ns() // 1000
 
     def stop(self) -> None:
         """Ask the job loop to end (safe from any thread or a signal handler)."""
@@ -197,13 +159,9 @@ class RadioHub:
         self._inbox.put(("wake",))
 
     def close(self) -> None:
-        """Undeclare everything, close the session and the pcap file."""
-        pcap, self._pcap = self._pcap, None
-        if pcap is not None:
-            pcap.close()
-        log, self._world_log = self._world_log, None
-        if log is not None:
-            log.close()
+        """Undeclare everything, close the session, the pcap file and the world log."""
+        self.env.close()
+        self._downlink.session = None
         for decl in self._decls:
             decl.undeclare()
         self._decls = []
@@ -214,11 +172,10 @@ class RadioHub:
     def serve(self) -> None:
         """Run the job loop until ``stop``."""
         _tight_timer_slack()
-        inbox, medium = self._inbox, self.medium
+        inbox, env = self._inbox, self.env
         while not self._stop.is_set():
-            events = (medium.next_event_us(), self.ir.next_event_us(), self.ble.next_event_us(), self._next_tick_us)
-            due = min((t for t in events if t is not None), default=None)
-            until_due = _IDLE_WAKE_US if due is None else due - self.now_us()
+            until_due = env.next_event_us() - self.now_us()
+            until_due = min(until_due, _IDLE_WAKE_US)
             try:
                 if until_due > _SPIN_US:
                     self._handle(inbox.get(timeout=(until_due - _SPIN_US) / 1e6))
@@ -230,365 +187,30 @@ class RadioHub:
                 if 0 < until_due <= _SPIN_US:
                     # a timed wait wakes tens of microseconds late; yield-spin the last stretch instead
                     os.sched_yield()
-            self._dispatch(medium.advance(self.now_us()))
-            self._tick_world()
-            self._sweep_ir()
-            self._deliver_ble()
-
-    def _sweep_ir(self) -> None:
-        now = self.now_us()
-        if not self.ir.take_due(now):
-            return
-        poses = self.world.poses()
-        chaos = self.medium.chaos
-        for node_id, readings in self.ir.receive_sweep(poses, chaos).items():
-            self._send_down(node_id, wire.IrSample(readings=readings.astype("<f4").tobytes(), t_us=now))
-        if self.ir.sweeps % 5 == 0:  # beacons at 20 Hz: 20 robots x 19 sources at 100 Hz would swamp the nodes
-            for node_id, (sources, block, gains) in self.ir.beacon_sweep(poses, chaos).items():
-                readings = block.astype("<f4").tobytes()
-                self._send_down(node_id, wire.IrBeacons(sources=sources, readings=readings, t_us=now, gains=gains))
-
-    def _tick_world(self) -> None:
-        now = self.now_us()
-        if now < self._next_tick_us:
-            return
-        tick_us = round(self.world.config.tick_s * 1e6)
-        self._next_tick_us = max(self._next_tick_us + tick_us, now - tick_us)  # a late hub does not race to catch up
-        self._ticks += 1
-        world = self.world
-        world.step(now / 1e6)
-        for node_id, node in self.medium.nodes.items():
-            body = world.bodies.get(node_id)
-            if body is not None:
-                node.position = (float(body.pose[0]), float(body.pose[1]))
-        if self._ticks % _SENSORS_EVERY == 0:
-            self._send_sensors(now)
-        if self._world_log is not None or self._ticks % _PUBLISH_EVERY == 0:
-            self._record_world(now)
-
-    def _send_sensors(self, now: int) -> None:
-        for node_id, kind in self._kinds.items():
-            if kind != "robot" or node_id not in self.world.bodies:
-                continue
-            own = self.world.sense(node_id, self._body_rng)
-            self._send_down(
-                node_id,
-                wire.Sensors(
-                    t_us=now,
-                    ranges=own.ranges_m.astype("<f4").tobytes(),
-                    yaw=float(own.yaw_rad),
-                    odometry=[float(v) for v in own.odometry],
-                ),
-            )
-
-    def _record_world(self, now: int) -> None:
-        state = self.world_state(now)
-        if self._world_log is not None:
-            try:
-                self._world_log.write(json.dumps(state, separators=(",", ":")) + "\n")
-                self._world_log.flush()
-            except (OSError, ValueError) as err:  # a full disk must not take the world down
-                print(f"hub: world log: {err}; no longer recording", file=sys.stderr)
-                self._world_log = None
-        if self._ticks % _PUBLISH_EVERY == 0 and self._world_pub is not None:
-            with contextlib.suppress(zenoh.ZError):
-                self._world_pub.put(msgpack.packb(state, use_bin_type=True))
-
-    def world_state(self, now: int) -> dict[str, Any]:
-        """The ground truth as viewers and run records see it (one line of ``world.jsonl``)."""
-        bodies = self.world.snapshot()
-        poses = {b["id"]: b for b in bodies}
-        modes = self.ir.counter.modes
-        for body in bodies:
-            node = self.medium.nodes.get(body["id"])
-            body["pan_id"] = None if node is None else node.pan_id
-            body["ir"] = str(modes.get(body["id"], "idle"))
-            tele = self._telemetry.get(body["id"], {})
-            # an empty role or state (a robot outside any swarm) is published as none
-            body["state"], body["role"] = tele.get("state") or None, tele.get("role") or None
-            body["reference"] = _reference(poses.get(tele.get("master", "")), tele.get("slot"))
-        totals = {"delivered": 0, "collided": 0, "lost": 0}
-        for counters in self.medium.node_counters.values():
-            for name in totals:
-                totals[name] += getattr(counters, name, 0)
-        return {
-            "v": 1,
-            "t_us": now,
-            "wall": round(self._t0_wall_us / 1e6 + now / 1e6, 4),
-            "bodies": bodies,
-            "obstacles": [o.to_dict() for o in self.world.obstacles],
-            "collisions": self.world.collisions,
-            "radio": totals,
-        }
-
-    def _deliver_ble(self) -> None:
-        for delivery in self.ble.due(self.now_us()):
-            if delivery.dst in self._kinds:
-                msg = wire.BleReceived(src=delivery.src, payload=delivery.payload, t_us=delivery.due_us)
-                self._send_down(delivery.dst, msg)
-
-    # -- inputs ----------------------------------------------------------------------------------
+            env.advance(self.now_us())
 
     def _handle(self, item: tuple[Any, ...]) -> None:
         kind = item[0]
         if kind == "up":
-            self._on_up(self.keys.node_of(item[1]), item[2])
+            self.env.receive(self.keys.node_of(item[1]), item[2], self.now_us())
         elif kind == "alive":
-            self._on_alive(*self.keys.alive_of(item[1]), item[2])
+            node_id, instance = self.keys.alive_of(item[1])
+            if item[2] == zenoh.SampleKind.DELETE:
+                self.env.node_gone(node_id, instance, self.now_us())
         elif kind == "stats":
             self._reply(item[1], self.stats())
         elif kind == "air":
-            self._reply(item[1], {"transmissions": [tx.to_dict() for tx in self.medium.air_log]})
+            self._reply(item[1], self.env.air())
         elif kind == "chaos":
-            self._reply(item[1], self._on_chaos(item[1]))
-        elif kind == "world":
-            self._reply(item[1], self.world_state(self.now_us()))
-
-    def _on_up(self, node_id: str, data: bytes) -> None:
-        try:
-            check_name("node", node_id)
-            msg = wire.decode(data)
-        except ValueError as err:
-            self.counters.malformed += 1
-            self._send_down(node_id, wire.Error(reason=f"malformed message: {err}"))
-            return
-        if isinstance(msg, wire.Attach) and msg.exclusive and node_id in self._kinds:
-            # a refused claim must not touch the live node's sequence numbering
-            self._send_down(node_id, wire.Error(reason=f"node id {node_id} is taken", instance=msg.instance))
-            return
-        self._check_sequence(node_id, msg)
-        if isinstance(msg, wire.Attach):
-            self._on_attach(node_id, msg)
-        elif node_id not in self._kinds:
-            self.counters.unattached += 1
-            self._send_down(node_id, wire.Error(token=getattr(msg, "token", 0), reason=wire.NOT_ATTACHED))
-        elif isinstance(msg, (wire.Drive, wire.Place, wire.LfBurst, wire.BleSend, wire.Telemetry)):
-            self._on_body(node_id, msg)
-        elif isinstance(msg, wire.Transmit):
-            if self._kinds[node_id] != "robot":
-                self._send_down(node_id, wire.Error(token=msg.token, reason="a user has no 802.15.4 radio"))
+            query = item[1]
+            try:
+                request = msgpack.unpackb(query.payload.to_bytes(), raw=False) if query.payload else {}
+            except Exception as err:  # a bad request must not hurt the hub
+                self._reply(query, {"error": f"{type(err).__name__}: {err}"})
                 return
-            self._dispatch(self.medium.submit(node_id, msg.psdu, msg.token, self.now_us()))
-        elif isinstance(msg, wire.Configure):
-            self._on_configure(node_id, msg)
-        elif isinstance(msg, wire.SetIrMode):
-            self._on_ir_mode(node_id, msg)
-        elif isinstance(msg, wire.Detach):
-            self._detach(node_id)
-        else:
-            self.counters.malformed += 1
-            self._send_down(node_id, wire.Error(reason=f"{msg.TYPE} is not a node-to-hub message"))
-
-    def _check_sequence(self, node_id: str, msg: wire.Message) -> None:
-        # an attach starts a node's numbering (a node re-attaching after a hub restart goes on counting)
-        last = msg.n - 1 if isinstance(msg, wire.Attach) else self._up_seq.get(node_id, msg.n - 1)
-        if msg.n > last + 1:
-            self.counters.transport_gaps += msg.n - last - 1
-        self._up_seq[node_id] = msg.n
-
-    def _on_attach(self, node_id: str, msg: wire.Attach) -> None:
-        self.medium.detach(node_id)
-        self.ir.remove(node_id, self.now_us())  # a restarted node's module starts dark, as the node believes
-        self._kinds.pop(node_id, None)
-        # a node that restarts under the same id starts afresh; a robot that re-attaches to a restarted
-        # hub says where it last was (its position as the old hub reported it)
-        node = RadioNode(node_id, msg.ext_addr, msg.short_addr, msg.pan_id, msg.channel, _pos(msg.position))
-        try:
-            if msg.kind not in ("robot", "user"):
-                raise ValueError(f"kind must be robot or user, not {msg.kind!r}")
-            if msg.kind == "robot":
-                self.medium.attach(node)
-            x, y = node.position
-            self.world.add(node_id, msg.kind, x, y, math.radians(msg.heading_deg))
-        except ValueError as err:
-            self.medium.detach(node_id)
-            self.counters.config_errors += 1
-            self._send_down(node_id, wire.Error(reason=f"cannot attach: {err}"))
-            return
-        self._kinds[node_id] = msg.kind
-        if msg.kind == "user":
-            self.ir.power[node_id] = PERSON_BEACON_POWER
-        self.counters.attaches += 1
-        self._instances[node_id] = msg.instance
-        if node_id not in self._pubs:
-            self._pubs[node_id] = reliable_publisher(self._require_session(), self.keys.down(node_id))
-
-        self._down_seq[node_id] = 0
-        self._send_down(node_id, self._attached(node_id, 0))
-
-    def _on_configure(self, node_id: str, msg: wire.Configure) -> None:
-        changes: dict[str, Any] = {
-            name: getattr(msg, name) for name in ("pan_id", "short_addr", "channel") if getattr(msg, name) is not None
-        }
-        body = self.world.bodies[node_id]
-        try:
-            if changes and self._kinds[node_id] != "robot":
-                raise ValueError("a user has no 802.15.4 radio")
-            if changes:
-                self.medium.update(node_id, **changes)
-            if msg.position is not None or msg.heading_deg is not None:
-                x, y = _pos(msg.position) if msg.position is not None else body.pose[:2]
-                yaw = math.radians(msg.heading_deg) if msg.heading_deg is not None else body.pose[2]
-                self.world.place(node_id, float(x), float(y), float(yaw))
-                if node_id in self.medium.nodes:
-                    self.medium.nodes[node_id].position = (float(x), float(y))
-        except (ValueError, TypeError) as err:
-            self.counters.config_errors += 1
-            self._send_down(node_id, wire.Error(token=msg.token, reason=f"cannot configure: {err}"))
-            return
-        self._send_down(node_id, self._attached(node_id, msg.token))
-
-    def _on_body(self, node_id: str, msg: wire.Message) -> None:
-        """Motor commands, a user's pose, LF bursts, BLE messages and telemetry; none is answered, so a
-        bad one is counted and reported with an error message."""
-        try:
-            if isinstance(msg, wire.Drive):
-                self.world.command(node_id, msg.vx, msg.vy, msg.omega, self.now_us() / 1e6)
-            elif isinstance(msg, wire.Place):
-                if self._kinds[node_id] != "user":
-                    raise ValueError("only a user places itself; robots drive")
-                self.world.place(node_id, msg.x, msg.y, msg.yaw, msg.vx, msg.vy, msg.omega)
-            elif isinstance(msg, wire.LfBurst):
-                self._on_lf_burst(node_id, msg)
-            elif isinstance(msg, wire.BleSend):
-                self._on_ble_send(node_id, msg)
-            elif isinstance(msg, wire.Telemetry):
-                self._telemetry[node_id] = {
-                    "state": msg.state,
-                    "role": msg.role,
-                    "master": msg.master,
-                    "slot": msg.slot,
-                }
-        except ValueError as err:
-            self.counters.config_errors += 1
-            self._send_down(node_id, wire.Error(reason=f"{msg.TYPE}: {err}"))
-
-    def _on_lf_burst(self, node_id: str, msg: wire.LfBurst) -> None:
-        if self._kinds[node_id] != "robot":
-            raise ValueError("only robots have LF antennas")
-        if msg.antenna not in ("left", "right") or len(msg.data) > 4:
-            raise ValueError("antenna is left or right and data at most 4 bytes")
-        self.lf_counters["bursts"] += 1
-        left, right = antenna_positions(self.world.bodies[node_id].pose)
-        at = left if msg.antenna == "left" else right
-        now = self.now_us()
-        for user_id, kind in self._kinds.items():
-            if kind != "user":
-                continue
-            rssi = lf_rssi(at, self.world.bodies[user_id].pose[:2], self.environment.lf, self._lf_rng)
-            if rssi is None:
-                continue
-            self.lf_counters["heard"] += 1
-            heard = wire.LfHeard(antenna=msg.antenna, pattern=msg.pattern, data=msg.data, rssi_dbm=rssi, t_us=now)
-            self._send_down(user_id, heard)
-
-    def _on_ble_send(self, node_id: str, msg: wire.BleSend) -> None:
-        if msg.to not in self._kinds:
-            self.ble.counters.sent += 1
-            self.ble.counters.out_of_range += 1  # nobody of that name: like a peer out of reach
-            return
-        a, b = self.world.bodies[node_id].pose, self.world.bodies[msg.to].pose
-        self.ble.send(node_id, msg.to, msg.payload, self.now_us(), float(math.hypot(a[0] - b[0], a[1] - b[1])))
-
-    def _on_ir_mode(self, node_id: str, msg: wire.SetIrMode) -> None:
-        try:
-            self.ir.set_mode(node_id, msg.mode, self.now_us())
-        except ValueError:
-            self.counters.config_errors += 1
-            self._send_down(node_id, wire.Error(token=msg.token, reason=f"unknown IR mode {msg.mode!r}"))
-            return
-        self._send_down(node_id, self._attached(node_id, msg.token))
-
-    def _on_chaos(self, query: zenoh.Query) -> dict[str, Any]:
-        """Add, clear or list faults; every change is logged with model and wall time."""
-        chaos = self.medium.chaos
-        try:
-            request = msgpack.unpackb(query.payload.to_bytes(), raw=False) if query.payload else {}
-            if not isinstance(request, dict):
-                raise ValueError("a chaos request is a map")
-            op = request.get("op", "list")
-            if op == "add":
-                fault = chaos.add(request["fault"], self.now_us(), time.time())
-                print(f"hub: chaos {fault.to_dict()} at model {self.now_us()} us", file=sys.stderr, flush=True)
-            elif op == "clear":
-                ended = chaos.clear(request.get("id"), self.now_us(), time.time())
-                print(f"hub: chaos cleared {ended} at model {self.now_us()} us", file=sys.stderr, flush=True)
-            elif op != "list":
-                raise ValueError(f"op must be add, clear or list, not {op!r}")
-        except Exception as err:  # a bad request must not hurt the hub
-            return {"error": f"{type(err).__name__}: {err}"}
-        return {"faults": [f.to_dict() for f in chaos.faults.values()], "log": chaos.log}
-
-    def _attached(self, node_id: str, token: int) -> wire.Attached:
-        node = self.medium.nodes.get(node_id)
-        pose = self.world.bodies[node_id].pose
-        return wire.Attached(
-            token=token,
-            ext_addr=0 if node is None else node.ext_addr,
-            short_addr=0 if node is None else node.short_addr,
-            pan_id=0 if node is None else node.pan_id,
-            channel=11 if node is None else node.channel,
-            position=[float(pose[0]), float(pose[1])],
-            heading_deg=math.degrees(float(pose[2])),
-            now_us=self.now_us(),
-            ultrasonic_deg=list(self.world.config.ultrasonic_angles_deg),
-            instance=self._instances.get(node_id, ""),
-        )
-
-    def _on_alive(self, node_id: str, instance: str, kind: zenoh.SampleKind) -> None:
-        gone = kind == zenoh.SampleKind.DELETE
-        if gone and node_id in self._kinds and self._instances.get(node_id) == instance:
-            self._detach(node_id)
-
-    def _detach(self, node_id: str) -> None:
-        self.medium.detach(node_id)
-        self.ir.remove(node_id, self.now_us())
-        self.world.remove(node_id)
-        self.ir.power.pop(node_id, None)
-        self._kinds.pop(node_id, None)
-        self._telemetry.pop(node_id, None)
-        self.counters.detaches += 1
-        pub = self._pubs.pop(node_id, None)
-        if pub is not None:
-            pub.undeclare()
-
-    # -- outputs ---------------------------------------------------------------------------------
-
-    def _dispatch(self, outputs: list[Output]) -> None:
-        if not outputs:
-            return
-        now = self.now_us()
-        lag = self.counters.lag_us
-        for out in outputs:
-            if isinstance(out, Reception):
-                lag.append(now - out.handed_up_us)  # a chaos delay is model time, not hub lag
-                msg: wire.Message = wire.Received(
-                    psdu=out.psdu,
-                    rssi_dbm=out.rssi_dbm,
-                    lqi=out.lqi,
-                    start_us=out.start_us,
-                    end_us=out.end_us,
-                    submitted_us=out.submitted_us,
-                )
-            else:
-                if out.status != TxStatus.REFUSED:  # refusals are immediate, not scheduled deliveries
-                    lag.append(now - out.done_us)
-                msg = _tx_done(out)
-
-            self._send_down(out.node_id, msg)
-
-    def _send_down(self, node_id: str, msg: wire.Message) -> None:
-        seq = self._down_seq.get(node_id, 0) + 1
-        self._down_seq[node_id] = seq
-        msg.n = seq
-        pub = self._pubs.get(node_id)
-        try:
-            if pub is not None:
-                pub.put(msg.encode())
-            else:  # a node that never attached (or a raw client): best effort
-                self._require_session().put(self.keys.down(node_id), msg.encode())
-        except zenoh.ZError as err:
-            print(f"hub: cannot reach {node_id}: {err}", file=sys.stderr)
+            self._reply(query, self.env.chaos_request(request, self.now_us(), time.time()))
+        elif kind == "world":
+            self._reply(item[1], self.env.world_state(self.now_us()))
 
     def _reply(self, query: zenoh.Query, body: dict[str, Any]) -> None:
         try:
@@ -596,68 +218,9 @@ class RadioHub:
         finally:
             query.drop()
 
-    def _require_session(self) -> zenoh.Session:
-        if self._session is None:
-            raise RuntimeError("hub session is not open")
-        return self._session
-
-    def _write_pcap(self, tx: Transmission) -> None:
-        pcap = self._pcap
-        if pcap is None:
-            return
-        try:
-            pcap.write(tx.psdu, self._t0_wall_us + tx.start_us)
-            self._pcap_records += 1
-        except (OSError, ValueError) as err:  # a full disk must not take the air down: stop recording
-            self._pcap_error = str(err)
-            self._pcap = None
-            print(f"hub: pcap {self.pcap_path}: {err}; no longer recording", file=sys.stderr)
-            with contextlib.suppress(OSError):
-                pcap.close()
-
-    # -- introspection ---------------------------------------------------------------------------
-
     def stats(self) -> dict[str, Any]:
-        """Counters per node and per channel, hub anomalies, and the attached nodes' radios."""
-        medium = self.medium
-        nodes = {}
-        for node_id, counters in medium.node_counters.items():
-            entry: dict[str, Any] = counters.to_dict()
-            node = medium.nodes.get(node_id)
-            entry["attached"] = node is not None
-            if node is not None:
-                entry.update(
-                    pan_id=node.pan_id, short_addr=node.short_addr, channel=node.channel, position=list(node.position)
-                )
-            nodes[node_id] = entry
-        channels = {str(ch): c.to_dict() for ch, c in medium.channel_counters.items() if c.sent or c.heard}
-        stats: dict[str, Any] = {
-            "world": self.keys.world,
-            "seed": self.seed,
-            "now_us": self.now_us(),
-            "config": medium.config.to_dict(),
-            "nodes": nodes,
-            "channels": channels,
-            "hub": self.counters.to_dict(),
-            "chaos": [f.to_dict() for f in medium.chaos.faults.values()],
-            "ir": {
-                **self.ir.counter.as_dict(self.now_us()),
-                "sweeps": self.ir.sweeps,
-                "config": self.ir.config.to_dict(),
-            },
-            "world_model": {
-                "bodies": len(self.world.bodies),
-                "collisions": self.world.collisions,
-                "collision_log": self.world.collision_log[-100:],
-                "config": self.world.config.to_dict(),
-                "obstacles": [o.to_dict() for o in self.world.obstacles],
-            },
-            "ble": self.ble.counters.to_dict(),
-            "lf": dict(self.lf_counters),
-        }
-        if self.pcap_path is not None:
-            stats["pcap"] = {"path": str(self.pcap_path), "records": self._pcap_records, "error": self._pcap_error}
-        return stats
+        """The environment's counters, with this hub's world name and model clock."""
+        return {"world": self.keys.world, **self.env.stats(self.now_us())}
 
 
 def _tight_timer_slack() -> None:
@@ -665,60 +228,6 @@ def _tight_timer_slack() -> None:
     # timed to the microsecond, so ask for 1 us. Best effort: other kernels keep their default.
     with contextlib.suppress(OSError, AttributeError):
         ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_TIMERSLACK, 1000)
-
-
-def _tx_done(report: TxReport) -> wire.TxDone:
-    return wire.TxDone(
-        token=report.token,
-        status=report.status.value,
-        retries=report.retries,
-        backoffs=report.backoffs,
-        submitted_us=report.submitted_us,
-        done_us=report.done_us,
-        reason=report.reason,
-    )
-
-
-def _reference(master: dict[str, Any] | None, slot: list[float] | None) -> list[float] | None:
-    """A slave's formation reference in the world: its slot (master frame) placed by the master's true pose."""
-    if master is None or slot is None:
-        return None
-    c, s = math.cos(master["yaw"]), math.sin(master["yaw"])
-    return [round(master["x"] + c * slot[0] - s * slot[1], 4), round(master["y"] + s * slot[0] + c * slot[1], 4)]
-
-
-def _pos(values: list[float]) -> tuple[float, float]:
-    return (float(values[0]), float(values[1]))
-
-
-def load_config(path: str | Path) -> Environment:
-    """A hub config file (TOML or JSON): the radio's tables plus optional ``[ir]``, ``[world]``, ``[ble]``,
-    ``[lf]`` tables and ``[[obstacles]]``."""
-    path = Path(path)
-    text = path.read_text()
-    data = tomllib.loads(text) if path.suffix == ".toml" else json.loads(text)
-    if not isinstance(data, dict):
-        raise ValueError("a hub config file holds tables")
-    return environment_from_dict(data)
-
-
-def environment_from_dict(data: dict[str, Any]) -> Environment:
-    """The tables of a hub config (or a scenario's ``[hub]`` table plus its obstacles)."""
-    data = dict(data)
-    ir = IrConfig.from_dict(data.pop("ir", {}))
-    world = WorldConfig.from_dict(data.pop("world", {}))
-    ble = BleConfig.from_dict(data.pop("ble", {}))
-    lf = LfConfig.from_dict(data.pop("lf", {}))
-    obstacles = data.pop("obstacles", [])
-    if not isinstance(obstacles, list):
-        raise ValueError("obstacles is a list of [[obstacles]] tables")
-    parsed = [parse_obstacle(o) for o in obstacles]
-    try:
-        medium = MediumConfig.from_dict(data.get("medium", data))
-    except ValueError as err:
-        extra = " (and [ir], [world], [ble], [lf], [[obstacles]])"
-        raise ValueError(f"{err}{extra}" if "the top level" in str(err) else str(err)) from None
-    return Environment(medium, ir, world, ble, lf, parsed)
 
 
 def ready_line(hub: RadioHub) -> str:

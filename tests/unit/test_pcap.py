@@ -141,7 +141,7 @@ def test_hub_writes_each_ended_transmission_stamped_at_wall_start_plus_model_sta
     read = read_pcap(path)
     assert read.header.linktype == 195
     assert [r.data for r in read.records] == [psdu, Frame(FrameType.ACK, 5).encode()]
-    assert [r.ts_us for r in read.records] == [hub._t0_wall_us + tx.start_us for tx in m.air_log]
+    assert [r.ts_us for r in read.records] == [hub.env.wall_epoch_us + tx.start_us for tx in m.air_log]
     assert hub.stats()["pcap"] == {"path": str(path), "records": 2, "error": ""}
 
 

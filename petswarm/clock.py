@@ -1,0 +1,87 @@
+"""Time for the robot middleware: one reading of ``now`` that is the wall clock or model time.
+
+Every manager asks ``now()`` (seconds, monotonic) and sleeps with ``asyncio.sleep``; both go through the
+running event loop. On an ordinary loop that is the wall clock (``--clock wall``). On a
+``ModelClockLoop`` it is model time: the loop never blocks, and when nothing is ready it jumps straight
+to the earliest timer (``--clock model``). The same robot code therefore runs unchanged in both clocks,
+and in model time a run is as fast as the CPU allows and independent of the machine's load.
+
+Ties: callbacks due at one instant run in the order they were scheduled (asyncio's ready queue is FIFO
+and its timer heap orders equal deadlines by insertion), and in model time nothing else can interleave
+with them, so a run is a pure function of its seed and options.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import selectors
+import time
+from typing import Any
+
+MODEL_EPOCH_S = 1_700_000_000.0
+"""The wall-clock time a model run reports for model time 0 (a fixed date: records of equal seeds are equal)."""
+
+
+class ModelTimeStalled(RuntimeError):
+    """Nothing is ready and no timer is pending: every task waits on something that can never happen."""
+
+
+class _ModelSelector(selectors.DefaultSelector):
+    """A real selector (the loop's self-pipe still works) that never blocks: a wait advances model time."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.now = 0.0
+
+    def select(self, timeout: float | None = None) -> list[tuple[selectors.SelectorKey, int]]:
+        ready = super().select(0)
+        if ready or timeout == 0:
+            return ready
+        if timeout is None:
+            raise ModelTimeStalled("model time stalled: no task is ready and no timer is pending")
+        self.now += timeout
+        return []
+
+
+class ModelClockLoop(asyncio.SelectorEventLoop):
+    """An asyncio loop on model time: ``time()`` starts at 0 and moves only when the loop would wait."""
+
+    def __init__(self) -> None:
+        self._model = _ModelSelector()
+        super().__init__(self._model)
+
+    def time(self) -> float:
+        """Model seconds since the loop was made."""
+        return self._model.now
+
+    def advance_to(self, when: float) -> None:
+        """Move model time forward to ``when`` (never back); for drivers that own the clock."""
+        self._model.now = max(self._model.now, when)
+
+
+def now() -> float:
+    """Monotonic seconds on the running loop's clock (model time on a ``ModelClockLoop``)."""
+    try:
+        return asyncio.get_running_loop().time()
+    except RuntimeError:  # no loop (a constructor called from plain code): the wall clock
+        return time.monotonic()
+
+
+def wall_time() -> float:
+    """Seconds since the epoch: the real date, or ``MODEL_EPOCH_S`` + model time in model time."""
+    loop = _running_loop()
+    if isinstance(loop, ModelClockLoop):
+        return MODEL_EPOCH_S + loop.time()
+    return time.time()
+
+
+def in_model_time() -> bool:
+    """True when the running loop is a ``ModelClockLoop``."""
+    return isinstance(_running_loop(), ModelClockLoop)
+
+
+def _running_loop() -> Any:
+    try:
+        return asyncio.get_running_loop()
+    except RuntimeError:
+        return None
