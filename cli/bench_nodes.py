@@ -20,7 +20,7 @@ from typing import Any
 import zenoh
 
 from radio_hub.interface import Frame, FrameType, Keys, RadioClient, RadioIdentity, RxFrame, open_session
-from radio_hub.keys import reliable_publisher
+from radio_hub.zenoh_link import reliable_publisher
 
 PAN_ID = 0x1000
 EXT_BASE = 0x00124B00BE000000
@@ -236,7 +236,7 @@ class Pinger:
     def __init__(self, radio: RadioClient) -> None:
         self.radio = radio
         self._loop = asyncio.get_running_loop()
-        world = radio.keys.world
+        world = radio.world
         self._waiter: asyncio.Future[None] | None = None
         self._expect = b""
         self._req = reliable_publisher(radio.session, bench_key(world, "echo/req"))

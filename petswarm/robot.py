@@ -37,6 +37,7 @@ from radio_hub.interface import (
     DEFAULT_WORLD,
     FrameError,
     HubUnavailable,
+    Keys,
     RadioClient,
     RadioError,
     RadioIdentity,
@@ -412,7 +413,7 @@ class ControlServer:
         self.robot = robot
         self.malformed = 0
         self._loop = asyncio.get_running_loop()
-        keys = robot.rf.radio.keys
+        keys = Keys(robot.rf.radio.world)
         self._decls = [
             session.declare_queryable(robot_key(keys, robot.config.robot_id), self._on_query),
             session.declare_subscriber(all_robots_key(keys), self._on_broadcast),
@@ -487,7 +488,7 @@ async def _attach_once(config: RobotConfig) -> tuple[RobotConfig, RadioClient]:
         except HubUnavailable:
             session.close()
             raise
-        radio.owns_session = True
+        radio.link.owns_session = True  # type: ignore[attr-defined]  # the claim's session is the radio's
         return claimed, radio
     raise RadioError("every robot id is taken")
 

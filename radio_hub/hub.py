@@ -33,8 +33,9 @@ from radio_hub.environment import (
     environment_from_dict,
     load_config,
 )
-from radio_hub.keys import Keys, reliable_publisher, session_config
+from radio_hub.keys import Keys
 from radio_hub.light import IrConfig
+from radio_hub.zenoh_link import reliable_publisher, session_config
 
 __all__ = ["Environment", "EnvironmentConfig", "RadioHub", "environment_from_dict", "load_config", "ready_line"]
 

@@ -1,4 +1,4 @@
-"""Zenoh key expressions and session settings shared by the hub and its nodes.
+"""Zenoh key expressions shared by the hub and its nodes (plain strings: this module imports no zenoh).
 
 Every run lives under its own prefix ``petswarm/<world>`` so parallel runs on one router never meet.
 """
@@ -6,8 +6,6 @@ Every run lives under its own prefix ``petswarm/<world>`` so parallel runs on on
 from __future__ import annotations
 
 import re
-
-import zenoh
 
 ROOT = "petswarm"
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
@@ -89,29 +87,3 @@ class Keys:
     def node_of(self, key: str) -> str:
         """The node id at the end of an up key."""
         return str(key).rsplit("/", 1)[-1]
-
-
-def session_config(mode: str, endpoint: str) -> zenoh.Config:
-    """A zenoh config: ``router`` listens on ``endpoint``, ``client`` connects to it; no multicast."""
-    if mode not in ("router", "client"):
-        raise ValueError("mode must be router or client")
-    config = zenoh.Config()
-    config.insert_json5("mode", f'"{mode}"')
-    where = "listen/endpoints" if mode == "router" else "connect/endpoints"
-    config.insert_json5(where, f'["{endpoint}"]')
-    config.insert_json5("scouting/multicast/enabled", "false")
-    if mode == "client":
-        # A restarted hub must get its nodes back at once. Zenoh's default backoff retries 1 s, then 2, then
-        # 4 s after the router went away: a client unlucky with a hub down 1.5 s came back 5 s late, missed
-        # the re-organize that followed, and failed test_the_hub_restarts about 1 run in 15 on a busy machine.
-        # A constant 0.2-0.5 s costs a connect attempt per node twice a second while the hub is away.
-        retry = "{ period_init_ms: 200, period_max_ms: 500, period_increase_factor: 1.5 }"
-        config.insert_json5("connect/retry", retry)
-    return config
-
-
-def reliable_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
-    """Emulated frames must never vanish in the transport: reliable, and block rather than drop."""
-    return session.declare_publisher(
-        key, congestion_control=zenoh.CongestionControl.BLOCK, reliability=zenoh.Reliability.RELIABLE
-    )

@@ -1,0 +1,559 @@
+"""The radio port: what a node (a robot, a wearable, a test) uses to get on the air, whatever carries it.
+
+``RadioClient`` gives an asyncio node the RF calls of a real 802.15.4 radio driver:
+``await send(frame) -> TxResult``, ``await receive() -> RxFrame`` (or ``async for``), and
+``await configure(pan_id=..., short_addr=..., channel=...)`` at run time, plus the body's links (motors,
+own sensors, IR, BLE, LF). It speaks ``wire`` messages to the hub's environment through a ``HubLink``:
+``radio_hub.zenoh_link.ZenohLink`` between processes, or a link in memory bound to the environment in a
+model-time run (``runner.model``). This module imports no zenoh.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+import secrets
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from typing import Any, Protocol
+
+import numpy as np
+
+from radio_hub import wire
+from radio_hub.keys import DEFAULT_ENDPOINT, DEFAULT_WORLD, check_name
+from radio_hub.light import RECEIVERS as IR_RECEIVERS
+from radio_hub.mac import BROADCAST, Frame, FrameError, FrameType
+from radio_hub.medium import TxStatus
+
+
+class HubLink(Protocol):
+    """How a node's messages reach the hub's environment and its answers come back.
+
+    ``open`` starts the link: from then on ``on_down(data)`` is called on the node's event loop with every
+    message for the node, and ``on_hub(present)`` whenever the hub appears or goes away. ``put`` sends one
+    encoded message up (in order, never dropped by the transport); ``close`` ends the node's presence.
+    """
+
+    def open(
+        self, node_id: str, instance: str, on_down: Callable[[bytes], None], on_hub: Callable[[bool], None]
+    ) -> None:
+        """Start delivering to the node."""
+
+    def put(self, data: bytes) -> None:
+        """One encoded message to the hub."""
+
+    async def close(self) -> None:
+        """Leave: the hub sees the node go."""
+
+
+class HubUnavailable(ConnectionError):
+    """No hub answers at the endpoint, or it stopped answering."""
+
+
+class RadioError(RuntimeError):
+    """The hub refused a request (bad channel, address, PAN...)."""
+
+
+@dataclass(frozen=True)
+class RadioIdentity:
+    """A node's radio: ids, addresses, PAN, channel and (until the world model) a fixed position."""
+
+    node_id: str
+    ext_addr: int
+    short_addr: int
+    pan_id: int
+    channel: int = 11
+    position: tuple[float, float] = (0.0, 0.0)
+    heading_deg: float = 0.0
+    """Where the body faces when it attaches (the world moves it from then on)."""
+    kind: str = "robot"
+    """``robot`` or ``user`` (a person's wearables: BLE, the belt's LF receiver, an IR beacon; no 802.15.4)."""
+
+
+@dataclass(frozen=True)
+class RxFrame:
+    """A frame this node's MAC received, with its signal and model times (microseconds)."""
+
+    frame: Frame
+    rssi_dbm: float
+    lqi: int
+    start_us: int
+    end_us: int
+    submitted_us: int
+
+
+@dataclass(frozen=True)
+class TxResult:
+    """The MAC's answer to ``send``."""
+
+    status: TxStatus
+    retries: int = 0
+    backoffs: int = 0
+    submitted_us: int = 0
+    done_us: int = 0
+    reason: str = ""
+
+    @property
+    def ok(self) -> bool:
+        """True when the frame went out (and, for acknowledged unicast, was acknowledged)."""
+        return self.status == TxStatus.SUCCESS
+
+
+@dataclass(frozen=True)
+class OwnSensors:
+    """A robot's own body sensors at model time ``t_us``: ultrasonic ranges (m, nan = no echo) at
+    ``angles_rad`` from its heading, AHRS yaw (rad), wheel odometry (vx, vy, omega in its frame)."""
+
+    t_us: int
+    ranges_m: np.ndarray
+    angles_rad: np.ndarray
+    yaw_rad: float
+    odometry: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class BeaconSweep:
+    """One beacon-mode sweep at model time ``t_us``: each coded beacon's 12 readings (counts) and the gain its
+    channel's AGC read them at (divide the light above ambient by it)."""
+
+    t_us: int
+    readings: dict[str, np.ndarray]
+    gains: dict[str, float]
+
+
+@dataclass(frozen=True)
+class BleMessage:
+    """A BLE message from ``src`` (a user's wearable or a robot)."""
+
+    src: str
+    payload: bytes
+    t_us: int
+
+
+@dataclass(frozen=True)
+class LfBurstHeard:
+    """What a belt's LF front end heard: which antenna, the wake-up pattern, the 4 data bytes, RSSI."""
+
+    antenna: str
+    pattern: int
+    data: bytes
+    rssi_dbm: float
+    t_us: int
+
+
+@dataclass(frozen=True)
+class IrSweep:
+    """One sweep of the 12 phototransistors (ADC counts, receiver 0 on the heading) at model time ``t_us``."""
+
+    readings: np.ndarray
+    t_us: int
+
+
+REQUEST_TIMEOUT_S = 5.0
+
+"""How long a node waits for the hub's answer to a request once attached."""
+
+
+RESEND_S = 0.5
+"""An idempotent request (re-attach, configure, IR mode) unanswered this long is sent again."""
+
+
+class RadioClient:
+    """One node's 802.15.4 radio, attached to the hub's air."""
+
+    def __init__(self, link: HubLink, world: str, identity: RadioIdentity) -> None:
+        self.identity = identity
+        self.world = world
+        self.request_timeout = 5.0
+        self.malformed = 0
+        self.transport_gaps = 0
+        self.errors: list[str] = []
+        self.link = link
+        self._loop = asyncio.get_running_loop()
+        self._rx: asyncio.Queue[RxFrame] = asyncio.Queue()
+        self._ir: asyncio.Queue[IrSweep] = asyncio.Queue()
+        self._ble: asyncio.Queue[BleMessage] = asyncio.Queue()
+        self._lf: asyncio.Queue[LfBurstHeard] = asyncio.Queue()
+        self.sensors: OwnSensors | None = None
+        """The latest own-body sensors (robots; the hub sends them at 25 Hz)."""
+        self.beacons = BeaconSweep(0, {}, {})
+        """The latest beacon sweep, in beacon mode."""
+        self.on_sensors: list[Callable[[OwnSensors], None]] = []
+        self._ultrasonic_rad = np.zeros(0)
+        self._pending: dict[int, asyncio.Future[Any]] = {}
+        self._pending_types: dict[int, str] = {}
+
+        self._tokens = itertools.count(1)
+        self._up_seq = itertools.count(1)
+        self._down_seq = 0
+        self._dsn = itertools.count()
+        node_id = identity.node_id
+        self.instance = secrets.token_hex(8)
+        self.reattaches = 0
+        self.hub_present = True
+        """False while the hub's liveliness token is gone (the hub died or restarts): silence means nothing."""
+
+        self.on_reattach: list[Callable[[], None]] = []
+        """Called after the radio attached again to a restarted hub (the hub forgot IR modes and the like)."""
+        self._attached_once = False
+        self._reattaching: asyncio.Task[None] | None = None
+        link.open(node_id, self.instance, self._on_down, self._hub_seen)
+
+    @classmethod
+    async def connect(
+        cls,
+        identity: RadioIdentity,
+        endpoint: str = DEFAULT_ENDPOINT,
+        world: str = DEFAULT_WORLD,
+        *,
+        session: Any = None,
+        link: HubLink | None = None,
+        timeout: float = 5.0,
+        exclusive: bool = False,
+    ) -> RadioClient:
+        """Attach ``identity`` to the hub; raises HubUnavailable if none answers.
+
+        ``link`` is the port to the hub (default: zenoh to ``endpoint``, on ``session`` if given, which the
+        radio then leaves open). With ``exclusive`` the hub refuses (RadioError) when a live node already
+        uses the id.
+        """
+        check_name("node", identity.node_id)
+        if link is None:
+            from radio_hub.zenoh_link import ZenohLink  # here: a node in memory never loads zenoh
+
+            link = await ZenohLink.connect(endpoint, world, session)
+        client = cls(link, world, identity)
+        client.request_timeout = timeout
+        try:
+            attached = await client._request(0, client._attach_message(exclusive))
+        except (HubUnavailable, RadioError):
+            await client.close(detach=False)
+            raise
+        client._adopt(attached)
+        client._attached_once = True
+        client.request_timeout = max(timeout, REQUEST_TIMEOUT_S)
+        return client
+
+    @property
+    def session(self) -> Any:
+        """The zenoh session this radio uses (a node may serve its own keys on it); None off zenoh."""
+        return getattr(self.link, "session", None)
+
+    # -- the radio ---------------------------------------------------------------------------------
+
+    def next_dsn(self) -> int:
+        """The MAC data sequence number for the next frame (wraps at 256)."""
+        return next(self._dsn) & 0xFF
+
+    def data_frame(self, dst: int, payload: bytes, *, dst_pan: int | None = None, ack: bool = True) -> Frame:
+        """A data frame from this node; ``ack`` asks for an acknowledgement (ignored for broadcast)."""
+        me = self.identity
+        return Frame(
+            FrameType.DATA,
+            self.next_dsn(),
+            me.pan_id if dst_pan is None else dst_pan,
+            dst,
+            me.pan_id,
+            me.short_addr,
+            payload,
+            ack_request=ack and dst != BROADCAST,
+        )
+
+    async def send(self, frame: Frame) -> TxResult:
+        """Hand a frame to the MAC and wait for its result. FrameError if it cannot be encoded."""
+        psdu = frame.encode()
+        for attempt in range(2):
+            token = next(self._tokens)
+            try:
+                done: wire.TxDone = await self._request(token, wire.Transmit(token=token, psdu=psdu))
+                break
+            except RadioError as err:
+                if str(err) != wire.NOT_ATTACHED or attempt:
+                    raise
+                await self._reattached()  # a restarted hub: attach again, then send once more
+        return TxResult(
+            TxStatus(done.status), done.retries, done.backoffs, done.submitted_us, done.done_us, done.reason
+        )
+
+    async def receive(self) -> RxFrame:
+        """The next received frame."""
+        return await self._rx.get()
+
+    async def set_ir_mode(self, mode: str) -> None:
+        """Switch the IR module: ``idle``, ``receive`` or ``transmit``; returns once the hub has it."""
+        token = next(self._tokens)
+        await self._request(token, wire.SetIrMode(token=token, mode=mode), resend_s=RESEND_S)
+
+    async def ir_sample(self) -> IrSweep:
+        """The next sweep of the 12 phototransistors (arrives only while receiving and something shines)."""
+        return await self._ir.get()
+
+    # -- the body and the wearables' links --------------------------------------------------------
+
+    def drive(self, vx: float, vy: float, omega: float) -> None:
+        """Command the motors (robot frame, m/s and rad/s); the motor controller's watchdog stops the
+        robot if no command comes for half a second."""
+        self._put(wire.Drive(vx=float(vx), vy=float(vy), omega=float(omega)))
+
+    def place(self, x: float, y: float, yaw: float, vx: float = 0.0, vy: float = 0.0, omega: float = 0.0) -> None:
+        """A user's pose and motion in the world frame (users walk; the world does not move them)."""
+        self._put(wire.Place(x=float(x), y=float(y), yaw=float(yaw), vx=float(vx), vy=float(vy), omega=float(omega)))
+
+    def lf_burst(self, antenna: str, pattern: int, data: bytes) -> None:
+        """Fire one LF burst from the ``left`` or ``right`` antenna (one-way, not answered)."""
+        self._put(wire.LfBurst(antenna=antenna, pattern=int(pattern), data=bytes(data)))
+
+    def ble_send(self, to: str, payload: bytes) -> None:
+        """A BLE message to another node (not answered; the link may drop it)."""
+        self._put(wire.BleSend(to=to, payload=bytes(payload)))
+
+    def telemetry(
+        self, state: str, role: str = "", master: str = "", slot: tuple[float, float] | None = None, mode: str = ""
+    ) -> None:
+        """Tell the hub what this robot believes (for viewers and metrics only)."""
+        self._put(
+            wire.Telemetry(
+                state=state,
+                role=role,
+                master=master,
+                slot=None if slot is None else [float(slot[0]), float(slot[1])],
+                mode=mode,
+            )
+        )
+
+    async def ble_receive(self) -> BleMessage:
+        """The next BLE message."""
+        return await self._ble.get()
+
+    async def lf_heard(self) -> LfBurstHeard:
+        """The next LF burst the belt's front end heard (users)."""
+        return await self._lf.get()
+
+    def __aiter__(self) -> RadioClient:
+        return self
+
+    async def __anext__(self) -> RxFrame:
+        return await self._rx.get()
+
+    async def configure(
+        self,
+        *,
+        pan_id: int | None = None,
+        short_addr: int | None = None,
+        channel: int | None = None,
+        position: tuple[float, float] | None = None,
+    ) -> RadioIdentity:
+        """Change the radio at run time; returns the radio as the hub now has it. RadioError if refused."""
+        token = next(self._tokens)
+        msg = wire.Configure(
+            token=token,
+            pan_id=pan_id,
+            short_addr=short_addr,
+            channel=channel,
+            position=None if position is None else list(position),
+        )
+        wanted = {
+            k: v
+            for k, v in (("pan_id", pan_id), ("short_addr", short_addr), ("channel", channel), ("position", position))
+            if v is not None
+        }
+        before = self.identity
+        # what we want is our identity from now on: an attach to a restarted hub in the meantime applies it
+        self.identity = replace(before, **wanted)
+        try:
+            self._adopt(await self._request(token, msg, resend_s=RESEND_S))
+        except RadioError as err:
+            if str(err) != wire.NOT_ATTACHED:
+                self.identity = before  # refused: the radio stays as it was
+                raise
+            try:
+                await self._reattached()
+            except RadioError:
+                self.identity = before  # the new hub refused what we wanted: keep what worked
+                raise
+        return self.identity
+
+    async def close(self, detach: bool = True) -> None:
+        """Leave the air and close the link."""
+        if detach:
+            with contextlib.suppress(HubUnavailable):
+                self._put(wire.Detach())
+        for fut in self._pending.values():
+            if not fut.done():
+                fut.set_exception(HubUnavailable("radio closed"))
+        await self.link.close()
+
+    # -- plumbing ----------------------------------------------------------------------------------
+
+    def _adopt(self, attached: wire.Attached) -> None:
+        self.identity = replace(
+            self.identity,
+            ext_addr=attached.ext_addr,
+            short_addr=attached.short_addr,
+            pan_id=attached.pan_id,
+            channel=attached.channel,
+            position=(attached.position[0], attached.position[1]),
+            heading_deg=attached.heading_deg,
+        )
+        self._ultrasonic_rad = np.radians(np.asarray(attached.ultrasonic_deg, dtype=float))
+
+    def _put(self, msg: wire.Message) -> None:
+        msg.n = next(self._up_seq)
+        self.link.put(msg.encode())
+
+    async def _request(self, token: int, msg: wire.Message, resend_s: float | None = None) -> Any:
+        """Send ``msg`` and wait up to ``request_timeout`` for the hub's answer to ``token``. With ``resend_s``
+        (idempotent requests only) the message goes again every ``resend_s`` until answered: one sent just
+        as the hub restarted, or answered before the router had our subscription back, is lost without a
+        trace, and waiting out the whole timeout left a robot deaf for 5 s after a hub restart."""
+        fut: asyncio.Future[Any] = self._loop.create_future()
+        self._pending[token] = fut
+        self._pending_types[token] = msg.TYPE
+        deadline = self._loop.time() + self.request_timeout
+        try:
+            while True:
+                self._put(msg)
+                left = deadline - self._loop.time()
+                # asyncio.wait leaves the future alone on a timeout, so a resend can still be answered
+                done, _ = await asyncio.wait({fut}, timeout=left if resend_s is None else min(resend_s, left))
+                if done:
+                    return fut.result()
+                if self._loop.time() >= deadline:
+                    raise HubUnavailable(
+                        f"no answer from the hub of world {self.world!r} within {self.request_timeout} s"
+                    )
+        finally:
+            self._pending.pop(token, None)
+            self._pending_types.pop(token, None)
+
+    def _on_down(self, data: bytes) -> None:
+        try:
+            msg = wire.decode(data)
+        except wire.WireError:
+            self.malformed += 1
+            return
+        if isinstance(msg, (wire.Attached, wire.Error)) and msg.instance not in ("", self.instance):
+            return  # another process claiming our id at the same moment: its answer, not ours
+        if isinstance(msg, wire.Attached) and msg.token == 0:
+            self._down_seq = msg.n - 1  # the hub numbers afresh on every attach
+        if msg.n > self._down_seq + 1:
+            self.transport_gaps += msg.n - self._down_seq - 1
+        self._down_seq = max(self._down_seq, msg.n)
+        if isinstance(msg, wire.Received):
+            self._on_received(msg)
+        elif isinstance(msg, wire.IrSample):
+            self._on_ir(msg)
+        elif isinstance(msg, wire.Sensors):
+            self._on_sensors(msg)
+        elif isinstance(msg, wire.BleReceived):
+            self._ble.put_nowait(BleMessage(msg.src, msg.payload, msg.t_us))
+        elif isinstance(msg, wire.LfHeard):
+            self._lf.put_nowait(LfBurstHeard(msg.antenna, msg.pattern, msg.data, msg.rssi_dbm, msg.t_us))
+        elif isinstance(msg, wire.IrBeacons):
+            self._on_beacons(msg)
+        elif isinstance(msg, (wire.TxDone, wire.Attached)):
+            self._resolve(msg.token, msg)
+        elif isinstance(msg, wire.Error):
+            self.errors.append(msg.reason)
+            fut = self._pending.get(msg.token)
+            if fut is not None and not fut.done():
+                fut.set_exception(RadioError(msg.reason))
+            if msg.reason == wire.NOT_ATTACHED:
+                self._start_reattach()  # the hub restarted and forgot us
+        else:
+            self.malformed += 1
+
+    def _on_received(self, msg: wire.Received) -> None:
+        try:
+            frame = Frame.decode(msg.psdu)
+        except FrameError:
+            self.malformed += 1
+            return
+        self._rx.put_nowait(RxFrame(frame, msg.rssi_dbm, msg.lqi, msg.start_us, msg.end_us, msg.submitted_us))
+
+    def _on_ir(self, msg: wire.IrSample) -> None:
+        if len(msg.readings) != 4 * IR_RECEIVERS:
+            self.malformed += 1
+            return
+        self._ir.put_nowait(IrSweep(np.frombuffer(msg.readings, dtype="<f4").astype(float), msg.t_us))
+
+    def _on_sensors(self, msg: wire.Sensors) -> None:
+        ranges = np.frombuffer(msg.ranges, dtype="<f4").astype(float)
+        if len(ranges) != len(self._ultrasonic_rad):
+            self.malformed += 1
+            return
+        odometry = (float(msg.odometry[0]), float(msg.odometry[1]), float(msg.odometry[2]))
+        self.sensors = OwnSensors(msg.t_us, ranges, self._ultrasonic_rad, float(msg.yaw), odometry)
+        for callback in self.on_sensors:
+            callback(self.sensors)
+
+    def _on_beacons(self, msg: wire.IrBeacons) -> None:
+        block = np.frombuffer(msg.readings, dtype="<f4").astype(float)
+        gains = msg.gains or [1.0] * len(msg.sources)
+        if block.size != len(msg.sources) * IR_RECEIVERS or len(gains) != len(msg.sources):
+            self.malformed += 1
+            return
+        if not all(0 < g <= 1 for g in gains):
+            self.malformed += 1
+            return
+        readings = dict(zip(msg.sources, block.reshape(-1, IR_RECEIVERS), strict=True))
+        self.beacons = BeaconSweep(msg.t_us, readings, dict(zip(msg.sources, map(float, gains), strict=True)))
+
+    def _hub_seen(self, present: bool) -> None:
+        self.hub_present = present
+        if present and self._attached_once:
+            self._start_reattach()
+
+    def _start_reattach(self) -> None:
+        if self._reattaching is None or self._reattaching.done():
+            self._reattaching = self._loop.create_task(self._reattach())
+
+    async def _reattached(self) -> None:
+        self._start_reattach()
+        assert self._reattaching is not None
+        await asyncio.shield(self._reattaching)
+
+    def _attach_message(self, exclusive: bool = False) -> wire.Attach:
+        """Attach with the radio as this node wants it now."""
+        me = self.identity
+        return wire.Attach(
+            ext_addr=me.ext_addr,
+            short_addr=me.short_addr,
+            pan_id=me.pan_id,
+            channel=me.channel,
+            position=list(me.position),
+            heading_deg=float(me.heading_deg),
+            instance=self.instance,
+            exclusive=exclusive,
+            kind=me.kind,
+        )
+
+    async def _reattach(self) -> None:
+        orphans = [token for token in self._pending if token]  # sent before this attach: to the dead hub
+        attached = await self._request(0, self._attach_message(), resend_s=RESEND_S)
+
+        self._adopt(attached)
+        self.reattaches += 1
+        self._settle_orphans(orphans, attached)
+        for callback in self.on_reattach:
+            callback()
+
+    def _settle_orphans(self, orphans: list[int], attached: wire.Attached) -> None:
+        """Requests the dead hub took with it: the attach carried our configuration (and the IR mode is
+        sent again), so those are done; a frame is lost, as in any crash. Requests sent after the attach
+        went to the new hub, which answers them itself."""
+        for token in orphans:
+            fut = self._pending.get(token)
+            if fut is None or fut.done():
+                continue
+            if self._pending_types.get(token) in (wire.Configure.TYPE, wire.SetIrMode.TYPE):
+                fut.set_result(attached)
+            else:
+                fut.set_exception(HubUnavailable("the hub restarted before it answered"))
+
+    def _resolve(self, token: int, msg: wire.Message) -> None:
+
+        fut = self._pending.get(token)
+        if fut is not None and not fut.done():
+            fut.set_result(msg)
