@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import json
 import os
 import signal
@@ -9,7 +10,7 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import msgpack
 import zenoh
@@ -153,8 +154,8 @@ def _ping_and_organize(ctx: RunContext) -> dict[str, Any]:
     _wait_for_robots(ctx.sup, session, keys, opts.robots, opts.startup_timeout)
     timeline = FaultTimeline(list(opts.faults))
     _exercise(ctx.sup, session, keys, opts.duration, timeline)
-    timeline.apply_due(session, keys, float("inf"))  # what is left acts on the swarm phase
-    swarm = organize_and_disperse(session, keys, opts) if opts.organize else {}
+    timeline.apply_due(hub_chaos(session, keys), float("inf"))  # what is left acts on the swarm phase
+    swarm = asyncio.run(organize_and_disperse(ZenohControl(session, keys), opts)) if opts.organize else {}
     summary = _summarise(session, keys, opts, ctx.world, ctx.endpoint)
     summary["faults"] = timeline.applied
     problems = summary["problems"] + swarm.pop("problems", [])
@@ -212,7 +213,7 @@ def _exercise(sup: Supervisor, session: zenoh.Session, keys: Keys, duration: flo
     next_report = start
     while (elapsed := time.monotonic() - start) < duration:
         _check_alive(sup)
-        timeline.apply_due(session, keys, elapsed)
+        timeline.apply_due(hub_chaos(session, keys), elapsed)
         if time.monotonic() >= next_report:
             totals = _totals(query_hub(session, keys.stats))
             progress(
@@ -230,19 +231,25 @@ class FaultTimeline:
         self.pending = sorted(faults, key=lambda f: float(f.get("at", 0.0)))
         self.applied: list[dict[str, Any]] = []
 
-    def apply_due(self, session: zenoh.Session, keys: Keys, elapsed: float) -> None:
-        """Send every fault whose time has come; a refused one fails the run with the hub's reason."""
+    def apply_due(self, chaos: Callable[[dict[str, Any]], dict[str, Any]], elapsed: float) -> None:
+        """Send every fault whose time has come to ``chaos`` (the hub's chaos request); a refused one fails
+        the run with the hub's reason."""
         while self.pending and float(self.pending[0].get("at", 0.0)) <= elapsed:
             fault = dict(self.pending.pop(0))
             at = fault.pop("at", 0.0)
             request = (
                 {"op": "clear", "id": fault.get("id")} if fault.pop("clear", False) else {"op": "add", "fault": fault}
             )
-            answer = query_hub(session, keys.chaos, payload=msgpack.packb(request, use_bin_type=True))
+            answer = chaos(request)
             if "error" in answer:
                 raise RunFailed(f"fault at {at} s refused by the hub: {answer['error']}")
             progress(f"fault at {at:g} s: {request}")
             self.applied.append({"at": at, **request})
+
+
+def hub_chaos(session: zenoh.Session, keys: Keys) -> Callable[[dict[str, Any]], dict[str, Any]]:
+    """The hub's chaos queryable as a call."""
+    return lambda request: query_hub(session, keys.chaos, payload=msgpack.packb(request, use_bin_type=True))
 
 
 def _totals(stats: dict[str, Any]) -> dict[str, int]:
@@ -254,32 +261,66 @@ def _totals(stats: dict[str, Any]) -> dict[str, int]:
     return totals
 
 
-def organize_and_disperse(session: zenoh.Session, keys: Keys, opts: RunOptions) -> dict[str, Any]:
+class RunControl(Protocol):
+    """How a run's orchestration reaches its robots: zenoh queries to processes, or calls in model time."""
+
+    async def command(self, robot: int, cmd: str, timeout: float = 5.0, **args: Any) -> dict[str, Any]:
+        """One control command (``status``, ``organize``...) to one robot; HubUnavailable if it cannot answer."""
+
+    async def sleep(self, seconds: float) -> None:
+        """Let the run go on for ``seconds`` (wall or model time)."""
+
+
+class ZenohControl:
+    """``RunControl`` over the robots' control queryables."""
+
+    def __init__(self, session: zenoh.Session, keys: Keys) -> None:
+        self.session, self.keys = session, keys
+
+    async def command(self, robot: int, cmd: str, timeout: float = 5.0, **args: Any) -> dict[str, Any]:
+        return await asyncio.to_thread(control.command, self.session, self.keys, robot, cmd, timeout, **args)
+
+    async def sleep(self, seconds: float) -> None:
+        await asyncio.sleep(seconds)
+
+
+async def organize_and_disperse(ctl: RunControl, opts: RunOptions) -> dict[str, Any]:
     """Robot 1 (connected to user 1) organizes, the swarm holds a second, then disperses; states are checked."""
     progress(f"robot 1 organizes a swarm of {opts.organize} ({opts.protocol} protocol)")
-    organized = control.command(session, keys, 1, "organize", 60.0, count=opts.organize)
+    organized = await ctl.command(1, "organize", 60.0, count=opts.organize)
     if "error" in organized:
         return {"organization": organized, "problems": [f"organize failed: {organized['error']}"]}
     progress(
         f"members {organized['members']} on PAN {organized['pan_id']:#06x} in "
         f"{organized['organize_time_s'] * 1000:.1f} ms, {organized['retries']} retries"
     )
-    time.sleep(1.0)
-    problems = check_swarm(session, keys, opts.robots, organized)
+    await ctl.sleep(1.0)
+    problems = swarm_problems(opts.robots, await statuses(ctl, opts.robots), organized)
     expected = min(opts.organize, opts.robots - 1)
     if len(organized["members"]) < expected:
         problems.append(f"only {len(organized['members'])} of the {expected} robots available joined the swarm")
     if not organized["members"]:
         return {"organization": organized, "problems": problems}
-    dispersed = control.command(session, keys, 1, "disperse", 60.0)
+    dispersed = await ctl.command(1, "disperse", 60.0)
 
     progress(f"dispersed in {dispersed.get('disperse_time_s', 0) * 1000:.1f} ms")
-    time.sleep(0.3)
-    problems += check_swarm(session, keys, opts.robots, None)
+    await ctl.sleep(0.3)
+    problems += swarm_problems(opts.robots, await statuses(ctl, opts.robots), None)
     return {"organization": organized, "dispersal": dispersed, "problems": problems}
 
 
-def check_swarm(session: zenoh.Session, keys: Keys, robots: int, organized: dict[str, Any] | None) -> list[str]:
+async def statuses(ctl: RunControl, robots: int) -> dict[int, dict[str, Any] | str]:
+    """Every robot's status, or the reason it gave none."""
+    answers: dict[int, dict[str, Any] | str] = {}
+    for rid in range(1, robots + 1):
+        try:
+            answers[rid] = await ctl.command(rid, "status")
+        except HubUnavailable as err:
+            answers[rid] = str(err)
+    return answers
+
+
+def swarm_problems(robots: int, status: dict[int, dict[str, Any] | str], organized: dict[str, Any] | None) -> list[str]:
     """Every robot's own belief against the master's: the master and its members on the swarm's PAN in
     their swarm states, everyone else waiting on the waiting PAN (and the master following, after)."""
     members = set(organized["members"]) if organized else set()
@@ -291,12 +332,11 @@ def check_swarm(session: zenoh.Session, keys: Keys, robots: int, organized: dict
             want = ("master-driving", pan) if members else ("following", DEFAULT_PAN)
         else:
             want = ("slave-driving", pan) if rid in members else ("waiting", DEFAULT_PAN)
-        try:
-            status = control.command(session, keys, rid, "status")
-        except HubUnavailable as err:
-            problems.append(f"{err} {when}")
+        answer = status[rid]
+        if isinstance(answer, str):
+            problems.append(f"{answer} {when}")
             continue
-        got = (status["state"], status["radio"]["pan_id"])
+        got = (answer["state"], answer["radio"]["pan_id"])
         if got != want:
             problems.append(
                 f"robot {rid} is {got[0]} on PAN {got[1]:#06x} {when}; the master says {want[0]} on {want[1]:#06x}"
@@ -305,16 +345,20 @@ def check_swarm(session: zenoh.Session, keys: Keys, robots: int, organized: dict
 
 
 def _summarise(session: zenoh.Session, keys: Keys, opts: RunOptions, world: str, endpoint: str) -> dict[str, Any]:
-    stats = query_hub(session, keys.stats)
+    ctl = ZenohControl(session, keys)
+    return summarise(query_hub(session, keys.stats), asyncio.run(statuses(ctl, opts.robots)), opts, world, endpoint)
+
+
+def summarise(
+    stats: dict[str, Any], status: dict[int, dict[str, Any] | str], opts: RunOptions, world: str, endpoint: str
+) -> dict[str, Any]:
+    """The run's summary from the hub's stats and every robot's status."""
     nodes: dict[str, Any] = {}
-    problems: list[str] = []
+    problems: list[str] = [answer for answer in status.values() if isinstance(answer, str)]
     for rid in range(1, opts.robots + 1):
         name = f"robot-{rid}"
-        try:
-            status = control.command(session, keys, rid, "status")
-        except HubUnavailable as err:
-            problems.append(str(err))
-            status = {}
+        answer = status[rid]
+        robot = answer if isinstance(answer, dict) else {}
         counters = stats["nodes"].get(name, {})
         nodes[name] = {
             **{
@@ -333,10 +377,10 @@ def _summarise(session: zenoh.Session, keys: Keys, opts: RunOptions, world: str,
                     "chaos_lost",
                 )
             },
-            "heard_from": sorted(status.get("heard_from", {})),
-            "transport_gaps": status.get("transport_gaps", 0),
-            "pings_sent": status.get("pings_sent", 0),
-            "pings_answered": status.get("pings_answered", 0),
+            "heard_from": sorted(robot.get("heard_from", {})),
+            "transport_gaps": robot.get("transport_gaps", 0),
+            "pings_sent": robot.get("pings_sent", 0),
+            "pings_answered": robot.get("pings_answered", 0),
         }
     everyone = set(range(1, opts.robots + 1))
     all_pairs = all(set(n["heard_from"]) >= everyone - {rid} for rid, n in enumerate(nodes.values(), 1))

@@ -27,6 +27,7 @@ from cli.run import (
     _check_alive,
     _summarise,
     _wait_for_robots,
+    hub_chaos,
     progress,
     supervise,
 )
@@ -90,7 +91,7 @@ def _follow(sup: Supervisor, session: zenoh.Session, keys: Keys, duration: float
         if "user" in dead and dead["user"] == 0:
             return
         _check_alive(sup)
-        timeline.apply_due(session, keys, elapsed)
+        timeline.apply_due(hub_chaos(session, keys), elapsed)
         if time.monotonic() >= next_report:
             progress(f"t={elapsed:5.1f}/{duration:g}s")
             next_report += 5.0
