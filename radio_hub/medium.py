@@ -512,10 +512,12 @@ class Medium:
             rssi += float(self.rng.normal(0.0, pl.shadowing_sigma_db))
         copies, delay_us = 1, 0
         if self.chaos.faults:
-            for p in self.chaos.probabilities("duplicate", tx.sender, node.node_id, node.pan_id, tx.channel):
-                if self.rng.random() < p:
-                    copies = 2
-                    self._count(node.node_id, "duplicated")
+            # every selecting fault draws (so the seeded sequence does not depend on which one hit first), but
+            # the frame is duplicated, and counted, once however many of them hit
+            probabilities = self.chaos.probabilities("duplicate", tx.sender, node.node_id, node.pan_id, tx.channel)
+            if any([self.rng.random() < p for p in probabilities]):
+                copies = 2
+                self._count(node.node_id, "duplicated")
             delay_us = self.chaos.delay_us(tx.sender, node.node_id, node.pan_id, tx.channel, self.rng)
         reception = Reception(
             node.node_id,
