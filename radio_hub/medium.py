@@ -563,7 +563,9 @@ class Medium:
         sender = self.nodes.get(job.node_id)
         if job.done or sender is None or job.retries != ack.attempt:
             return
-        in_range = distance(ack.position, sender.position) <= self.config.range.tx_range_m
+        # a sender that changed channel since it sent (its radio is tuned elsewhere) hears nothing of the ACK
+        in_range = sender.channel == ack.channel
+        in_range = in_range and distance(ack.position, sender.position) <= self.config.range.tx_range_m
         in_range = in_range and not self.chaos.separated(ack.sender, sender.node_id)
 
         outcome = self._judge(ack, sender, filtered=False) if in_range else RxOutcome.LOST
