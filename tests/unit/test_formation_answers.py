@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from petswarm import messages as m
-from petswarm.formation import FormationConfig, NetworkFormation
+from petswarm.formation import ANSWER_ATTEMPTS, FormationConfig, NetworkFormation
 from petswarm.rf import Incoming
 from petswarm.sequence import EventLog, RobotState, SequenceManager
 from radio_hub.interface import RxFrame, TxResult, TxStatus
@@ -45,6 +45,18 @@ class FakeRf:
         return TxResult(self.statuses.pop(0) if self.statuses else TxStatus.SUCCESS)
 
 
+class CountingRng:
+    """Stands for the formation's generator where only ``uniform`` is drawn: the pause before a retried answer."""
+
+    def __init__(self) -> None:
+        self.pauses = 0
+
+    def uniform(self, low: float, high: float) -> float:
+        """Count the pause; make it none, so the test does not wait."""
+        self.pauses += 1
+        return 0.0
+
+
 def _formation(rf: FakeRf, sequence: SequenceManager, log: EventLog, rng: Any = None) -> NetworkFormation:
     rng = rng if rng is not None else np.random.default_rng(0)
     return NetworkFormation(rf, sequence, None, log, FormationConfig(), rng, user=USER)  # type: ignore[arg-type]
@@ -68,3 +80,28 @@ async def test_a_former_master_that_became_a_candidate_names_no_user_in_its_scan
     await formation.on_message(_incoming(m.Scan(6, 0, 0)))
     dst, reply = rf.sent[-1]
     assert dst == MASTER and reply == m.ScanReply(6, int(RobotState.ORGANIZING), WAITING_PAN, 0)
+
+
+async def test_an_answer_the_mac_never_gets_out_is_retried_only_between_attempts():
+    log = EventLog()
+    rf = FakeRf(statuses=[TxStatus.CHANNEL_ACCESS_FAILURE] * (ANSWER_ATTEMPTS + 1))
+    rng = CountingRng()
+    formation = _formation(rf, SequenceManager(log), log, rng)
+    await formation.on_message(_incoming(m.Scan(6, 0, 0)))
+    assert len(rf.sent) == ANSWER_ATTEMPTS
+    retries = [e for e in log.events if e["kind"] == "answer_retry"]
+    assert [e["attempt"] for e in retries] == list(range(ANSWER_ATTEMPTS - 1))
+    assert rng.pauses == ANSWER_ATTEMPTS - 1  # no pause after the last attempt: nothing follows it
+    [failed] = [e for e in log.events if e["kind"] == "answer_failed"]
+    assert failed["type"] == "ScanReply" and failed["status"] == "channel_access_failure"
+    assert failed["attempts"] == ANSWER_ATTEMPTS
+
+
+async def test_an_answer_that_gets_out_on_a_retry_is_not_reported_failed():
+    log = EventLog()
+    rf = FakeRf(statuses=[TxStatus.NO_ACK])
+    rng = CountingRng()
+    formation = _formation(rf, SequenceManager(log), log, rng)
+    await formation.on_message(_incoming(m.Scan(6, 0, 0)))
+    assert len(rf.sent) == 2 and rng.pauses == 1
+    assert [e["kind"] for e in log.events] == ["answer_retry"]
