@@ -631,6 +631,12 @@ class NetworkFormation:
             result = await self.rf.send(incoming.sender, reply, dst_pan=incoming.rx.frame.src_pan)
             if result.ok:
                 return
+            if attempt == ANSWER_ATTEMPTS - 1:
+                # no retry follows the last attempt: record the give-up, not a retry, and do not pause for nothing
+                self.log.record(
+                    "answer_failed", type=type(reply).__name__, status=result.status.value, attempts=ANSWER_ATTEMPTS
+                )
+                return
             # the MAC gave up (a crowded channel: many answer one broadcast); an open step such as the
             # scan is not retried by the master for us, so try again a little later, at a random moment
             self.log.record("answer_retry", type=type(reply).__name__, status=result.status.value, attempt=attempt)

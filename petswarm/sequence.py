@@ -104,6 +104,10 @@ class SequenceManager:
             raise TransitionError(f"no transition from {self.state.label} to {to.label}")
         if self.state in DRIVING and to == RobotState.ORGANIZING:
             self.previous_driving = self.state
+        elif to in (RobotState.WAITING, RobotState.SLAVE_DRIVING):
+            # a slave or a waiting robot has no user of its own, so no driving state to go back to; kept, it
+            # would make a later candidate (waiting -> organizing) look connected to its former user
+            self.previous_driving = None
         self.log.record("state", frm=self.state.label, to=to.label, **detail)
         self.state = to
 

@@ -38,6 +38,7 @@ from radio_hub.propagation import (
 
 # Receptions are judged against every transmission that could still overlap them.
 _AIR_HORIZON_US = airtime_us(MAX_PSDU) * 2
+_ACK_AIRTIME_US = airtime_us(len(Frame(FrameType.ACK, 0).encode()))
 
 
 class TxStatus(enum.StrEnum):
@@ -237,6 +238,8 @@ class Medium:
         self.chaos = Chaos()
         self._queues: dict[str, deque[_Job]] = {}
         self._air: list[Transmission] = []
+        self._acking_until: dict[str, int] = {}
+        """Per node, when the last ACK its MAC committed to send leaves the air: the radio is busy until then."""
         self._events: list[tuple[int, int, Callable[..., None], tuple[Any, ...]]] = []
         self._seq = itertools.count()
         self._tx_ids = itertools.count(1)
@@ -264,6 +267,7 @@ class Medium:
     def detach(self, node_id: str) -> None:
         """Take a node off the air; its queued requests are dropped without a report."""
         self.nodes.pop(node_id, None)
+        self._acking_until.pop(node_id, None)
         for job in self._queues.pop(node_id, ()):
             job.done = True
         self._burst.forget(node_id)
@@ -334,7 +338,7 @@ class Medium:
         self._at(cca_start + mac.cca_us, self._on_cca_end, job, cca_start)
 
     def _on_cca_end(self, job: _Job, cca_start: int) -> None:
-        if job.done:
+        if job.done or self._defer_while_acking(job, cca_start):
             return
         mac = self.config.mac
         node = self.nodes[job.node_id]
@@ -349,6 +353,25 @@ class Medium:
             self._finish(job, TxStatus.CHANNEL_ACCESS_FAILURE)
         else:
             self._backoff(job)
+
+    def _defer_while_acking(self, job: _Job, from_us: int) -> bool:
+        """Put the job's channel access off when its radio is busy with an ACK at some instant from ``from_us``.
+
+        A half-duplex radio that is turning around to send an ACK, or sending it, can neither assess the channel
+        nor start a data frame: it does the CCA (or, without CSMA, the transmission) once the ACK has left the
+        air. This is the radio's own state, not a busy channel, so no backoff is counted. Returns True when put
+        off.
+        """
+        free_us = self._acking_until.get(job.node_id, 0)
+        if free_us <= from_us:
+            return False
+        mac = self.config.mac
+        start = max(free_us, self.now_us)
+        if mac.csma_enabled:
+            self._at(start + mac.cca_us, self._on_cca_end, job, start)
+        else:
+            self._at(start + mac.turnaround_us, self._on_tx_start, job)
+        return True
 
     def _energy_detected(self, node: RadioNode, start_us: int, end_us: int) -> bool:
         reach = self.config.range.interference_range_m
@@ -382,7 +405,8 @@ class Medium:
         return tx
 
     def _on_tx_start(self, job: _Job) -> None:
-        if job.done:
+        # an ACK can fall due after a clear CCA (a node moved into range, a partition was lifted, no CSMA at all)
+        if job.done or self._defer_while_acking(job, self.now_us):
             return
         tx = self._put_on_air(self.nodes[job.node_id], job.frame, job.psdu, job.submitted_us)
         tx.job, tx.attempt = job, job.retries
@@ -401,7 +425,11 @@ class Medium:
             if outcome == RxOutcome.DELIVERED:
                 self._deliver(tx, node, job.psdu)
                 if job.wants_ack and node.short_addr == tx.frame.dst:
-                    self._at(self.now_us + self.config.mac.turnaround_us, self._on_ack_start, tx, node)
+                    ack_start = self.now_us + self.config.mac.turnaround_us
+                    self._at(ack_start, self._on_ack_start, tx, node)
+                    # from now the responder's radio is turning around to send the ACK, then sending it
+                    until = max(self._acking_until.get(node.node_id, 0), ack_start + _ACK_AIRTIME_US)
+                    self._acking_until[node.node_id] = until
         self._left_air(tx)
         if job.done:
             return
@@ -484,10 +512,12 @@ class Medium:
             rssi += float(self.rng.normal(0.0, pl.shadowing_sigma_db))
         copies, delay_us = 1, 0
         if self.chaos.faults:
-            for p in self.chaos.probabilities("duplicate", tx.sender, node.node_id, node.pan_id, tx.channel):
-                if self.rng.random() < p:
-                    copies = 2
-                    self._count(node.node_id, "duplicated")
+            # every selecting fault draws (so the seeded sequence does not depend on which one hit first), but
+            # the frame is duplicated, and counted, once however many of them hit
+            probabilities = self.chaos.probabilities("duplicate", tx.sender, node.node_id, node.pan_id, tx.channel)
+            if any([self.rng.random() < p for p in probabilities]):
+                copies = 2
+                self._count(node.node_id, "duplicated")
             delay_us = self.chaos.delay_us(tx.sender, node.node_id, node.pan_id, tx.channel, self.rng)
         reception = Reception(
             node.node_id,
@@ -533,7 +563,9 @@ class Medium:
         sender = self.nodes.get(job.node_id)
         if job.done or sender is None or job.retries != ack.attempt:
             return
-        in_range = distance(ack.position, sender.position) <= self.config.range.tx_range_m
+        # a sender that changed channel since it sent (its radio is tuned elsewhere) hears nothing of the ACK
+        in_range = sender.channel == ack.channel
+        in_range = in_range and distance(ack.position, sender.position) <= self.config.range.tx_range_m
         in_range = in_range and not self.chaos.separated(ack.sender, sender.node_id)
 
         outcome = self._judge(ack, sender, filtered=False) if in_range else RxOutcome.LOST

@@ -38,6 +38,16 @@ def test_duplication_hands_a_frame_up_twice_without_breaking_the_counters():
     assert counters.duplicated == 1 and counters.delivered == 1 and counters.heard == 1
 
 
+def test_a_frame_two_duplication_faults_select_is_duplicated_and_counted_once():
+    m, a, b, _ = _three()
+    m.chaos.add({"kind": "duplicate", "pan": 0x1000}, 0, 0.0)
+    m.chaos.add({"kind": "duplicate", "node": b}, 0, 0.0)
+    assert len(receptions(run_to_idle(m, m.submit(a, data(1), 1, 0)), b)) == 2
+    counters = m.node_counters[b]
+    assert counters.duplicated == 1 and counters.delivered == 1
+    assert m.channel_counters[11].duplicated == 2  # b's one and c's one (c is selected by the PAN fault)
+
+
 def test_a_partition_blocks_reception_interference_and_carrier_sense():
     m, a, b, c = _three()
     m.chaos.add({"kind": "partition", "group": [a]}, 0, 0.0)

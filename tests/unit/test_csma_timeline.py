@@ -7,7 +7,7 @@ ACK wait 864 us, airtime (6 + PSDU) x 32 us; an ACK PSDU is 5 bytes (352 us on a
 import numpy as np
 
 from radio_hub.config import airtime_us
-from radio_hub.medium import TxStatus
+from radio_hub.medium import RxOutcome, TxStatus
 
 from .helpers import NO_BACKOFF, data, medium, place, receptions, reports, run_to_idle
 
@@ -48,6 +48,23 @@ def test_acknowledged_unicast_completes_when_the_ack_ends():
     assert report.status == TxStatus.SUCCESS
     assert report.done_us == data_end + TURNAROUND + ACK_AIR
     assert m.node_counters[b].acks_sent == 1
+
+
+def test_an_ack_is_not_heard_by_a_sender_that_left_the_channel_meanwhile():
+    m = medium(NO_BACKOFF)
+    a, b = place(m, 1, 0), place(m, 2, 1)
+    psdu = data(1, dst=2)
+    m.submit(a, psdu, 1, 0)
+    data_end = CCA + TURNAROUND + airtime_us(len(psdu))
+    m.advance(data_end)  # b has the frame and turns around to send its ACK on channel 11
+    m.update(a, channel=12)
+    outs = run_to_idle(m)
+    [ack] = [tx for tx in m.air_log if tx.sender == b and tx.frame.frame_type.name == "ACK"]
+    assert ack.channel == 11 and ack.outcomes == {a: RxOutcome.LOST}
+    assert m.node_counters[a].acks_lost == 1
+    # a retries on channel 12, where b is not: no ACK at all
+    [report] = reports(outs)
+    assert report.status == TxStatus.NO_ACK and report.retries == 3
 
 
 def test_unicast_to_nobody_is_retried_three_times_then_no_ack():

@@ -92,6 +92,17 @@ def test_the_master_role_passes_between_slave_and_master_driving():
     assert not seq.user_connected
 
 
+def test_a_former_master_that_became_a_candidate_has_no_user_and_no_driving_state_to_return_to():
+    seq = SequenceManager(EventLog(), RobotState.FOLLOWING)
+    seq.transition(RobotState.ORGANIZING)
+    seq.transition(RobotState.MASTER_DRIVING)
+    seq.transition(RobotState.SLAVE_DRIVING, cause="handover")
+    seq.transition(RobotState.WAITING, reason="dispersed")
+    seq.transition(RobotState.ORGANIZING, master=9)  # said 'available' to another master
+    assert not seq.user_connected
+    assert seq.previous_driving is None
+
+
 def test_the_largest_roster_and_query_fit_one_inter_pan_frame():
     from petswarm.formation import MAX_LISTED, MAX_MEMBERS
     from petswarm.messages import JoinNotice, JoinQuery, Roster, Scan, ScanReply
