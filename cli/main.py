@@ -8,9 +8,12 @@ import json
 import os
 import signal
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from cli.args import bounded, int_auto, position, robot_id, seed, surround_config
+
+if TYPE_CHECKING:
+    from petswarm.robot import RobotConfig
 
 EPILOG = """examples:
   petswarm run --robots 5 --duration 5          a hub and 5 robots pinging each other; prints a summary
@@ -236,6 +239,14 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument(
         "--protocol", choices=("paper", "slotted"), default="paper", help="organizing protocol (default paper)"
     )
+    run.add_argument(
+        "--clock",
+        choices=("wall", "model"),
+        default="wall",
+        help="wall (default): a hub process and robot processes over zenoh, in real time; model: the hub's "
+        "environment and every robot in this one process on a virtual clock, as fast as the CPU allows, "
+        "the same run (digest) for the same seed on any machine",
+    )
 
     from cli.chaos import add_arguments as add_chaos_arguments
 
@@ -414,16 +425,23 @@ def _user(args: argparse.Namespace) -> int:
 
 
 def _robot(args: argparse.Namespace) -> int:
+    from petswarm.robot import run_robot
+
+    return asyncio.run(run_robot(robot_config(args)))
+
+
+def robot_config(args: argparse.Namespace) -> RobotConfig:
+    """The robot a ``petswarm robot`` command line describes (also how a model-time run builds its robots)."""
     from petswarm.exchange import StepTiming
     from petswarm.formation import FormationConfig
     from petswarm.relative_location import TokenConfig
-    from petswarm.robot import RobotConfig, run_robot
+    from petswarm.robot import RobotConfig
     from petswarm.surround import SurroundConfig
     from petswarm.surround_pilot import SurroundDriverConfig
 
     timing = StepTiming(args.step_deadline, args.step_retries)
     formation = FormationConfig(protocol=args.protocol, step=timing, min_rssi_dbm=args.region_rssi)
-    config = RobotConfig(
+    return RobotConfig(
         robot_id=args.id,
         endpoint=args.hub,
         world=args.world,
@@ -442,7 +460,6 @@ def _robot(args: argparse.Namespace) -> int:
         formation_mode=args.formation,
         surround=SurroundDriverConfig(law=args.surround_config or SurroundConfig(), human_id=args.surround_human),
     )
-    return asyncio.run(run_robot(config))
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -462,6 +479,7 @@ def _run(args: argparse.Namespace) -> int:
         protocol=args.protocol,
         record_dir=args.record,
         scenario=args.scenario,
+        clock=args.clock,
     )
     return run(opts)
 

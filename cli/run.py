@@ -49,6 +49,8 @@ class RunOptions:
     faults: tuple[dict[str, Any], ...] = ()
     """Chaos requests with ``at`` (seconds into the traffic phase); those later than the phase act just
     before the swarm is organized. ``{"at": 1, "kind": "loss", "p": 0.3}``, ``{"at": 2, "clear": true}``."""
+    clock: str = "wall"
+    """``wall``: processes over zenoh in real time; ``model``: one process on model time (``cli.model_run``)."""
 
 
 def progress(text: str) -> None:
@@ -62,8 +64,8 @@ class RunFailed(RuntimeError):
 
 def run(opts: RunOptions) -> int:
     """Run the emulation; returns the process exit code."""
+    scenario = None
     if opts.scenario:
-        from cli.run_scenario import run_scenario
         from petswarm.scenario import ScenarioError, load
 
         try:
@@ -71,6 +73,13 @@ def run(opts: RunOptions) -> int:
         except ScenarioError as err:
             print(f"petswarm run: {err}", file=sys.stderr)
             return 2
+    if opts.clock == "model":
+        from cli.model_run import run_model
+
+        return run_model(opts, scenario)
+    if scenario is not None:
+        from cli.run_scenario import run_scenario
+
         return run_scenario(opts, scenario)
     return supervise(opts, "run", lambda _record: [], _ping_and_organize)
 
@@ -144,13 +153,7 @@ def _ping_and_organize(ctx: RunContext) -> dict[str, Any]:
     """The default run: robots ping each other for ``duration``, then robot 1 may organize a swarm."""
     opts, session, keys = ctx.opts, ctx.session, ctx.keys
     for rid in range(1, opts.robots + 1):
-        robot_args = ["robot", "--id", str(rid), "--hub", ctx.endpoint, "--world", ctx.world]
-        robot_args += ["--record", str(ctx.record.events_of(f"robot-{rid}"))]
-        if rid == 1 and opts.organize:
-            robot_args += ["--user", "1", "--protocol", opts.protocol]
-        ctx.sup.spawn(
-            f"robot-{rid}", [*robot_args, "--ping-interval", str(opts.ping_interval), "--seed", str(opts.seed)]
-        )
+        ctx.sup.spawn(f"robot-{rid}", ping_robot_argv(opts, rid, ctx.endpoint, ctx.world, ctx.record))
     _wait_for_robots(ctx.sup, session, keys, opts.robots, opts.startup_timeout)
     timeline = FaultTimeline(list(opts.faults))
     _exercise(ctx.sup, session, keys, opts.duration, timeline)
@@ -161,6 +164,16 @@ def _ping_and_organize(ctx: RunContext) -> dict[str, Any]:
     problems = summary["problems"] + swarm.pop("problems", [])
     summary.update(swarm, problems=problems, ok=not problems)
     return summary
+
+
+def ping_robot_argv(opts: RunOptions, rid: int, endpoint: str, world: str, record: RunRecord) -> list[str]:
+    """The ``petswarm robot`` command line of robot ``rid`` in the default run (robot 1 serves user 1 when
+    the run organizes a swarm)."""
+    argv = ["robot", "--id", str(rid), "--hub", endpoint, "--world", world]
+    argv += ["--record", str(record.events_of(f"robot-{rid}"))]
+    if rid == 1 and opts.organize:
+        argv += ["--user", "1", "--protocol", opts.protocol]
+    return [*argv, "--ping-interval", str(opts.ping_interval), "--seed", str(opts.seed)]
 
 
 def _check_alive(sup: Supervisor) -> None:

@@ -52,11 +52,8 @@ def run_scenario(opts: RunOptions, scenario: Scenario) -> int:
 def _drive(ctx: RunContext, scenario: Scenario) -> dict[str, Any]:
     """Robots where the scenario puts them, the user walking its path, the fault timeline; the summary."""
     opts, endpoint, world = ctx.opts, ctx.endpoint, ctx.world
-    for rid, (x, y, heading) in enumerate(scenario.robot_poses, start=1):
-        args = ["robot", "--id", str(rid), "--hub", endpoint, "--world", world, f"--pos={x},{y}"]
-        args += ["--heading", str(heading), "--seed", str(opts.seed), "--protocol", opts.protocol]
-        args += _surround_args(scenario)
-        ctx.sup.spawn(f"robot-{rid}", [*args, "--record", str(ctx.record.events_of(f"robot-{rid}"))])
+    for rid in range(1, scenario.robot_count + 1):
+        ctx.sup.spawn(f"robot-{rid}", scenario_robot_argv(opts, scenario, rid, endpoint, world, ctx.record))
     _wait_for_robots(ctx.sup, ctx.session, ctx.keys, scenario.robot_count, opts.startup_timeout)
     if scenario.user is not None:
         user_args = ["user", "--scenario", str(scenario.path), "--hub", endpoint, "--world", world]
@@ -69,6 +66,17 @@ def _drive(ctx: RunContext, scenario: Scenario) -> dict[str, Any]:
     summary.update(scenario=scenario.name, faults=timeline.applied, duration_s=scenario.duration_s)
     summary["ok"] = not summary["problems"]
     return summary
+
+
+def scenario_robot_argv(
+    opts: RunOptions, scenario: Scenario, rid: int, endpoint: str, world: str, record: RunRecord
+) -> list[str]:
+    """The ``petswarm robot`` command line of robot ``rid`` where the scenario puts it."""
+    x, y, heading = scenario.robot_poses[rid - 1]
+    argv = ["robot", "--id", str(rid), "--hub", endpoint, "--world", world, f"--pos={x},{y}"]
+    argv += ["--heading", str(heading), "--seed", str(opts.seed), "--protocol", opts.protocol]
+    argv += _surround_args(scenario)
+    return [*argv, "--record", str(record.events_of(f"robot-{rid}"))]
 
 
 def _surround_args(scenario: Scenario) -> list[str]:

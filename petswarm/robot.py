@@ -276,6 +276,13 @@ class Robot:
             }
         )
 
+    async def close(self) -> None:
+        """Record the last event (the run's record keeps the driving totals), leave the air, close the record."""
+        self.log.record("stop", driving=dict(self.driver.counters))
+        await self.rf.radio.close()
+        if self.log.sink is not None:
+            self.log.sink.close()
+
     # -- actions ---------------------------------------------------------------------------------
 
     async def ping(self, dst: int, wait: float = 1.0) -> dict[str, Any]:
@@ -518,9 +525,6 @@ async def run_robot(config: RobotConfig) -> int:
         print(f"robot {config.robot_id}: {err}", file=sys.stderr)
         return 3
     finally:
-        robot.log.record("stop", driving=dict(robot.driver.counters))  # the run's record keeps the totals
         control.close()
-        await radio.close()
-        if robot.log.sink is not None:
-            robot.log.sink.close()
+        await robot.close()
     return 0

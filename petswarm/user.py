@@ -29,7 +29,7 @@ from petswarm.imu import ACCEL_PERIOD_S, GYRO_PERIOD_S, BeltImu
 from petswarm.lf_location import rssi_to_distance
 from petswarm.scenario import UserPlan
 from petswarm.sequence import EventLog
-from radio_hub.interface import HubUnavailable, LfBurstHeard, RadioClient, RadioError, RadioIdentity
+from radio_hub.interface import HubLink, HubUnavailable, LfBurstHeard, RadioClient, RadioError, RadioIdentity
 from radio_hub.lf import LfConfig, wake_pattern, wakes
 
 PLACE_PERIOD_S = 0.02
@@ -193,15 +193,16 @@ class User:
             self.log.record("request", request=request.request, **request.args)
 
 
-async def run_user(config: UserConfig, log: EventLog, attach_timeout: float = 15.0) -> int:
-    """The user process's main coroutine; returns the exit code."""
+async def run_user(config: UserConfig, log: EventLog, attach_timeout: float = 15.0, link: HubLink | None = None) -> int:
+    """The user process's main coroutine; returns the exit code. ``link``: the port to the hub (default zenoh
+    to ``config.endpoint``)."""
     plan = config.plan
     x, y, yaw = plan.start
     identity = RadioIdentity(plan.node_id, 0, 0, 0, position=(x, y), heading_deg=math.degrees(yaw), kind="user")
     deadline = asyncio.get_running_loop().time() + attach_timeout
     while True:
         try:
-            client = await RadioClient.connect(identity, config.endpoint, config.world, timeout=1.0)
+            client = await RadioClient.connect(identity, config.endpoint, config.world, link=link, timeout=1.0)
             break
         except HubUnavailable as err:
             if asyncio.get_running_loop().time() >= deadline:

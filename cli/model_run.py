@@ -1,0 +1,335 @@
+"""``petswarm run --clock model``: the hub's environment and every robot and user in one process, on model time.
+
+The environment (``radio_hub.environment``) is driven by a ``ModelClockLoop``: its next event is a timer on
+the loop, and every node's ``RadioClient`` reaches it through a ``MemoryLink`` instead of zenoh. The robots and
+the user are the very objects a robot or user process runs (built from the same command lines), so the only
+difference from a wall-clock run is what carries messages and what moves time: nothing sleeps, a run goes as
+fast as the CPU allows, and the same seed and options give the same run (``digest``) on any machine, loaded or
+idle. Messages between a node and the environment take no time; the air's own timing (airtime, backoffs,
+ACKs) is modelled in the environment as in the hub.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections.abc import Callable
+from contextlib import AsyncExitStack
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+from cli.checker import check_record
+from cli.digest import record_digest
+from cli.metrics import driving_metrics, read_world
+from cli.records import RunRecord
+from cli.run import (
+    FaultTimeline,
+    RunOptions,
+    _print,
+    organize_and_disperse,
+    ping_robot_argv,
+    progress,
+    statuses,
+    summarise,
+)
+from petswarm.clock import MODEL_EPOCH_S, ModelClockLoop
+from petswarm.robot import Robot
+from petswarm.scenario import Scenario
+from petswarm.sequence import EventLog
+from petswarm.user import UserConfig, run_user
+from radio_hub.environment import Environment, EnvironmentConfig, environment_from_dict, load_config
+from radio_hub.interface import HubUnavailable, RadioClient
+
+ENDPOINT = "memory"
+"""What a model run records as its hub endpoint: there is no socket."""
+
+
+class MemoryAir:
+    """The environment on the running ``ModelClockLoop``, its nodes linked in memory (a ``Downlink``)."""
+
+    def __init__(self, config: EnvironmentConfig, seed: int, record: RunRecord, world_log: bool) -> None:
+        self.loop = asyncio.get_running_loop()
+        if not isinstance(self.loop, ModelClockLoop):
+            raise TypeError("MemoryAir runs on a ModelClockLoop")
+        self.env = Environment(
+            config,
+            seed,
+            self,
+            wall_epoch_us=round(MODEL_EPOCH_S * 1e6),
+            pcap_path=record.path / "air.pcap",
+            world_log=record.path / "world.jsonl" if world_log else None,
+        )
+        self._nodes: dict[str, Callable[[bytes], None]] = {}
+        self._wake: asyncio.TimerHandle | None = None
+        self._wake_us = 0
+        self._schedule()
+
+    def now_us(self) -> int:
+        """Model time in microseconds."""
+        return round(self.loop.time() * 1e6)
+
+    def link(self) -> MemoryLink:
+        """A new node's port to this environment."""
+        return MemoryLink(self)
+
+    # -- Downlink ---------------------------------------------------------------------------------------
+
+    def send(self, node_id: str, data: bytes) -> None:
+        """Hand a message to the node's loop callback (after whatever is already due at this instant)."""
+        on_down = self._nodes.get(node_id)
+        if on_down is not None:
+            self.loop.call_soon(on_down, data)
+
+    def forget(self, node_id: str) -> None:
+        """Nothing is kept per node beyond its link, which goes when the node closes it."""
+
+    def publish_world(self, state: dict[str, Any]) -> None:
+        """No viewers in memory: the record's world.jsonl holds the ground truth."""
+
+    # -- from the nodes -----------------------------------------------------------------------------------
+
+    def up(self, node_id: str, data: bytes) -> None:
+        """A node's message reaches the environment now."""
+        self.env.receive(node_id, data, self.now_us())
+        self._schedule()
+
+    def opened(self, node_id: str, on_down: Callable[[bytes], None]) -> None:
+        """A node's link is open: deliver to ``on_down`` from now on."""
+        self._nodes[node_id] = on_down
+
+    def gone(self, node_id: str, instance: str) -> None:
+        """A node's link closed (its liveliness ended)."""
+        self._nodes.pop(node_id, None)
+        self.env.node_gone(node_id, instance, self.now_us())
+        self._schedule()
+
+    # -- the schedule ---------------------------------------------------------------------------------------
+
+    def _fire(self) -> None:
+        self._wake = None
+        self.env.advance(self.now_us())
+        self._schedule()
+
+    def _schedule(self) -> None:
+        # one timer on the loop, always at the environment's next event (an input may bring that forward)
+        due = self.env.next_event_us()
+        if self._wake is not None:
+            if self._wake_us <= due:
+                return
+            self._wake.cancel()
+        self._wake_us = due
+        self._wake = self.loop.call_at(due / 1e6, self._fire)
+
+
+class MemoryLink:
+    """A node's ``HubLink`` to a ``MemoryAir``: messages go both ways through the loop, in order."""
+
+    def __init__(self, air: MemoryAir) -> None:
+        self.air = air
+        self.node_id = ""
+        self.instance = ""
+
+    def open(
+        self, node_id: str, instance: str, on_down: Callable[[bytes], None], on_hub: Callable[[bool], None]
+    ) -> None:
+        """Register the node with the air (the hub is always present in memory)."""
+        self.node_id, self.instance = node_id, instance
+        self.air.opened(node_id, on_down)
+
+    def put(self, data: bytes) -> None:
+        """One message up, delivered after whatever is already due at this instant."""
+        self.air.loop.call_soon(self.air.up, self.node_id, data)
+
+    async def close(self) -> None:
+        """The node goes: the environment detaches it once its last messages are in."""
+        self.air.loop.call_soon(self.air.gone, self.node_id, self.instance)
+
+
+@dataclass
+class ModelControl:
+    """``RunControl`` in model time: commands are calls on the robot objects."""
+
+    robots: dict[int, Robot] = field(default_factory=dict)
+
+    async def command(self, robot: int, cmd: str, timeout: float = 5.0, **args: Any) -> dict[str, Any]:
+        """One control command, as a robot process's control queryable would carry it out."""
+        target = self.robots.get(robot)
+        if target is None:
+            raise HubUnavailable(f"no robot {robot} in this model run")
+        async with asyncio.timeout(timeout):
+            return await target.handle({"cmd": cmd, **args})
+
+    async def sleep(self, seconds: float) -> None:
+        """Model time goes on."""
+        await asyncio.sleep(seconds)
+
+
+def run_model(opts: RunOptions, scenario: Scenario | None) -> int:
+    """The run in model time: record, summary and checks as a wall-clock run; returns the exit code."""
+    world = opts.world or f"model-{opts.seed}"
+    record = RunRecord.create(opts, world, ENDPOINT)
+    progress(f"world {world}, seed {opts.seed}, model time, record in {record.path}")
+    started = time.perf_counter()
+    loop = ModelClockLoop()
+    summary: dict[str, Any] = {"ok": False, "problems": ["the run did not finish"], "seed": opts.seed}
+    try:
+        summary = loop.run_until_complete(_run(opts, scenario, world, record))
+    except KeyboardInterrupt:
+        progress("interrupted")
+        summary["problems"] = ["interrupted"]
+        record.finish(summary, {})
+        return 130
+    finally:
+        model_time_s = loop.time()
+        loop.close()
+    summary["clock"] = "model"
+    summary["model_time_s"] = round(model_time_s, 6)
+    summary["wall_time_s"] = round(time.perf_counter() - started, 3)
+    summary["speedup"] = round(model_time_s / max(summary["wall_time_s"], 1e-9), 1)
+    if scenario is not None:
+        summary["driving"] = driving_metrics(read_world(record.path / "world.jsonl"))
+    violations = check_record(record.path)
+    summary["invariants"] = violations or "all hold"
+    summary["problems"] += [f"invariant violated: {v}" for v in violations]
+    summary["ok"] = not summary["problems"]
+    summary["digest"] = record_digest(record.path)
+    record.finish(summary, {})
+    progress(
+        f"{summary['model_time_s']:.1f} s of model time in {summary['wall_time_s']:.2f} s "
+        f"({summary['speedup']:g}x); digest {summary['digest'][:16]}"
+    )
+    _print(summary, opts.as_json)
+    return 0 if summary["ok"] else 1
+
+
+async def _run(opts: RunOptions, scenario: Scenario | None, world: str, record: RunRecord) -> dict[str, Any]:
+    air = MemoryAir(_environment(opts, scenario), opts.seed, record, world_log=scenario is not None)
+    ctl = ModelControl()
+    async with AsyncExitStack() as stack:
+        stack.callback(air.env.close)
+        argvs = _robot_argvs(opts, scenario, world, record)
+        for rid, argv in argvs.items():
+            ctl.robots[rid] = await _start_robot(argv, air, stack)
+        progress(f"{len(ctl.robots)}/{len(argvs)} robots attached")
+        if scenario is None:
+            summary = await _ping_and_organize(opts, air, ctl, world)
+        else:
+            summary = await _drive(opts, scenario, air, ctl, world, record)
+    return summary
+
+
+def _environment(opts: RunOptions, scenario: Scenario | None) -> EnvironmentConfig:
+    """The hub's tables: ``--config``, and the scenario's world (as ``petswarm hub --scenario`` takes them)."""
+    config = load_config(opts.config) if opts.config else EnvironmentConfig()
+    if scenario is None:
+        return config
+    tables = environment_from_dict(scenario.hub_tables())
+    if opts.config:
+        tables.medium, tables.ir = config.medium, config.ir
+    return tables
+
+
+def _robot_argvs(opts: RunOptions, scenario: Scenario | None, world: str, record: RunRecord) -> dict[int, list[str]]:
+    from cli.run_scenario import scenario_robot_argv
+
+    if scenario is None:
+        return {rid: ping_robot_argv(opts, rid, ENDPOINT, world, record) for rid in range(1, opts.robots + 1)}
+    count = scenario.robot_count
+    return {rid: scenario_robot_argv(opts, scenario, rid, ENDPOINT, world, record) for rid in range(1, count + 1)}
+
+
+async def _start_robot(argv: list[str], air: MemoryAir, stack: AsyncExitStack) -> Robot:
+    """The robot a ``petswarm robot`` command line describes, attached through memory and running."""
+    from cli.main import build_parser, robot_config
+
+    config = robot_config(build_parser().parse_args(argv))
+    radio = await RadioClient.connect(config.identity(), world=config.world, link=air.link(), timeout=5.0)
+    robot = Robot(config, radio)
+    task = asyncio.get_running_loop().create_task(robot.run())
+
+    async def stop() -> None:
+        robot.stopping.set()
+        await task
+        await robot.close()
+
+    stack.push_async_callback(stop)
+    return robot
+
+
+async def _ping_and_organize(opts: RunOptions, air: MemoryAir, ctl: ModelControl, world: str) -> dict[str, Any]:
+    timeline = FaultTimeline(list(opts.faults))
+    chaos = _chaos(air)
+    start = asyncio.get_running_loop().time()
+    for second in range(1, int(opts.duration) + 1):
+        timeline.apply_due(chaos, float(second - 1))
+        await asyncio.sleep(1.0)
+        _report(air, f"t={second:5.1f}/{opts.duration:g}s")
+    await asyncio.sleep(max(0.0, start + opts.duration - asyncio.get_running_loop().time()))
+    timeline.apply_due(chaos, float("inf"))  # what is left acts on the swarm phase
+    swarm = await organize_and_disperse(ctl, opts) if opts.organize else {}
+    summary = await _summary(opts, air, ctl, world)
+    summary["faults"] = timeline.applied
+    problems = summary["problems"] + swarm.pop("problems", [])
+    summary.update(swarm, problems=problems, ok=not problems)
+    return summary
+
+
+async def _drive(
+    opts: RunOptions, scenario: Scenario, air: MemoryAir, ctl: ModelControl, world: str, record: RunRecord
+) -> dict[str, Any]:
+    opts = _scenario_options(opts, scenario)
+    user_task = None
+    if scenario.user is not None:
+        config = UserConfig(
+            scenario.user, ENDPOINT, world, scenario.duration_s, opts.seed, beacon=scenario.surround_enabled
+        )
+        sink = open(record.events_of(scenario.user.node_id), "a")  # noqa: SIM115 (closed below)
+        user_task = asyncio.get_running_loop().create_task(run_user(config, EventLog(sink=sink), link=air.link()))
+        user_task.add_done_callback(lambda _task: sink.close())
+    timeline = FaultTimeline(list(scenario.faults) + list(opts.faults))
+    chaos = _chaos(air)
+    loop = asyncio.get_running_loop()
+    start = loop.time()
+    while (elapsed := loop.time() - start) < scenario.duration_s:
+        timeline.apply_due(chaos, elapsed)
+        if user_task is not None and user_task.done():
+            break
+        await asyncio.sleep(min(0.1, scenario.duration_s - elapsed))
+        if round(loop.time() - start, 6) % 5 == 0:
+            _report(air, f"t={loop.time() - start:5.1f}/{scenario.duration_s:g}s")
+    if user_task is not None:
+        await user_task
+    summary = await _summary(opts, air, ctl, world)
+    summary["problems"] = [p for p in summary["problems"] if "heard every other" not in p]  # no ping phase here
+    summary.update(scenario=scenario.name, faults=timeline.applied, duration_s=scenario.duration_s)
+    summary["ok"] = not summary["problems"]
+    return summary
+
+
+def _scenario_options(opts: RunOptions, scenario: Scenario) -> RunOptions:
+    return replace(opts, robots=scenario.robot_count, duration=scenario.duration_s)
+
+
+async def _summary(opts: RunOptions, air: MemoryAir, ctl: ModelControl, world: str) -> dict[str, Any]:
+    stats = {"world": world, **air.env.stats(air.now_us())}
+    return summarise(stats, await statuses(ctl, opts.robots), opts, world, ENDPOINT)
+
+
+def _chaos(air: MemoryAir) -> Callable[[dict[str, Any]], dict[str, Any]]:
+    def request(body: dict[str, Any]) -> dict[str, Any]:
+        answer = air.env.chaos_request(body, air.now_us(), MODEL_EPOCH_S + air.now_us() / 1e6)
+        air._schedule()  # a fault may change what is due next
+        return answer
+
+    return request
+
+
+def _report(air: MemoryAir, what: str) -> None:
+    totals = {"sent": 0, "delivered": 0, "collided": 0, "lost": 0}
+    for counters in air.env.medium.node_counters.values():
+        for name in totals:
+            totals[name] += getattr(counters, name, 0)
+    progress(
+        f"{what}  sent {totals['sent']}  delivered {totals['delivered']}  "
+        f"collided {totals['collided']}  lost {totals['lost']}"
+    )
