@@ -1,12 +1,9 @@
 """``petswarm bench surround``: the surround scenarios in model time, through each robot's own pipeline.
 
-Each run steps the hub's world (``radio_hub.world``: kinematics, contacts, ultrasonic, odometry) and its IR
-beacons (``radio_hub.ir_air``: 20 Hz sweeps, noise, AGC) exactly as the hub schedules them (a 20 ms world
-tick, body sensors every second tick, beacons every fifth), and one ``SurroundPilot`` per robot, the very
-code a robot process runs, fed from them. A command takes effect at the next world tick. What is left out is
-only the processes' scheduling: on a loaded machine (20 robot processes on 2 cores) sensor samples come late
-and commands later, and ``petswarm run SCENARIO`` shows that; this bench shows the pipeline itself,
-deterministically per seed, in seconds.
+Each run is a ``petswarm run SCENARIO --clock model`` (``cli.model_run``): the hub's own environment on its
+one schedule (world ticks, body sensors, IR beacons) and every robot and the user as the objects their
+processes run, on model time. It is deterministic per seed and independent of the machine's load; a process
+run of the same scenario (``--clock wall``) differs only by the processes' scheduling.
 
 Figures per run come from the same ``cli.metrics.driving_metrics`` as a process run's, over the world's
 ground truth at 10 Hz; the plot draws how far each run's swarm centre is from its human over time.
@@ -17,32 +14,23 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+import tempfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from cli.bench_output import emit, save
-from cli.metrics import driving_metrics
+from cli.metrics import driving_metrics, read_world
+from cli.model_run import execute
+from cli.run import RunOptions
 from petswarm.scenario import Scenario, load
-from petswarm.surround import SurroundConfig
-from petswarm.surround_pilot import SurroundDriverConfig, SurroundPilot
 from petswarm.surround_sim import surround_figures
-from radio_hub.interface import BeaconSweep, IrConfig, OwnSensors
-from radio_hub.ir_air import IrAir
-from radio_hub.light import PERSON_BEACON_POWER
-from radio_hub.world import World, WorldConfig, parse_obstacle
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 DEFAULT_SCENARIOS = [str(SCENARIOS / "surround-cylinder.toml"), str(SCENARIOS / "surround-corridor.toml")]
-TICK_S = 0.02
-"""The hub's world tick."""
-SENSORS_EVERY = 2
-"""Ticks between body-sensor samples (25 Hz), as the hub sends them."""
-BEACONS_EVERY = 5
-"""Ticks between beacon sweeps (20 Hz), as the hub sends them."""
 RECORD_EVERY = 5
-"""Ticks between recorded world states (10 Hz) for the figures."""
+"""World ticks (50 Hz) between the states the figures use (10 Hz)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -93,66 +81,23 @@ def bench_surround(args: argparse.Namespace) -> int:
     return 0
 
 
-def model_time_run(scenario: Scenario, seed: int) -> list[dict[str, Any]]:
-    """One run of ``scenario`` in model time; the world's states at 10 Hz, as a run's world.jsonl holds them."""
+def model_time_run(scenario: Scenario, seed: int, record_dir: str | Path | None = None) -> list[dict[str, Any]]:
+    """One ``--clock model`` run of ``scenario``: the world's states at 10 Hz, from the run's world.jsonl."""
     if scenario.user is None:
         raise ValueError(f"scenario {scenario.name!r} has no user to surround")
-    tables = scenario.hub_tables()
-    config = WorldConfig.from_dict(tables.get("world", {}))
-    world = World(config, [parse_obstacle(o) for o in tables["obstacles"]])
-    body_rng, ir_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
-    ir = IrAir(IrConfig.from_dict(tables.get("ir", {})) if "ir" in tables else IrConfig(), ir_rng)
-    human = scenario.user.node_id
-    world.add(human, "user", *scenario.user.start)
-    ir.set_mode(human, "beacon", 0)
-    ir.power[human] = PERSON_BEACON_POWER
-    law = SurroundConfig.from_dict(scenario.surround_law())
-    pilots: dict[str, SurroundPilot] = {}
-    for n, (x, y, heading_deg) in enumerate(scenario.robot_poses, start=1):
-        robot = f"robot-{n}"
-        world.add(robot, "robot", x, y, math.radians(heading_deg))
-        ir.set_mode(robot, "beacon", 0)
-        pilots[robot] = SurroundPilot(SurroundDriverConfig(law=law, human_id=human))
-    return _step_world(scenario, world, ir, pilots, body_rng)
-
-
-def _step_world(
-    scenario: Scenario, world: World, ir: IrAir, pilots: dict[str, SurroundPilot], rng: np.random.Generator
-) -> list[dict[str, Any]]:
-    assert scenario.user is not None
-    human = scenario.user.node_id
-    angles = np.radians(np.array(world.config.ultrasonic_angles_deg))
-    sweeps = {robot: BeaconSweep(0, {}, {}) for robot in pilots}
-    commands: dict[str, tuple[float, float]] = {}
-    states: list[dict[str, Any]] = []
-    for tick in range(1, round(scenario.duration_s / TICK_S) + 1):
-        t = tick * TICK_S
-        t_us = round(t * 1e6)
-        for robot, (vx, vy) in commands.items():
-            world.command(robot, vx, vy, 0.0, t)
-        commands = {}
-        world.place(human, *scenario.user.pose_at(t))
-        world.step(t)
-        if tick % BEACONS_EVERY == 0:
-            sweeps.update(_beacon_sweeps(world, ir, t_us))
-        if tick % SENSORS_EVERY == 0:
-            for robot, pilot in pilots.items():
-                own = world.sense(robot, rng)
-                sensors = OwnSensors(t_us, own.ranges_m, angles, own.yaw_rad, tuple(float(v) for v in own.odometry))
-                command = pilot.step(sensors, sweeps[robot], t)
-                if command is not None:
-                    commands[robot] = command
-        if tick % RECORD_EVERY == 0:
-            states.append({"t_us": t_us, "bodies": world.snapshot(), "collisions": world.collisions})
-    return states
-
-
-def _beacon_sweeps(world: World, ir: IrAir, t_us: int) -> dict[str, BeaconSweep]:
-    poses = world.poses()
-    return {
-        node: BeaconSweep(t_us, dict(zip(sources, block, strict=True)), dict(zip(sources, gains, strict=True)))
-        for node, (sources, block, gains) in ir.beacon_sweep(poses).items()
-    }
+    with tempfile.TemporaryDirectory(prefix="bench-surround-") as scratch:
+        record = Path(record_dir or scratch) / f"{scenario.name}-{seed}"
+        opts = RunOptions(
+            robots=scenario.robot_count,
+            seed=seed,
+            duration=scenario.duration_s,
+            ping_interval=0.5,
+            record_dir=str(record),
+            scenario=str(scenario.path),
+            clock="model",
+        )
+        execute(opts, scenario)
+        return read_world(record / "world.jsonl")[RECORD_EVERY - 1 :: RECORD_EVERY]
 
 
 def summarise(world: list[dict[str, Any]]) -> dict[str, Any]:

@@ -165,27 +165,38 @@ class ModelControl:
 
 
 def run_model(opts: RunOptions, scenario: Scenario | None) -> int:
-    """The run in model time: record, summary and checks as a wall-clock run; returns the exit code."""
+    """The run in model time, printed as a wall-clock run's is; returns the exit code."""
+    try:
+        summary = execute(opts, scenario)
+    except KeyboardInterrupt:
+        progress("interrupted")
+        return 130
+    progress(
+        f"{summary['model_time_s']:.1f} s of model time in {summary['wall_time_s']:.2f} s "
+        f"({summary['speedup']:g}x); digest {summary['digest'][:16]}"
+    )
+    _print(summary, opts.as_json)
+    return 0 if summary["ok"] else 1
+
+
+def execute(opts: RunOptions, scenario: Scenario | None) -> dict[str, Any]:
+    """Run in model time and leave the record (``summary.json`` too, also when interrupted); the summary."""
     world = opts.world or f"model-{opts.seed}"
     record = RunRecord.create(opts, world, ENDPOINT)
     progress(f"world {world}, seed {opts.seed}, model time, record in {record.path}")
     started = time.perf_counter()
     loop = ModelClockLoop()
-    summary: dict[str, Any] = {"ok": False, "problems": ["the run did not finish"], "seed": opts.seed}
+    summary: dict[str, Any] = {"ok": False, "problems": ["interrupted"], "seed": opts.seed}
     try:
         summary = loop.run_until_complete(_run(opts, scenario, world, record))
-    except KeyboardInterrupt:
-        progress("interrupted")
-        summary["problems"] = ["interrupted"]
-        record.finish(summary, {})
-        return 130
     finally:
         model_time_s = loop.time()
         loop.close()
-    summary["clock"] = "model"
-    summary["model_time_s"] = round(model_time_s, 6)
-    summary["wall_time_s"] = round(time.perf_counter() - started, 3)
-    summary["speedup"] = round(model_time_s / max(summary["wall_time_s"], 1e-9), 1)
+        summary["clock"] = "model"
+        summary["model_time_s"] = round(model_time_s, 6)
+        summary["wall_time_s"] = round(time.perf_counter() - started, 3)
+        summary["speedup"] = round(model_time_s / max(summary["wall_time_s"], 1e-9), 1)
+        record.finish(summary, {})
     if scenario is not None:
         summary["driving"] = driving_metrics(read_world(record.path / "world.jsonl"))
     violations = check_record(record.path)
@@ -193,13 +204,9 @@ def run_model(opts: RunOptions, scenario: Scenario | None) -> int:
     summary["problems"] += [f"invariant violated: {v}" for v in violations]
     summary["ok"] = not summary["problems"]
     summary["digest"] = record_digest(record.path)
+    summary["record"] = str(record.path)
     record.finish(summary, {})
-    progress(
-        f"{summary['model_time_s']:.1f} s of model time in {summary['wall_time_s']:.2f} s "
-        f"({summary['speedup']:g}x); digest {summary['digest'][:16]}"
-    )
-    _print(summary, opts.as_json)
-    return 0 if summary["ok"] else 1
+    return summary
 
 
 async def _run(opts: RunOptions, scenario: Scenario | None, world: str, record: RunRecord) -> dict[str, Any]:
