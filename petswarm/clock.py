@@ -6,16 +6,20 @@ running event loop. On an ordinary loop that is the wall clock (``--clock wall``
 to the earliest timer (``--clock model``). The same robot code therefore runs unchanged in both clocks,
 and in model time a run is as fast as the CPU allows and independent of the machine's load.
 
-Ties: callbacks due at one instant run in the order they were scheduled (asyncio's ready queue is FIFO
-and its timer heap orders equal deadlines by insertion), and in model time nothing else can interleave
-with them, so a run is a pure function of its seed and options.
+Ties: callbacks due at one instant run in the order they were scheduled. asyncio's ready queue is FIFO, but
+its timer heap compares deadlines only, so equal deadlines would pop in heap order; a ``ModelClockLoop``
+timer also carries a sequence number that breaks the tie (first scheduled, first run). Nothing else can
+interleave in model time, so a run is a pure function of its seed and options.
 """
 
 from __future__ import annotations
 
 import asyncio
+import heapq
+import itertools
 import selectors
 import time
+from collections.abc import Callable
 from typing import Any
 
 MODEL_EPOCH_S = 1_700_000_000.0
@@ -43,12 +47,40 @@ class _ModelSelector(selectors.DefaultSelector):
         return []
 
 
+class _OrderedTimer(asyncio.TimerHandle):
+    """A timer that, at an equal deadline, comes after every timer scheduled before it."""
+
+    __slots__ = ("_order",)
+
+    def __init__(
+        self, when: float, callback: Callable[..., Any], args: tuple[Any, ...], loop: Any, context: Any, order: int
+    ) -> None:
+        super().__init__(when, callback, args, loop, context)
+        self._order = order
+
+    def __lt__(self, other: object) -> bool:
+        if isinstance(other, _OrderedTimer):
+            return (self._when, self._order) < (other._when, other._order)
+        return super().__lt__(other)
+
+
 class ModelClockLoop(asyncio.SelectorEventLoop):
     """An asyncio loop on model time: ``time()`` starts at 0 and moves only when the loop would wait."""
 
     def __init__(self) -> None:
         self._model = _ModelSelector()
+        self._timer_order = itertools.count()
         super().__init__(self._model)
+
+    def call_at(
+        self, when: float, callback: Callable[..., Any], *args: Any, context: Any = None
+    ) -> asyncio.TimerHandle:
+        """As asyncio's, with ties at one deadline run first scheduled, first run."""
+        self._check_closed()  # type: ignore[attr-defined]
+        timer = _OrderedTimer(when, callback, args, self, context, next(self._timer_order))
+        heapq.heappush(self._scheduled, timer)  # type: ignore[attr-defined]
+        timer._scheduled = True  # type: ignore[attr-defined]
+        return timer
 
     def time(self) -> float:
         """Model seconds since the loop was made."""

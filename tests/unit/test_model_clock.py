@@ -1,0 +1,107 @@
+"""The model clock: a loop whose time moves only when it would wait, and runs that repeat from their seed."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from pathlib import Path
+
+import pytest
+
+from cli.digest import record_digest
+from cli.main import main
+from petswarm import clock
+from petswarm.clock import MODEL_EPOCH_S, ModelClockLoop, ModelTimeStalled
+
+
+def test_sleeping_moves_model_time_by_exactly_the_sleep_and_no_wall_time_passes() -> None:
+    seen: list[tuple[str, float]] = []
+
+    async def sleeper(name: str, period: float) -> None:
+        for _ in range(3):
+            await asyncio.sleep(period)
+            seen.append((name, round(clock.now(), 9)))
+
+    async def both() -> None:
+        await asyncio.gather(sleeper("a", 0.1), sleeper("b", 0.25))
+
+    loop = ModelClockLoop()
+    try:
+        loop.run_until_complete(both())
+        assert loop.time() == pytest.approx(0.75)
+    finally:
+        loop.close()
+    assert seen == [("a", 0.1), ("a", 0.2), ("b", 0.25), ("a", 0.3), ("b", 0.5), ("b", 0.75)]
+
+
+def test_callbacks_due_at_one_instant_run_in_the_order_they_were_scheduled() -> None:
+    order: list[int] = []
+    loop = ModelClockLoop()
+    try:
+        for n in range(5):
+            loop.call_at(1.0, order.append, n)
+        loop.call_at(0.5, order.append, -1)
+        loop.run_until_complete(asyncio.sleep(2.0))
+    finally:
+        loop.close()
+    assert order == [-1, 0, 1, 2, 3, 4]
+
+
+def test_a_loop_with_nothing_to_wait_for_says_it_stalled_instead_of_hanging() -> None:
+    loop = ModelClockLoop()
+    try:
+        with pytest.raises(ModelTimeStalled):
+            loop.run_until_complete(loop.create_future())  # nobody will ever resolve it
+    finally:
+        loop.close()
+
+
+def test_wall_time_in_model_time_is_the_fixed_epoch_plus_model_time() -> None:
+    async def stamp() -> tuple[float, bool]:
+        await asyncio.sleep(2.5)
+        return clock.wall_time(), clock.in_model_time()
+
+    loop = ModelClockLoop()
+    try:
+        assert loop.run_until_complete(stamp()) == (MODEL_EPOCH_S + 2.5, True)
+    finally:
+        loop.close()
+    assert not asyncio.run(_in_model_time())  # an ordinary loop is the wall clock
+
+
+async def _in_model_time() -> bool:
+    return clock.in_model_time()
+
+
+def _model_run(tmp: Path, name: str, seed: int, capsys: pytest.CaptureFixture[str]) -> dict:
+    argv = ["run", "--robots", "4", "--organize", "2", "--duration", "2", "--seed", str(seed)]
+    code = main([*argv, "--clock", "model", "--json", "--record", str(tmp / name)])
+    summary = json.loads(capsys.readouterr().out)
+    assert code == 0, summary["problems"]
+    return summary
+
+
+def test_a_model_run_repeats_from_its_seed_and_another_seed_is_another_run(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    first = _model_run(tmp_path, "a", 7, capsys)
+    again = _model_run(tmp_path, "b", 7, capsys)
+    other = _model_run(tmp_path, "c", 8, capsys)
+    assert first["ok"] and first["clock"] == "model"
+    assert first["digest"] == again["digest"] == record_digest(tmp_path / "a")
+    assert first["organization"]["members"] == again["organization"]["members"]
+    assert other["digest"] != first["digest"]
+    # the model ran the traffic phase, the organization and the dispersal: more than the 2 s asked for
+    assert first["model_time_s"] > 2.0 and first["wall_time_s"] > 0
+
+
+def test_the_digest_ignores_wall_clock_stamps_and_sees_everything_else(tmp_path: Path) -> None:
+    events = tmp_path / "events"
+    events.mkdir()
+    line = {"t": 1.0, "mono": 0.5, "kind": "start", "robot_id": 1}
+    (events / "robot-1.jsonl").write_text(json.dumps(line) + "\n")
+    before = record_digest(tmp_path)
+    (events / "robot-1.jsonl").write_text(json.dumps({**line, "t": 99.0}) + "\n")
+    assert record_digest(tmp_path) == before
+    (events / "robot-1.jsonl").write_text(json.dumps({**line, "mono": 0.6}) + "\n")
+    assert record_digest(tmp_path) != before
