@@ -36,6 +36,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=seed, default=1, help="seed of the first scenario run (default %(default)s)")
     parser.add_argument("--out", default="bench-results", help="directory for JSON and plots (default %(default)s)")
     parser.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
+    parser.add_argument(
+        "--clock",
+        choices=("wall", "model"),
+        default="wall",
+        help="wall (default): each run as processes over zenoh; model: each run in model time (petswarm run "
+        "--clock model), deterministic per seed and much faster",
+    )
 
 
 def bench_reaction(args: argparse.Namespace) -> int:
@@ -47,7 +54,7 @@ def bench_reaction(args: argparse.Namespace) -> int:
         while len(trials) < args.runs and len(failures) < 3:
             record = Path(tmp) / f"run-{seed}"
             print(f"[bench reaction] run seed {seed}: {len(trials)}/{args.runs} trials so far", file=sys.stderr)
-            summary = _run(args.scenario, seed, record)
+            summary = _run(args.scenario, seed, record, args.clock)
             if summary is None or not summary.get("ok"):
                 failures.append(f"seed {seed}: {None if summary is None else summary.get('problems')}")
             else:
@@ -55,7 +62,7 @@ def bench_reaction(args: argparse.Namespace) -> int:
             seed += 1
     trials = trials[: args.runs]
     results = summarise(trials)
-    results.update(scenario=args.scenario, first_seed=args.seed, failed_runs=failures)
+    results.update(scenario=args.scenario, first_seed=args.seed, failed_runs=failures, clock=args.clock)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     save(results, out, "reaction", plot_cdfs, {**results, "trials": trials})
@@ -63,8 +70,9 @@ def bench_reaction(args: argparse.Namespace) -> int:
     return 0 if trials and not failures else 1
 
 
-def _run(scenario: str, seed: int, record: Path) -> dict[str, Any] | None:
+def _run(scenario: str, seed: int, record: Path, clock: str) -> dict[str, Any] | None:
     argv = [sys.executable, "-m", "cli", "run", scenario, "--seed", str(seed), "--json", "--record", str(record)]
+    argv += ["--clock", clock]
     done = subprocess.run(argv, capture_output=True, text=True, timeout=600)
     try:
         return json.loads(done.stdout)
