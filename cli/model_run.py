@@ -181,6 +181,8 @@ def run_model(opts: RunOptions, scenario: Scenario | None) -> int:
 
 def execute(opts: RunOptions, scenario: Scenario | None) -> dict[str, Any]:
     """Run in model time and leave the record (``summary.json`` too, also when interrupted); the summary."""
+    if scenario is not None:
+        opts = _scenario_options(opts, scenario)
     world = opts.world or f"model-{opts.seed}"
     record = RunRecord.create(opts, world, ENDPOINT)
     progress(f"world {world}, seed {opts.seed}, model time, record in {record.path}")
@@ -284,7 +286,6 @@ async def _ping_and_organize(opts: RunOptions, air: MemoryAir, ctl: ModelControl
 async def _drive(
     opts: RunOptions, scenario: Scenario, air: MemoryAir, ctl: ModelControl, world: str, record: RunRecord
 ) -> dict[str, Any]:
-    opts = _scenario_options(opts, scenario)
     user_task = None
     if scenario.user is not None:
         config = UserConfig(
