@@ -2,7 +2,9 @@
 
 import asyncio
 
-from petswarm.exchange import MessageProcessingManager, StepTiming
+import pytest
+
+from petswarm.exchange import MessageProcessingManager, SendRequest, Step, StepOver, StepTiming, WaitUntil
 from petswarm.messages import JoinAvailable, Joined
 from petswarm.rf import Incoming
 from petswarm.sequence import EventLog
@@ -86,3 +88,51 @@ async def test_open_step_with_a_quiet_gap_ends_once_answers_stop():
     elapsed = loop.time() - started
     assert set(result.responses) == {5, 6}  # the second answer came inside the gap and was waited for
     assert 0.08 <= elapsed < 1.0  # ended a quiet gap after the last answer, long before the deadline
+
+
+# -- the sans-IO step, stepped by hand: no loop, no clock ---------------------------------------------------
+
+
+def test_a_closed_step_asks_the_missing_again_at_each_deadline_and_ends_when_all_answered():
+    step = Step(7, (Joined,), {2, 3}, StepTiming(deadline_s=0.1, max_retries=3))
+    assert step.next_action(0.0) == SendRequest({2, 3}, retry=False)
+    step.sent(0.001)
+    assert step.next_action(0.05) == WaitUntil(0.101)
+    assert step.offer(_incoming(2, Joined(7, 1)), 0.06)
+    assert step.next_action(0.06) == WaitUntil(0.101)  # robot 3 still missing: the window stays open
+    assert step.next_action(0.101) == SendRequest({3}, retry=True)
+    step.sent(0.102)
+    assert step.offer(_incoming(3, Joined(7, 2)), 0.15)
+    assert step.next_action(0.15) == StepOver()  # complete before the deadline: no waiting it out
+    result = step.result()
+    assert set(result.responses) == {2, 3} and result.retries == 1 and result.missing == set()
+
+
+def test_a_closed_step_gives_up_after_max_retries_and_names_who_never_answered():
+    step = Step(7, (Joined,), {2, 3}, StepTiming(deadline_s=0.1, max_retries=2))
+    now, sends = 0.0, []
+    while not isinstance(action := step.next_action(now), StepOver):
+        if isinstance(action, SendRequest):
+            sends.append(sorted(action.missing or ()))
+            step.sent(now)
+        else:
+            now = action.when
+    assert sends == [[2, 3]] * 3 and now == pytest.approx(0.3)
+    assert step.result().missing == {2, 3} and step.result().attempts == 3
+
+
+def test_an_open_step_with_a_quiet_gap_ends_once_answers_stop_and_counts_duplicates():
+    step = Step(1, (Joined,), None, StepTiming(deadline_s=1.0, max_retries=2, quiet_s=0.05))
+    assert step.next_action(0.0) == SendRequest(None, retry=False)
+    step.sent(0.0)
+    assert step.next_action(0.01) == WaitUntil(1.0)  # no answer yet: the whole deadline
+    step.offer(_incoming(4, Joined(1, 1)), 0.02)
+    step.offer(_incoming(4, Joined(1, 1)), 0.03)
+    assert step.duplicates == 1
+    assert step.next_action(0.03) == WaitUntil(pytest.approx(0.07))
+    assert step.next_action(0.07) == StepOver()
+    assert not step.offer(_incoming(5, JoinAvailable(1, -50)), 0.08)  # another type: not this step's
+
+
+def test_a_step_expecting_nobody_is_over_at_once():
+    assert Step(1, (Joined,), set(), TIMING).next_action(0.0) == StepOver()
