@@ -12,10 +12,10 @@ ACKs) is modelled in the environment as in the hub.
 from __future__ import annotations
 
 import asyncio
+import math
 import time
 from collections.abc import Callable
-from contextlib import AsyncExitStack
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from typing import Any
 
 from cli.checker import check_record
@@ -33,35 +33,38 @@ from cli.run import (
     summarise,
 )
 from petswarm.clock import MODEL_EPOCH_S, ModelClockLoop
+from petswarm.control import RelayControl
 from petswarm.robot import Robot
 from petswarm.scenario import Scenario
 from petswarm.sequence import EventLog
 from petswarm.user import UserConfig, run_user
-from radio_hub.environment import Environment, EnvironmentConfig, environment_from_dict, load_config
-from radio_hub.interface import HubUnavailable, RadioClient
+from radio_hub.coordinator import Coordinator
+from radio_hub.environment import EnvironmentConfig, environment_from_dict, load_config
+from radio_hub.interface import RadioClient, RadioIdentity
 
 ENDPOINT = "memory"
 """What a model run records as its hub endpoint: there is no socket."""
+CONTROL_IDENTITY = RadioIdentity("run", 0, 0, 0, kind="control")
+"""The run's orchestrator as a node of the world: it only relays (commands to robots, questions to the hub)."""
 
 
 class MemoryAir:
-    """The environment on the running ``ModelClockLoop``, its nodes linked in memory (a ``Downlink``)."""
+    """The coordinator's environment on the running ``ModelClockLoop``, its nodes linked in memory.
 
-    def __init__(self, config: EnvironmentConfig, seed: int, record: RunRecord, world_log: bool) -> None:
+    "Every node is idle" is the loop having nothing ready: then held messages are released, or held node
+    messages settled, before model time moves (``radio_hub.coordinator`` gives the rules).
+    """
+
+    def __init__(self, coordinator: Coordinator) -> None:
         self.loop = asyncio.get_running_loop()
         if not isinstance(self.loop, ModelClockLoop):
             raise TypeError("MemoryAir runs on a ModelClockLoop")
-        self.env = Environment(
-            config,
-            seed,
-            self,
-            wall_epoch_us=round(MODEL_EPOCH_S * 1e6),
-            pcap_path=record.path / "air.pcap",
-            world_log=record.path / "world.jsonl" if world_log else None,
-        )
+        self.coordinator = coordinator
+        self.env = coordinator.env
         self._nodes: dict[str, Callable[[bytes], None]] = {}
         self._wake: asyncio.TimerHandle | None = None
         self._wake_us = 0
+        self.loop.on_quiescent = self.quiescent
         self._schedule()
 
     def now_us(self) -> int:
@@ -72,47 +75,45 @@ class MemoryAir:
         """A new node's port to this environment."""
         return MemoryLink(self)
 
-    # -- Downlink ---------------------------------------------------------------------------------------
-
-    def send(self, node_id: str, data: bytes) -> None:
-        """Hand a message to the node's loop callback (after whatever is already due at this instant)."""
-        on_down = self._nodes.get(node_id)
-        if on_down is not None:
-            self.loop.call_soon(on_down, data)
-
-    def forget(self, node_id: str) -> None:
-        """Nothing is kept per node beyond its link, which goes when the node closes it."""
-
-    def publish_world(self, state: dict[str, Any]) -> None:
-        """No viewers in memory: the record's world.jsonl holds the ground truth."""
-
-    # -- from the nodes -----------------------------------------------------------------------------------
-
-    def up(self, node_id: str, data: bytes) -> None:
-        """A node's message reaches the environment now."""
-        self.env.receive(node_id, data, self.now_us())
-        self._schedule()
-
     def opened(self, node_id: str, on_down: Callable[[bytes], None]) -> None:
         """A node's link is open: deliver to ``on_down`` from now on."""
         self._nodes[node_id] = on_down
 
-    def gone(self, node_id: str, instance: str) -> None:
-        """A node's link closed (its liveliness ended)."""
-        self._nodes.pop(node_id, None)
-        self.env.node_gone(node_id, instance, self.now_us())
-        self._schedule()
+    def up(self, node_id: str, data: bytes) -> None:
+        """A node's message, held until every node is idle."""
+        self.coordinator.up(node_id, data)
 
-    # -- the schedule ---------------------------------------------------------------------------------------
+    def gone(self, node_id: str, instance: str) -> None:
+        """A node's link closed."""
+        self._nodes.pop(node_id, None)
+        self.coordinator.leave(node_id, instance)
+
+    def quiescent(self) -> bool:
+        """Nothing is ready: release what is held for nodes, else settle what nodes sent; True when something
+        became ready."""
+        delivered = False
+        for node_id, messages in self.coordinator.take_downs().items():
+            on_down = self._nodes.get(node_id)
+            if on_down is None:  # a node that left meanwhile
+                continue
+            for data in messages:
+                self.loop.call_soon(on_down, data)
+            delivered = True
+        if delivered:
+            return True
+        if self.coordinator.settle(self.now_us()):
+            self._schedule()
+            return self.quiescent()
+        return False
 
     def _fire(self) -> None:
         self._wake = None
-        self.env.advance(self.now_us())
+        self.coordinator.advance(self.now_us())
         self._schedule()
 
     def _schedule(self) -> None:
         # one timer on the loop, always at the environment's next event (an input may bring that forward)
-        due = self.env.next_event_us()
+        due = self.coordinator.next_event_us()
         if self._wake is not None:
             if self._wake_us <= due:
                 return
@@ -122,7 +123,7 @@ class MemoryAir:
 
 
 class MemoryLink:
-    """A node's ``HubLink`` to a ``MemoryAir``: messages go both ways through the loop, in order."""
+    """A node's ``HubLink`` to a ``MemoryAir``."""
 
     def __init__(self, air: MemoryAir) -> None:
         self.air = air
@@ -137,31 +138,12 @@ class MemoryLink:
         self.air.opened(node_id, on_down)
 
     def put(self, data: bytes) -> None:
-        """One message up, delivered after whatever is already due at this instant."""
-        self.air.loop.call_soon(self.air.up, self.node_id, data)
+        """One message up, held until every node is idle."""
+        self.air.up(self.node_id, data)
 
     async def close(self) -> None:
-        """The node goes: the environment detaches it once its last messages are in."""
-        self.air.loop.call_soon(self.air.gone, self.node_id, self.instance)
-
-
-@dataclass
-class ModelControl:
-    """``RunControl`` in model time: commands are calls on the robot objects."""
-
-    robots: dict[int, Robot] = field(default_factory=dict)
-
-    async def command(self, robot: int, cmd: str, timeout: float = 5.0, **args: Any) -> dict[str, Any]:
-        """One control command, as a robot process's control queryable would carry it out."""
-        target = self.robots.get(robot)
-        if target is None:
-            raise HubUnavailable(f"no robot {robot} in this model run")
-        async with asyncio.timeout(timeout):
-            return await target.handle({"cmd": cmd, **args})
-
-    async def sleep(self, seconds: float) -> None:
-        """Model time goes on."""
-        await asyncio.sleep(seconds)
+        """The node goes."""
+        self.air.gone(self.node_id, self.instance)
 
 
 def run_model(opts: RunOptions, scenario: Scenario | None) -> int:
@@ -182,7 +164,7 @@ def run_model(opts: RunOptions, scenario: Scenario | None) -> int:
 def execute(opts: RunOptions, scenario: Scenario | None) -> dict[str, Any]:
     """Run in model time and leave the record (``summary.json`` too, also when interrupted); the summary."""
     if scenario is not None:
-        opts = _scenario_options(opts, scenario)
+        opts = replace(opts, robots=scenario.robot_count, duration=scenario.duration_s)
     world = opts.world or f"model-{opts.seed}"
     record = RunRecord.create(opts, world, ENDPOINT)
     progress(f"world {world}, seed {opts.seed}, model time, record in {record.path}")
@@ -212,18 +194,29 @@ def execute(opts: RunOptions, scenario: Scenario | None) -> dict[str, Any]:
 
 
 async def _run(opts: RunOptions, scenario: Scenario | None, world: str, record: RunRecord) -> dict[str, Any]:
-    air = MemoryAir(_environment(opts, scenario), opts.seed, record, world_log=scenario is not None)
-    ctl = ModelControl()
-    async with AsyncExitStack() as stack:
-        stack.callback(air.env.close)
+    coordinator = Coordinator(
+        _environment(opts, scenario),
+        opts.seed,
+        wall_epoch_us=round(MODEL_EPOCH_S * 1e6),
+        pcap_path=record.path / "air.pcap",
+        world_log=record.path / "world.jsonl" if scenario is not None else None,
+    )
+    air = MemoryAir(coordinator)
+    try:
+        # every node starts at model time 0 and attaches in the same round, as lockstep processes do
         argvs = _robot_argvs(opts, scenario, world, record)
-        for rid, argv in argvs.items():
-            ctl.robots[rid] = await _start_robot(argv, air, stack)
-        progress(f"{len(ctl.robots)}/{len(argvs)} robots attached")
-        if scenario is None:
-            summary = await _ping_and_organize(opts, air, ctl, world)
-        else:
-            summary = await _drive(opts, scenario, air, ctl, world, record)
+        loop = asyncio.get_running_loop()
+        robots = [loop.create_task(_run_robot(argv, air)) for argv in argvs.values()]
+        user = _start_user(opts, scenario, world, record, air)
+        radio = await RadioClient.connect(CONTROL_IDENTITY, world=world, link=air.link(), timeout=5.0)
+        ctl = RelayControl(radio)
+        summary = await orchestrate(opts, scenario, ctl, world)
+        if user is not None:
+            await user
+        await asyncio.gather(*robots)
+        await radio.close()
+    finally:
+        coordinator.close()
     return summary
 
 
@@ -247,96 +240,109 @@ def _robot_argvs(opts: RunOptions, scenario: Scenario | None, world: str, record
     return {rid: scenario_robot_argv(opts, scenario, rid, ENDPOINT, world, record) for rid in range(1, count + 1)}
 
 
-async def _start_robot(argv: list[str], air: MemoryAir, stack: AsyncExitStack) -> Robot:
-    """The robot a ``petswarm robot`` command line describes, attached through memory and running."""
+async def _run_robot(argv: list[str], air: MemoryAir) -> None:
+    """The robot a ``petswarm robot`` command line describes, attached through memory, until told to stop."""
     from cli.main import build_parser, robot_config
 
     config = robot_config(build_parser().parse_args(argv))
     radio = await RadioClient.connect(config.identity(), world=config.world, link=air.link(), timeout=5.0)
     robot = Robot(config, radio)
-    task = asyncio.get_running_loop().create_task(robot.run())
-
-    async def stop() -> None:
-        robot.stopping.set()
-        await task
+    try:
+        await robot.run()
+    finally:
         await robot.close()
 
-    stack.push_async_callback(stop)
-    return robot
+
+def _start_user(
+    opts: RunOptions, scenario: Scenario | None, world: str, record: RunRecord, air: MemoryAir
+) -> asyncio.Task[int] | None:
+    if scenario is None or scenario.user is None:
+        return None
+    config = UserConfig(
+        scenario.user, ENDPOINT, world, scenario.duration_s, opts.seed, beacon=scenario.surround_enabled
+    )
+    sink = open(record.events_of(scenario.user.node_id), "a")  # noqa: SIM115 (closed when the user is done)
+    task = asyncio.get_running_loop().create_task(run_user(config, EventLog(sink=sink), link=air.link()))
+    task.add_done_callback(lambda _task: sink.close())
+    return task
 
 
-async def _ping_and_organize(opts: RunOptions, air: MemoryAir, ctl: ModelControl, world: str) -> dict[str, Any]:
-    timeline = FaultTimeline(list(opts.faults))
-    chaos = _chaos(air)
+async def orchestrate(opts: RunOptions, scenario: Scenario | None, ctl: RelayControl, world: str) -> dict[str, Any]:
+    """What a model or lockstep run does, on model time, through the relay: wait for the robots, the
+    traffic or scenario phase with its faults, the summary, then every robot told to stop."""
+    await _wait_attached(ctl, opts.robots)
+    faults = FaultTimeline(list(opts.faults) + (list(scenario.faults) if scenario is not None else []))
+    if scenario is None:
+        summary = await _ping_and_organize(opts, ctl, faults, world)
+    else:
+        summary = await _follow_scenario(opts, scenario, ctl, faults, world)
+    for rid in range(1, opts.robots + 1):
+        await ctl.command(rid, "stop")
+    return summary
+
+
+async def _wait_attached(ctl: RelayControl, robots: int) -> None:
+    while True:
+        stats = await ctl.hub("stats")
+        attached = sum(1 for node in stats["nodes"].values() if node["attached"])
+        if attached >= robots:
+            progress(f"{attached}/{robots} robots attached")
+            return
+        await ctl.sleep(0.1)
+
+
+async def _apply_faults(ctl: RelayControl, faults: FaultTimeline, elapsed: float) -> None:
+    for at, request in faults.take_due(elapsed):
+        answer = await ctl.hub("chaos", request=request)
+        faults.applied_or_refused(at, request, answer)
+
+
+async def _ping_and_organize(opts: RunOptions, ctl: RelayControl, faults: FaultTimeline, world: str) -> dict[str, Any]:
     start = asyncio.get_running_loop().time()
-    for second in range(1, int(opts.duration) + 1):
-        timeline.apply_due(chaos, float(second - 1))
-        await asyncio.sleep(1.0)
-        _report(air, f"t={second:5.1f}/{opts.duration:g}s")
-    await asyncio.sleep(max(0.0, start + opts.duration - asyncio.get_running_loop().time()))
-    timeline.apply_due(chaos, float("inf"))  # what is left acts on the swarm phase
+    for second in range(1, math.ceil(opts.duration) + 1):
+        until = min(float(second), opts.duration)
+        while (elapsed := asyncio.get_running_loop().time() - start) < until:
+            await _apply_faults(ctl, faults, elapsed)
+            await ctl.sleep(min(0.1, until - elapsed))
+        _report(await ctl.hub("stats"), f"t={until:5.1f}/{opts.duration:g}s")
+    await _apply_faults(ctl, faults, float("inf"))  # what is left acts on the swarm phase
     swarm = await organize_and_disperse(ctl, opts) if opts.organize else {}
-    summary = await _summary(opts, air, ctl, world)
-    summary["faults"] = timeline.applied
+    summary = await _summary(opts, ctl, world)
+    summary["faults"] = faults.applied
     problems = summary["problems"] + swarm.pop("problems", [])
     summary.update(swarm, problems=problems, ok=not problems)
     return summary
 
 
-async def _drive(
-    opts: RunOptions, scenario: Scenario, air: MemoryAir, ctl: ModelControl, world: str, record: RunRecord
+async def _follow_scenario(
+    opts: RunOptions, scenario: Scenario, ctl: RelayControl, faults: FaultTimeline, world: str
 ) -> dict[str, Any]:
-    user_task = None
-    if scenario.user is not None:
-        config = UserConfig(
-            scenario.user, ENDPOINT, world, scenario.duration_s, opts.seed, beacon=scenario.surround_enabled
-        )
-        sink = open(record.events_of(scenario.user.node_id), "a")  # noqa: SIM115 (closed below)
-        user_task = asyncio.get_running_loop().create_task(run_user(config, EventLog(sink=sink), link=air.link()))
-        user_task.add_done_callback(lambda _task: sink.close())
-    timeline = FaultTimeline(list(scenario.faults) + list(opts.faults))
-    chaos = _chaos(air)
     loop = asyncio.get_running_loop()
     start = loop.time()
+    next_report = 5.0
     while (elapsed := loop.time() - start) < scenario.duration_s:
-        timeline.apply_due(chaos, elapsed)
-        if user_task is not None and user_task.done():
-            break
-        await asyncio.sleep(min(0.1, scenario.duration_s - elapsed))
-        if round(loop.time() - start, 6) % 5 == 0:
-            _report(air, f"t={loop.time() - start:5.1f}/{scenario.duration_s:g}s")
-    if user_task is not None:
-        await user_task
-    summary = await _summary(opts, air, ctl, world)
+        await _apply_faults(ctl, faults, elapsed)
+        await ctl.sleep(min(0.1, scenario.duration_s - elapsed))
+        if loop.time() - start >= next_report:
+            progress(f"t={next_report:5.1f}/{scenario.duration_s:g}s")
+            next_report += 5.0
+    summary = await _summary(opts, ctl, world)
     summary["problems"] = [p for p in summary["problems"] if "heard every other" not in p]  # no ping phase here
-    summary.update(scenario=scenario.name, faults=timeline.applied, duration_s=scenario.duration_s)
+    summary.update(scenario=scenario.name, faults=faults.applied, duration_s=scenario.duration_s)
     summary["ok"] = not summary["problems"]
     return summary
 
 
-def _scenario_options(opts: RunOptions, scenario: Scenario) -> RunOptions:
-    return replace(opts, robots=scenario.robot_count, duration=scenario.duration_s)
-
-
-async def _summary(opts: RunOptions, air: MemoryAir, ctl: ModelControl, world: str) -> dict[str, Any]:
-    stats = {"world": world, **air.env.stats(air.now_us())}
+async def _summary(opts: RunOptions, ctl: RelayControl, world: str) -> dict[str, Any]:
+    stats = {"world": world, **await ctl.hub("stats")}
     return summarise(stats, await statuses(ctl, opts.robots), opts, world, ENDPOINT)
 
 
-def _chaos(air: MemoryAir) -> Callable[[dict[str, Any]], dict[str, Any]]:
-    def request(body: dict[str, Any]) -> dict[str, Any]:
-        answer = air.env.chaos_request(body, air.now_us(), MODEL_EPOCH_S + air.now_us() / 1e6)
-        air._schedule()  # a fault may change what is due next
-        return answer
-
-    return request
-
-
-def _report(air: MemoryAir, what: str) -> None:
+def _report(stats: dict[str, Any], what: str) -> None:
     totals = {"sent": 0, "delivered": 0, "collided": 0, "lost": 0}
-    for counters in air.env.medium.node_counters.values():
+    for node in stats["nodes"].values():
         for name in totals:
-            totals[name] += getattr(counters, name, 0)
+            totals[name] += node.get(name, 0)
     progress(
         f"{what}  sent {totals['sent']}  delivered {totals['delivered']}  "
         f"collided {totals['collided']}  lost {totals['lost']}"

@@ -247,17 +247,25 @@ class FaultTimeline:
     def apply_due(self, chaos: Callable[[dict[str, Any]], dict[str, Any]], elapsed: float) -> None:
         """Send every fault whose time has come to ``chaos`` (the hub's chaos request); a refused one fails
         the run with the hub's reason."""
+        for at, request in self.take_due(elapsed):
+            self.applied_or_refused(at, request, chaos(request))
+
+    def take_due(self, elapsed: float) -> list[tuple[float, dict[str, Any]]]:
+        """The chaos requests whose time has come, with their times, in order."""
+        due = []
         while self.pending and float(self.pending[0].get("at", 0.0)) <= elapsed:
             fault = dict(self.pending.pop(0))
-            at = fault.pop("at", 0.0)
-            request = (
-                {"op": "clear", "id": fault.get("id")} if fault.pop("clear", False) else {"op": "add", "fault": fault}
-            )
-            answer = chaos(request)
-            if "error" in answer:
-                raise RunFailed(f"fault at {at} s refused by the hub: {answer['error']}")
-            progress(f"fault at {at:g} s: {request}")
-            self.applied.append({"at": at, **request})
+            at = float(fault.pop("at", 0.0))
+            clear = fault.pop("clear", False)
+            due.append((at, {"op": "clear", "id": fault.get("id")} if clear else {"op": "add", "fault": fault}))
+        return due
+
+    def applied_or_refused(self, at: float, request: dict[str, Any], answer: dict[str, Any]) -> None:
+        """Record a fault the hub took; RunFailed with the hub's reason when it refused it."""
+        if "error" in answer:
+            raise RunFailed(f"fault at {at:g} s refused by the hub: {answer['error']}")
+        progress(f"fault at {at:g} s: {request}")
+        self.applied.append({"at": at, **request})
 
 
 def hub_chaos(session: zenoh.Session, keys: Keys) -> Callable[[dict[str, Any]], dict[str, Any]]:

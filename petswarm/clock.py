@@ -36,14 +36,21 @@ class _ModelSelector(selectors.DefaultSelector):
     def __init__(self) -> None:
         super().__init__()
         self.now = 0.0
+        self.loop: ModelClockLoop | None = None
 
     def select(self, timeout: float | None = None) -> list[tuple[selectors.SelectorKey, int]]:
         ready = super().select(0)
         if ready or timeout == 0:
             return ready
-        if timeout is None:
+        loop = self.loop
+        assert loop is not None
+        # nothing is ready: the instant is over for every task on this loop
+        if loop.on_quiescent is not None and loop.on_quiescent():
+            return []
+        when = loop.next_timer()
+        if when is None:
             raise ModelTimeStalled("model time stalled: no task is ready and no timer is pending")
-        self.now += timeout
+        self.now = max(self.now, when)  # exactly the timer's time: now + timeout would round
         return []
 
 
@@ -69,7 +76,11 @@ class ModelClockLoop(asyncio.SelectorEventLoop):
 
     def __init__(self) -> None:
         self._model = _ModelSelector()
+        self._model.loop = self
         self._timer_order = itertools.count()
+        self.on_quiescent: Callable[[], bool] | None = None
+        """Called when nothing is ready, before time moves; True when it made something ready (a driver
+        releasing the messages it held for this instant, ``radio_hub.coordinator``)."""
         super().__init__(self._model)
 
     def call_at(
@@ -85,6 +96,15 @@ class ModelClockLoop(asyncio.SelectorEventLoop):
     def time(self) -> float:
         """Model seconds since the loop was made."""
         return self._model.now
+
+    def next_timer(self) -> float | None:
+        """When the earliest live timer is due (None: no timer); cancelled timers at the head are dropped, as
+        asyncio itself does before it computes a timeout."""
+        scheduled = self._scheduled  # type: ignore[attr-defined]
+        while scheduled and scheduled[0]._cancelled:
+            self._timer_cancelled_count -= 1  # type: ignore[attr-defined]
+            heapq.heappop(scheduled)._scheduled = False
+        return scheduled[0]._when if scheduled else None
 
     def advance_to(self, when: float) -> None:
         """Move model time forward to ``when`` (never back); for drivers that own the clock."""

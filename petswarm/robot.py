@@ -20,7 +20,7 @@ import numpy as np
 import zenoh
 
 from petswarm import clock
-from petswarm.control import all_robots_key, robot_key
+from petswarm.control import all_robots_key, answer_relayed, robot_key
 from petswarm.driving import Driver
 from petswarm.exchange import MessageProcessingManager
 from petswarm.formation import RESPONSES, FormationConfig, FormationError, NetworkFormation, Swarm
@@ -146,6 +146,7 @@ class Robot:
             SurroundDriver(radio, self.ir, self.log, config.surround) if config.formation_mode == "surround" else None
         )
         radio.on_reattach.append(self._reattached)
+        radio.on_relayed = answer_relayed(self.handle, radio, self._spawn)
         self.log.record(
             "start", robot_id=config.robot_id, state=self.sequence.state.label, user=config.user, seed=config.seed
         )

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
+import msgpack
 import numpy as np
 
 from radio_hub import wire
@@ -42,6 +43,12 @@ PUBLISH_EVERY = 5
 BEACONS_EVERY = 5
 """IR sweeps per beacon sweep (100 Hz sweeps: beacons at 20 Hz; 20 robots x 19 sources at 100 Hz would swamp
 the nodes)."""
+
+
+HUB = "hub"
+"""The name a ``Relay`` gives the environment itself."""
+NODE_KINDS = ("robot", "user", "control")
+"""``control``: a run's orchestrator in model and lockstep time (no body, no radio; it only relays)."""
 
 
 class Downlink(Protocol):
@@ -320,6 +327,13 @@ class Environment:
         elif node_id not in self._kinds:
             self.counters.unattached += 1
             self._send_down(node_id, wire.Error(token=getattr(msg, "token", 0), reason=wire.NOT_ATTACHED))
+        elif isinstance(msg, wire.Relay):
+            self._on_relay(node_id, msg)
+        elif isinstance(msg, wire.Detach):
+            self._detach(node_id)
+        elif self._kinds[node_id] == "control":
+            self.counters.malformed += 1
+            self._send_down(node_id, wire.Error(reason=f"{msg.TYPE}: a control node has no body and no radio"))
         elif isinstance(msg, (wire.Drive, wire.Place, wire.LfBurst, wire.BleSend, wire.Telemetry)):
             self._on_body(node_id, msg)
         elif isinstance(msg, wire.Transmit):
@@ -331,11 +345,37 @@ class Environment:
             self._on_configure(node_id, msg)
         elif isinstance(msg, wire.SetIrMode):
             self._on_ir_mode(node_id, msg)
-        elif isinstance(msg, wire.Detach):
-            self._detach(node_id)
         else:
             self.counters.malformed += 1
             self._send_down(node_id, wire.Error(reason=f"{msg.TYPE} is not a node-to-hub message"))
+
+    def _on_relay(self, node_id: str, msg: wire.Relay) -> None:
+        """The control channel: to another node as it is, or a question to the hub answered at once."""
+        if msg.to == HUB:
+            self._send_down(node_id, wire.Relayed(frm=HUB, body=self._hub_answer(msg.body)))
+        elif msg.to in self._kinds:
+            self._send_down(msg.to, wire.Relayed(frm=node_id, body=msg.body))
+        else:
+            self._send_down(node_id, wire.Relayed(frm=msg.to, body=msg.body, bounced=True))
+
+    def _hub_answer(self, body: bytes) -> bytes:
+        try:
+            request = msgpack.unpackb(body, raw=False)
+            if not isinstance(request, dict):
+                raise ValueError("a hub request is a map")
+            op = request.get("op")
+            if op == "stats":
+                answer: dict[str, Any] = self.stats()
+            elif op == "chaos":
+                answer = self.chaos_request(request.get("request"), self._now, (self.wall_epoch_us + self._now) / 1e6)
+            elif op == "world":
+                answer = self.world_state()
+            else:
+                raise ValueError(f"op must be stats, chaos or world, not {op!r}")
+        except Exception as err:  # a bad request must not hurt the environment
+            answer = {"error": f"{type(err).__name__}: {err}"}
+            request = {}
+        return msgpack.packb({"id": request.get("id"), "answer": answer}, use_bin_type=True)
 
     def _check_sequence(self, node_id: str, msg: wire.Message) -> None:
         # an attach starts a node's numbering (a node re-attaching after a hub restart goes on counting)
@@ -352,12 +392,13 @@ class Environment:
         # hub says where it last was (its position as the old hub reported it)
         node = RadioNode(node_id, msg.ext_addr, msg.short_addr, msg.pan_id, msg.channel, _pos(msg.position))
         try:
-            if msg.kind not in ("robot", "user"):
-                raise ValueError(f"kind must be robot or user, not {msg.kind!r}")
+            if msg.kind not in NODE_KINDS:
+                raise ValueError(f"kind must be one of {NODE_KINDS}, not {msg.kind!r}")
             if msg.kind == "robot":
                 self.medium.attach(node)
-            x, y = node.position
-            self.world.add(node_id, msg.kind, x, y, math.radians(msg.heading_deg))
+            if msg.kind != "control":
+                x, y = node.position
+                self.world.add(node_id, msg.kind, x, y, math.radians(msg.heading_deg))
         except ValueError as err:
             self.medium.detach(node_id)
             self.counters.config_errors += 1
@@ -439,7 +480,7 @@ class Environment:
             self._send_down(user_id, heard)
 
     def _on_ble_send(self, node_id: str, msg: wire.BleSend) -> None:
-        if msg.to not in self._kinds:
+        if msg.to not in self.world.bodies:
             self.ble.counters.sent += 1
             self.ble.counters.out_of_range += 1  # nobody of that name: like a peer out of reach
             return
@@ -478,7 +519,8 @@ class Environment:
 
     def _attached(self, node_id: str, token: int) -> wire.Attached:
         node = self.medium.nodes.get(node_id)
-        pose = self.world.bodies[node_id].pose
+        body = self.world.bodies.get(node_id)
+        pose = (0.0, 0.0, 0.0) if body is None else body.pose
         return wire.Attached(
             token=token,
             ext_addr=0 if node is None else node.ext_addr,

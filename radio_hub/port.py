@@ -68,7 +68,8 @@ class RadioIdentity:
     heading_deg: float = 0.0
     """Where the body faces when it attaches (the world moves it from then on)."""
     kind: str = "robot"
-    """``robot`` or ``user`` (a person's wearables: BLE, the belt's LF receiver, an IR beacon; no 802.15.4)."""
+    """``robot``, ``user`` (a person's wearables: BLE, the belt's LF receiver, an IR beacon; no 802.15.4) or
+    ``control`` (a run's orchestrator: it only relays)."""
 
 
 @dataclass(frozen=True)
@@ -180,6 +181,8 @@ class RadioClient:
         self.beacons = BeaconSweep(0, {}, {})
         """The latest beacon sweep, in beacon mode."""
         self.on_sensors: list[Callable[[OwnSensors], None]] = []
+        self.on_relayed: Callable[[wire.Relayed], None] | None = None
+        """Where control messages relayed by the hub go (model and lockstep runs); None: counted as malformed."""
         self._ultrasonic_rad = np.zeros(0)
         self._pending: dict[int, asyncio.Future[Any]] = {}
         self._pending_types: dict[int, str] = {}
@@ -303,6 +306,10 @@ class RadioClient:
     def lf_burst(self, antenna: str, pattern: int, data: bytes) -> None:
         """Fire one LF burst from the ``left`` or ``right`` antenna (one-way, not answered)."""
         self._put(wire.LfBurst(antenna=antenna, pattern=int(pattern), data=bytes(data)))
+
+    def relay(self, to: str, body: bytes) -> None:
+        """A control message to node ``to`` (or ``hub``), carried by the hub outside the emulated air."""
+        self._put(wire.Relay(to=to, body=bytes(body)))
 
     def ble_send(self, to: str, payload: bytes) -> None:
         """A BLE message to another node (not answered; the link may drop it)."""
@@ -450,6 +457,8 @@ class RadioClient:
             self._ble.put_nowait(BleMessage(msg.src, msg.payload, msg.t_us))
         elif isinstance(msg, wire.LfHeard):
             self._lf.put_nowait(LfBurstHeard(msg.antenna, msg.pattern, msg.data, msg.rssi_dbm, msg.t_us))
+        elif isinstance(msg, wire.Relayed) and self.on_relayed is not None:
+            self.on_relayed(msg)
         elif isinstance(msg, wire.IrBeacons):
             self._on_beacons(msg)
         elif isinstance(msg, (wire.TxDone, wire.Attached)):

@@ -270,6 +270,47 @@ class Telemetry(Message):
     mode: str = ""
 
 
+@dataclass
+class Relay(Message):
+    """Node -> hub: carry ``body`` (msgpack) to node ``to``, or to the hub itself when ``to`` is ``hub``
+    (``{"op": "stats"}``, ``{"op": "chaos", "request": {...}}``). The control channel of model and lockstep
+    runs: it takes no model time and is not part of the emulated air."""
+
+    TYPE: ClassVar[str] = "relay"
+    to: str = ""
+    body: bytes = b""
+
+
+@dataclass
+class Relayed(Message):
+    """Hub -> node: a ``Relay`` body from node ``frm`` (``hub`` for the hub's own answers)."""
+
+    TYPE: ClassVar[str] = "relayed"
+    frm: str = ""
+    body: bytes = b""
+    bounced: bool = False
+    """True when node ``frm`` does not exist: ``body`` is the sender's own, returned."""
+
+
+@dataclass
+class Idle(Message):
+    """Node -> hub (lockstep): everything the hub sent up to message ``seen`` is handled and nothing is ready;
+    the node's next timer is due at ``next_s`` (model seconds; None: no timer)."""
+
+    TYPE: ClassVar[str] = "idle"
+    seen: int = 0
+    next_s: float | None = None
+
+
+@dataclass
+class Grant(Message):
+    """Hub -> node (lockstep): model time is now ``at_s``: run what is due, then the messages that came with
+    this grant (those sent before it), then say ``Idle``."""
+
+    TYPE: ClassVar[str] = "grant"
+    at_s: float = 0.0
+
+
 _TYPES: dict[str, type[Message]] = {
     cls.TYPE: cls
     for cls in (
@@ -292,6 +333,10 @@ _TYPES: dict[str, type[Message]] = {
         BleSend,
         BleReceived,
         Telemetry,
+        Relay,
+        Relayed,
+        Idle,
+        Grant,
     )
 }
 
