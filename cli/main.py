@@ -63,6 +63,25 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="FILE",
         help="write the ground truth (every body's pose, every world tick) to this JSON-lines file",
     )
+    hub.add_argument(
+        "--clock",
+        choices=("wall", "lockstep"),
+        default="wall",
+        help="wall (default): model time is the wall clock; lockstep: the hub owns model time and grants it to "
+        "nodes started with --clock lockstep, so a run is exact and repeatable under any load",
+    )
+    hub.add_argument(
+        "--expect",
+        type=bounded(int, 1, 100000),
+        default=1,
+        help="lockstep: model time starts once this many nodes are there (default %(default)s)",
+    )
+    hub.add_argument(
+        "--dead-after",
+        type=bounded(float, 0.5, 3600),
+        default=10.0,
+        help="lockstep: wall seconds a granted node may stay silent before it is taken as gone (default 10)",
+    )
 
     user = sub.add_parser(
         "user",
@@ -77,8 +96,10 @@ def build_parser() -> argparse.ArgumentParser:
         "--duration", type=bounded(float, 0.1, 86400), default=None, help="seconds (default: the scenario's)"
     )
     user.add_argument("--record", metavar="FILE", help="append every event to this JSON-lines file as it happens")
+    _add_node_clock(user)
 
     robot = sub.add_parser("robot", help="run one robot process attached to a hub")
+    _add_node_clock(robot)
     robot.add_argument(
         "--id",
         type=robot_id,
@@ -241,11 +262,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     run.add_argument(
         "--clock",
-        choices=("wall", "model"),
+        choices=("wall", "model", "lockstep"),
         default="wall",
         help="wall (default): a hub process and robot processes over zenoh, in real time; model: the hub's "
         "environment and every robot in this one process on a virtual clock, as fast as the CPU allows, "
-        "the same run (digest) for the same seed on any machine",
+        "the same run (digest) for the same seed on any machine; lockstep: hub and robot processes over zenoh "
+        "on model time the hub owns, exact under any load, the same digest as model",
     )
 
     from cli.chaos import add_arguments as add_chaos_arguments
@@ -351,6 +373,16 @@ def main(argv: list[str] | None = None) -> int:
         return 0
 
 
+def _add_node_clock(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--clock",
+        choices=("wall", "lockstep"),
+        default="wall",
+        help="wall (default): run on the wall clock; lockstep: on model time granted by a `petswarm hub "
+        "--clock lockstep` (the node waits for that hub at start)",
+    )
+
+
 def _hub(args: argparse.Namespace) -> int:
     from petswarm.scenario import ScenarioError, load
     from radio_hub.hub import RadioHub, environment_from_dict, load_config, ready_line
@@ -371,14 +403,30 @@ def _hub(args: argparse.Namespace) -> int:
             from_scenario.medium, from_scenario.ir = environment.medium, environment.ir
         environment = from_scenario
     try:
-        hub = RadioHub(
-            args.listen,
-            args.world,
-            seed=args.seed,
-            pcap_path=args.pcap,
-            environment=environment,
-            world_log=args.world_log,
-        )
+        hub: Any
+        if args.clock == "lockstep":
+            from radio_hub.environment import EnvironmentConfig
+            from radio_hub.lockstep import LockstepHub
+
+            hub = LockstepHub(
+                args.listen,
+                args.world,
+                environment or EnvironmentConfig(),
+                args.seed,
+                expect=args.expect,
+                dead_after_s=args.dead_after,
+                pcap_path=args.pcap,
+                world_log=args.world_log,
+            )
+        else:
+            hub = RadioHub(
+                args.listen,
+                args.world,
+                seed=args.seed,
+                pcap_path=args.pcap,
+                environment=environment,
+                world_log=args.world_log,
+            )
     except OSError as err:
         print(f"petswarm hub: cannot open --pcap file or --world-log file: {err}", file=sys.stderr)
         return 2
@@ -391,7 +439,11 @@ def _hub(args: argparse.Namespace) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: hub.stop())
     print(ready_line(hub), flush=True)
-    print(f"hub: serving world {args.world!r} on {args.listen}, seed {args.seed}", file=sys.stderr, flush=True)
+    print(
+        f"hub: serving world {args.world!r} on {args.listen}, seed {args.seed}, {args.clock} clock",
+        file=sys.stderr,
+        flush=True,
+    )
     if args.pcap:
         print(f"hub: writing the air's frames to {args.pcap}", file=sys.stderr, flush=True)
     try:
@@ -418,6 +470,10 @@ def _user(args: argparse.Namespace) -> int:
     config = UserConfig(scenario.user, args.hub, args.world, duration, args.seed, beacon=scenario.surround_enabled)
     sink = open(args.record, "a") if args.record else None  # noqa: SIM115 (closed below)
     try:
+        if args.clock == "lockstep":
+            from cli.lockstep_node import run_node
+
+            return run_node("user", args.hub, args.world, lambda link: run_user(config, EventLog(sink=sink), link=link))
         return asyncio.run(run_user(config, EventLog(sink=sink)))
     finally:
         if sink is not None:
@@ -427,7 +483,18 @@ def _user(args: argparse.Namespace) -> int:
 def _robot(args: argparse.Namespace) -> int:
     from petswarm.robot import run_robot
 
-    return asyncio.run(run_robot(robot_config(args)))
+    config = robot_config(args)
+    if args.clock == "lockstep":
+        from cli.lockstep_node import run_node
+
+        if config.robot_id == 0:
+            print(
+                "petswarm robot: --clock lockstep needs an explicit --id (ids are claimed in wall time)",
+                file=sys.stderr,
+            )
+            return 2
+        return run_node(f"robot {config.robot_id}", config.endpoint, config.world, lambda link: run_robot(config, link))
+    return asyncio.run(run_robot(config))
 
 
 def robot_config(args: argparse.Namespace) -> RobotConfig:

@@ -204,7 +204,7 @@ async def _run(opts: RunOptions, scenario: Scenario | None, world: str, record: 
     air = MemoryAir(coordinator)
     try:
         # every node starts at model time 0 and attaches in the same round, as lockstep processes do
-        argvs = _robot_argvs(opts, scenario, world, record)
+        argvs = robot_argvs(opts, scenario, world, record)
         loop = asyncio.get_running_loop()
         robots = [loop.create_task(_run_robot(argv, air)) for argv in argvs.values()]
         user = _start_user(opts, scenario, world, record, air)
@@ -231,13 +231,16 @@ def _environment(opts: RunOptions, scenario: Scenario | None) -> EnvironmentConf
     return tables
 
 
-def _robot_argvs(opts: RunOptions, scenario: Scenario | None, world: str, record: RunRecord) -> dict[int, list[str]]:
+def robot_argvs(
+    opts: RunOptions, scenario: Scenario | None, world: str, record: RunRecord, endpoint: str = ENDPOINT
+) -> dict[int, list[str]]:
+    """The ``petswarm robot`` command lines of the run's robots, by id."""
     from cli.run_scenario import scenario_robot_argv
 
     if scenario is None:
-        return {rid: ping_robot_argv(opts, rid, ENDPOINT, world, record) for rid in range(1, opts.robots + 1)}
+        return {rid: ping_robot_argv(opts, rid, endpoint, world, record) for rid in range(1, opts.robots + 1)}
     count = scenario.robot_count
-    return {rid: scenario_robot_argv(opts, scenario, rid, ENDPOINT, world, record) for rid in range(1, count + 1)}
+    return {rid: scenario_robot_argv(opts, scenario, rid, endpoint, world, record) for rid in range(1, count + 1)}
 
 
 async def _run_robot(argv: list[str], air: MemoryAir) -> None:

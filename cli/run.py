@@ -77,6 +77,10 @@ def run(opts: RunOptions) -> int:
         from cli.model_run import run_model
 
         return run_model(opts, scenario)
+    if opts.clock == "lockstep":
+        from cli.lockstep_run import run_lockstep
+
+        return run_lockstep(opts, scenario)
     if scenario is not None:
         from cli.run_scenario import run_scenario
 

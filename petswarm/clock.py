@@ -20,10 +20,9 @@ import itertools
 import selectors
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Protocol
 
-MODEL_EPOCH_S = 1_700_000_000.0
-"""The wall-clock time a model run reports for model time 0 (a fixed date: records of equal seeds are equal)."""
+from radio_hub.interface import MODEL_EPOCH_S
 
 
 class ModelTimeStalled(RuntimeError):
@@ -47,11 +46,7 @@ class _ModelSelector(selectors.DefaultSelector):
         # nothing is ready: the instant is over for every task on this loop
         if loop.on_quiescent is not None and loop.on_quiescent():
             return []
-        when = loop.next_timer()
-        if when is None:
-            raise ModelTimeStalled("model time stalled: no task is ready and no timer is pending")
-        self.now = max(self.now, when)  # exactly the timer's time: now + timeout would round
-        return []
+        return loop.wait_quiet(super().select)
 
 
 class _OrderedTimer(asyncio.TimerHandle):
@@ -106,9 +101,59 @@ class ModelClockLoop(asyncio.SelectorEventLoop):
             heapq.heappop(scheduled)._scheduled = False
         return scheduled[0]._when if scheduled else None
 
+    def wait_quiet(self, real_select: Callable[[float | None], Any]) -> Any:
+        """Every task waits: move model time exactly to the earliest timer (now + timeout would round)."""
+        when = self.next_timer()
+        if when is None:
+            raise ModelTimeStalled("model time stalled: no task is ready and no timer is pending")
+        self._model.now = max(self._model.now, when)
+        return []
+
     def advance_to(self, when: float) -> None:
         """Move model time forward to ``when`` (never back); for drivers that own the clock."""
         self._model.now = max(self._model.now, when)
+
+
+class LockstepSync(Protocol):
+    """What a lockstep loop tells the hub when every task waits (``radio_hub.lockstep.LockstepLink``)."""
+
+    def idle(self, next_timer: float | None) -> None:
+        """Report: all handled, nothing ready, the next timer due at ``next_timer`` (model seconds)."""
+
+
+class LockstepLoop(ModelClockLoop):
+    """A process's loop on model time that the hub owns (``--clock lockstep``).
+
+    When every task waits, it reports idle to the hub (``sync.idle``) and blocks until the hub's grant arrives
+    (through the loop's self-pipe); the grant moves ``time()`` with ``grant``. Until a link syncs it there is
+    no model time to wait for; once the link has left (``sync`` back to None) the process is out of the
+    world and its loop waits on timers and threads as it needs to shut down.
+    """
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.sync: LockstepSync | None = None
+        self._synced = False
+
+    def attach_sync(self, sync: LockstepSync | None) -> None:
+        """Start (or, with None, end) reporting to the hub."""
+        self._synced = self._synced or sync is not None
+        self.sync = sync
+
+    def grant(self, at_s: float) -> None:
+        """The hub's grant: model time is now ``at_s`` (it never goes back)."""
+        self._model.now = max(self._model.now, at_s)
+
+    def wait_quiet(self, real_select: Callable[[float | None], Any]) -> Any:
+        """Report idle and block until the hub answers; before or after the world, wait as needed."""
+        if self.sync is not None:
+            self.sync.idle(self.next_timer())
+            return real_select(None)
+        if not self._synced:
+            raise RuntimeError("a lockstep loop waited before its link to the hub was open")
+        if self.next_timer() is None:
+            return real_select(None)  # a thread (the session closing) will wake us
+        return super().wait_quiet(real_select)
 
 
 def now() -> float:

@@ -36,6 +36,7 @@ from radio_hub.interface import (
     DEFAULT_ENDPOINT,
     DEFAULT_WORLD,
     FrameError,
+    HubLink,
     HubUnavailable,
     Keys,
     RadioClient,
@@ -501,10 +502,14 @@ async def _attach_once(config: RobotConfig) -> tuple[RobotConfig, RadioClient]:
     raise RadioError("every robot id is taken")
 
 
-async def run_robot(config: RobotConfig) -> int:
-    """The robot process's main coroutine; returns the exit code."""
+async def run_robot(config: RobotConfig, link: HubLink | None = None) -> int:
+    """The robot process's main coroutine; returns the exit code. ``link``: the port to the hub (default:
+    zenoh to ``config.endpoint``, waiting for a hub that is still starting; a lockstep link is already open)."""
     try:
-        config, radio = await attach(config)
+        if link is None:
+            config, radio = await attach(config)
+        else:
+            radio = await RadioClient.connect(config.identity(), world=config.world, link=link, timeout=5.0)
     except (HubUnavailable, RadioError) as err:
         print(f"robot {config.robot_id or 'auto'}: {err}", file=sys.stderr)
         return 2

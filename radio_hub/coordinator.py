@@ -21,6 +21,9 @@ from pathlib import Path
 from typing import Any
 
 from radio_hub.environment import Environment, EnvironmentConfig
+from radio_hub.port import MODEL_EPOCH_S
+
+MODEL_EPOCH_US = round(MODEL_EPOCH_S * 1e6)
 
 
 class Coordinator:
@@ -81,7 +84,8 @@ class Coordinator:
         to ``now_us``; False when nothing was held."""
         if not self._ups:
             return False
-        ups, self._ups = sorted(self._ups), []
+        # a node's departure comes after everything it sent (its liveliness may overtake its last messages)
+        ups, self._ups = sorted(self._ups, key=lambda u: (u[0], u[2] is None, u[1])), []
         for node_id, _, data, instance in ups:
             if data is None:
                 self.env.node_gone(node_id, instance, now_us)

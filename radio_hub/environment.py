@@ -173,6 +173,10 @@ class Environment:
         # time never runs backwards: a late input is stamped with the latest model time
         self._now = max(self._now, int(now_us))
 
+    def instance_of(self, node_id: str) -> str | None:
+        """The liveliness instance of the attached node ``node_id`` (None: not attached)."""
+        return self._instances.get(node_id) if node_id in self._kinds else None
+
     @property
     def kinds(self) -> dict[str, str]:
         """Attached nodes and their kind (``robot`` or ``user``)."""
@@ -568,6 +572,10 @@ class Environment:
                 msg = _tx_done(out)
 
             self._send_down(out.node_id, msg)
+
+    def send_to(self, node_id: str, msg: wire.Message) -> None:
+        """A message to a node, numbered in its stream like every other (a lockstep ``Grant``)."""
+        self._send_down(node_id, msg)
 
     def _send_down(self, node_id: str, msg: wire.Message) -> None:
         seq = self._down_seq.get(node_id, 0) + 1

@@ -16,6 +16,7 @@ from radio_hub.light import IrConfig
 from radio_hub.mac import BROADCAST, MAX_PSDU, Frame, FrameError, FrameType, max_payload
 from radio_hub.medium import TxStatus
 from radio_hub.port import (
+    MODEL_EPOCH_S,
     REQUEST_TIMEOUT_S,
     RESEND_S,
     BeaconSweep,
@@ -38,6 +39,7 @@ __all__ = [
     "DEFAULT_ENDPOINT",
     "DEFAULT_WORLD",
     "MAX_PSDU",
+    "MODEL_EPOCH_S",
     "REQUEST_TIMEOUT_S",
     "RESEND_S",
     "BeaconSweep",

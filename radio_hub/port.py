@@ -26,6 +26,10 @@ from radio_hub.light import RECEIVERS as IR_RECEIVERS
 from radio_hub.mac import BROADCAST, Frame, FrameError, FrameType
 from radio_hub.medium import TxStatus
 
+MODEL_EPOCH_S = 1_700_000_000.0
+"""The wall-clock time model and lockstep runs report for model time 0, on both sides (a fixed date: records of
+equal seeds are equal, pcap stamps included)."""
+
 
 class HubLink(Protocol):
     """How a node's messages reach the hub's environment and its answers come back.
@@ -457,6 +461,8 @@ class RadioClient:
             self._ble.put_nowait(BleMessage(msg.src, msg.payload, msg.t_us))
         elif isinstance(msg, wire.LfHeard):
             self._lf.put_nowait(LfBurstHeard(msg.antenna, msg.pattern, msg.data, msg.rssi_dbm, msg.t_us))
+        elif isinstance(msg, wire.Grant):
+            pass  # lockstep: the link has already moved the clock; the grant only keeps the numbering whole
         elif isinstance(msg, wire.Relayed) and self.on_relayed is not None:
             self.on_relayed(msg)
         elif isinstance(msg, wire.IrBeacons):
