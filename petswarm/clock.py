@@ -43,6 +43,8 @@ class _ModelSelector(selectors.DefaultSelector):
             return ready
         loop = self.loop
         assert loop is not None
+        if loop.timers_first():
+            return []
         # nothing is ready: the instant is over for every task on this loop
         if loop.on_quiescent is not None and loop.on_quiescent():
             return []
@@ -101,6 +103,10 @@ class ModelClockLoop(asyncio.SelectorEventLoop):
             heapq.heappop(scheduled)._scheduled = False
         return scheduled[0]._when if scheduled else None
 
+    def timers_first(self) -> bool:
+        """True when the timers due now must run before anything else is released (see ``LockstepLoop``)."""
+        return False
+
     def wait_quiet(self, real_select: Callable[[float | None], Any]) -> Any:
         """Every task waits: move model time exactly to the earliest timer (now + timeout would round)."""
         when = self.next_timer()
@@ -134,6 +140,7 @@ class LockstepLoop(ModelClockLoop):
         super().__init__()
         self.sync: LockstepSync | None = None
         self._synced = False
+        self._granted = False
 
     def attach_sync(self, sync: LockstepSync | None) -> None:
         """Start (or, with None, end) reporting to the hub."""
@@ -143,6 +150,15 @@ class LockstepLoop(ModelClockLoop):
     def grant(self, at_s: float) -> None:
         """The hub's grant: model time is now ``at_s`` (it never goes back)."""
         self._model.now = max(self._model.now, at_s)
+        self._granted = True
+
+    def timers_first(self) -> bool:
+        """Right after a grant, let asyncio take the timers due at the granted instant (within its clock
+        resolution) before the instant's messages are released: a model-time loop that jumps to an instant
+        takes them in that same pass, and the grant arrives as a callback, after asyncio has looked at its
+        timers for this pass."""
+        granted, self._granted = self._granted, False
+        return granted
 
     def wait_quiet(self, real_select: Callable[[float | None], Any]) -> Any:
         """Report idle and block until the hub answers; before or after the world, wait as needed."""

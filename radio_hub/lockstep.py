@@ -44,6 +44,8 @@ from radio_hub.zenoh_link import ZenohLink, reliable_publisher, session_config
 
 DEAD_AFTER_S = 10.0
 """Wall seconds the hub waits for a granted node's idle before it takes the node as gone."""
+CLOCK_RESOLUTION_S = time.get_clock_info("monotonic").resolution
+"""asyncio runs every timer due within this of the loop's time in one go; the hub grants the same way."""
 LEAVING_GRACE_S = 1.0
 """Wall seconds a busy node whose liveliness ended has for its last messages (and Detach) to arrive: zenoh
 orders a node's messages but not its liveliness against them."""
@@ -307,6 +309,9 @@ class LockstepHub:
                 if len(self.nodes) < self.expect:
                     return
                 self._started = True
+                # instant 0 opens like any other, with the environment's events (the first world tick) before
+                # what nodes sent: in model time the environment's timer at 0 runs before the nodes' attaches
+                self.coordinator.advance(0)
             now_us = round(self.now_s * 1e6)
             if self.coordinator.settle(now_us):
                 self._deliver(set())
@@ -314,7 +319,9 @@ class LockstepHub:
             timers = [node.next_s for node in self.nodes.values() if node.next_s is not None]
             self.now_s = max(self.now_s, min([self.coordinator.next_event_us() / 1e6, *timers]))
             self.coordinator.advance(round(self.now_s * 1e6))
-            due = {nid for nid, node in self.nodes.items() if node.next_s is not None and node.next_s <= self.now_s}
+            # due as an asyncio loop counts it (within its clock resolution), which is what model time does
+            horizon = self.now_s + CLOCK_RESOLUTION_S
+            due = {nid for nid, node in self.nodes.items() if node.next_s is not None and node.next_s < horizon}
             self._deliver(due)
 
     def _deliver(self, due: set[str]) -> None:
