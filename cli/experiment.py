@@ -36,26 +36,40 @@ import numpy as np
 
 from cli.bench_output import save
 from cli.run import RunOptions, run
+from radio_hub.chaos import check_timed_fault
+from radio_hub.config import check_keys
 
-_RUN_KEYS = {"robots", "duration", "ping_interval", "organize", "protocol", "config"}
+_TOP_KEYS = ("name", "repetitions", "seed", "seeds", "run", "faults")
+_RUN_KEYS = ("robots", "duration", "ping_interval", "organize", "protocol", "config")
 
 
 def load(path: Path) -> dict[str, Any]:
-    """The experiment file, checked; ValueError naming what is wrong."""
-    data = tomllib.loads(path.read_text())
-    unknown = set(data) - {"name", "repetitions", "seed", "seeds", "run", "faults"}
-    if unknown:
-        raise ValueError(f"unknown keys {sorted(unknown)}")
-    bad = set(data.get("run", {})) - _RUN_KEYS
-    if bad:
-        raise ValueError(f"[run] takes {sorted(_RUN_KEYS)}, not {sorted(bad)}")
+    """The experiment file, checked (every table, and the hub config file ``[run] config`` names);
+    ValueError naming the file, the table and what is wrong."""
+    try:
+        return _check(tomllib.loads(path.read_text()))
+    except ValueError as err:
+        raise ValueError(f"{path}: {err}") from None
+
+
+def _check(data: dict[str, Any]) -> dict[str, Any]:
+    check_keys(data, _TOP_KEYS, "the top level")
+    check_keys(data.get("run", {}), _RUN_KEYS, "[run]")
     seeds = data.get("seeds") or [int(data.get("seed", 1)) + i for i in range(int(data.get("repetitions", 1)))]
     if not seeds or not all(isinstance(s, int) and s >= 0 for s in seeds):
         raise ValueError("seeds must be non-negative integers (or give repetitions and seed)")
-    for fault in data.get("faults", []):
-        at = fault.get("at")
-        if not isinstance(at, (int, float)) or isinstance(at, bool) or at < 0:
-            raise ValueError(f"fault {fault} needs 'at', seconds (a number >= 0) into the traffic phase")
+    for i, fault in enumerate(data.get("faults", [])):
+        check_timed_fault(fault, f"[[faults]][{i}]")
+    config = data.get("run", {}).get("config")
+    if config is not None:
+        from radio_hub.hub import load_config
+
+        try:
+            load_config(config)
+        except OSError as err:
+            raise ValueError(f"[run] config: cannot read {config}: {err}") from None
+        except ValueError as err:  # it names its own file
+            raise ValueError(f"[run] config: {err}") from None
     return {**data, "seeds": seeds}
 
 

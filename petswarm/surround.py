@@ -35,6 +35,8 @@ from typing import Any
 
 import numpy as np
 
+from radio_hub.config import check_keys
+
 MIN_RANGE_M = 0.02
 """Sensed points closer than this are taken to be this far: a point at the centre has no direction, and
 the repulsion Q / d^2 must stay finite (robots touch at 0.2 m, walls at 0.1 m, far above it)."""
@@ -101,12 +103,7 @@ class SurroundConfig:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> SurroundConfig:
         """Build from a dict of field values (missing ones take the defaults); unknown keys raise ValueError."""
-        if not isinstance(data, dict):
-            raise ValueError(f"surround config: expected a table, got {type(data).__name__}")
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(data) - known)
-        if unknown:
-            raise ValueError(f"surround config: unknown keys {unknown}; known: {sorted(known)}")
+        check_keys(data, (f.name for f in dataclasses.fields(cls)), "surround config")
         return cls(**data)
 
 

@@ -27,13 +27,14 @@ draws from it only for the receptions an active fault selects.
 
 from __future__ import annotations
 
+import difflib
 import itertools
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
 
-from radio_hub.config import GilbertElliottConfig
+from radio_hub.config import GilbertElliottConfig, check_keys
 from radio_hub.propagation import GilbertElliott
 
 KINDS = ("loss", "corrupt", "duplicate", "delay", "burst", "partition", "ir_blind", "ir_noise")
@@ -119,22 +120,29 @@ class Fault:
         )
 
 
-def parse_fault(fault_id: int, spec: dict[str, Any]) -> Fault:
-    """A fault from a request map; ValueError with the reason on anything malformed."""
-    spec = dict(spec)
-    kind = spec.pop("kind", None)
+def fault_keys(kind: str) -> tuple[str, ...]:
+    """The keys a fault of ``kind`` takes besides ``kind`` (every kind's keys for an unknown kind)."""
     if kind not in KINDS:
-        raise ValueError(f"kind must be one of {KINDS}, not {kind!r}")
-    allowed = {
-        "partition": {"group", "others"},
-        "ir_blind": {"node"},
-        "ir_noise": {"node", "sigma"},
-        "delay": {"ms", "jitter_ms", "jitter", *_SELECTORS},
-        "burst": {*BURST_DEFAULTS, *_SELECTORS},
-    }.get(kind, {"p", *_SELECTORS})
-    unknown = set(spec) - allowed
-    if unknown:
-        raise ValueError(f"a {kind} fault takes {sorted(allowed)}, not {sorted(unknown)}")
+        return tuple(sorted({k for known in KINDS for k in fault_keys(known)}))
+    return {
+        "partition": ("group", "others"),
+        "ir_blind": ("node",),
+        "ir_noise": ("node", "sigma"),
+        "delay": ("ms", "jitter_ms", "jitter", *_SELECTORS),
+        "burst": (*BURST_DEFAULTS, *_SELECTORS),
+    }.get(kind, ("p", *_SELECTORS))
+
+
+def parse_fault(fault_id: int, spec: dict[str, Any], where: str = "the fault") -> Fault:
+    """A fault from a request map (``where`` names it in errors); ValueError with the reason on anything malformed."""
+    kind = spec.get("kind") if isinstance(spec, dict) else None
+    check_keys(spec, ("kind", *fault_keys(kind)), where)
+    if kind not in KINDS:
+        nearest = difflib.get_close_matches(str(kind), KINDS, n=1)
+        hint = f" (did you mean {nearest[0]!r}?)" if nearest else ""
+        raise ValueError(f"{where}: kind must be one of {', '.join(KINDS)}, not {kind!r}{hint}")
+    spec = dict(spec)
+    del spec["kind"]
     p = _probability("p", spec.get("p", 1.0))
     link = spec.get("link")
     if link is not None and (len(link) != 2 or not all(isinstance(n, str) for n in link)):
@@ -158,6 +166,20 @@ def parse_fault(fault_id: int, spec: dict[str, Any]) -> Fault:
         raise ValueError("a partition needs a group of node ids")
 
     return fault
+
+
+def check_timed_fault(spec: Any, where: str) -> None:
+    """A fault of a timeline (a scenario's or an experiment's ``[[faults]]``): ``at`` (seconds into the
+    traffic phase) and either a fault, as ``parse_fault`` takes it, or ``clear = true`` (with an ``id``,
+    else every fault). ValueError naming ``where`` and what is wrong, before any run starts."""
+    check_keys(spec, ("at", "clear", "id", "kind", *fault_keys("")), where)
+    at = spec.get("at")
+    if not isinstance(at, int | float) or isinstance(at, bool) or not at >= 0:
+        raise ValueError(f"{where} needs at = seconds (a number >= 0) into the traffic phase, not {at!r}")
+    if spec.get("clear", False):
+        check_keys(spec, ("at", "clear", "id"), f"{where} (clear)")
+        return
+    parse_fault(0, {k: v for k, v in spec.items() if k not in ("at", "clear")}, where)
 
 
 def _number(name: str, value: Any) -> float:

@@ -33,7 +33,7 @@ import zenoh
 
 from radio_hub import wire
 from radio_hub.ble import BleAir, BleConfig
-from radio_hub.config import MediumConfig
+from radio_hub.config import MediumConfig, check_keys
 from radio_hub.ir_air import IrAir
 from radio_hub.keys import Keys, check_name, reliable_publisher, session_config
 from radio_hub.lf import LfConfig, antenna_positions, lf_rssi
@@ -697,13 +697,17 @@ def load_config(path: str | Path) -> Environment:
     path = Path(path)
     text = path.read_text()
     data = tomllib.loads(text) if path.suffix == ".toml" else json.loads(text)
-    if not isinstance(data, dict):
-        raise ValueError("a hub config file holds tables")
-    return environment_from_dict(data)
+    try:
+        return environment_from_dict(data)
+    except ValueError as err:
+        raise ValueError(f"{path}: {err}") from None
 
 
 def environment_from_dict(data: dict[str, Any]) -> Environment:
     """The tables of a hub config (or a scenario's ``[hub]`` table plus its obstacles)."""
+    # the radio's tables sit at the top level or under [medium], not both
+    radio = ("medium",) if "medium" in data else tuple(MediumConfig().to_dict())
+    check_keys(data, ("ir", "world", "ble", "lf", "obstacles", *radio), "the top level")
     data = dict(data)
     ir = IrConfig.from_dict(data.pop("ir", {}))
     world = WorldConfig.from_dict(data.pop("world", {}))
@@ -712,12 +716,8 @@ def environment_from_dict(data: dict[str, Any]) -> Environment:
     obstacles = data.pop("obstacles", [])
     if not isinstance(obstacles, list):
         raise ValueError("obstacles is a list of [[obstacles]] tables")
-    parsed = [parse_obstacle(o) for o in obstacles]
-    try:
-        medium = MediumConfig.from_dict(data.get("medium", data))
-    except ValueError as err:
-        extra = " (and [ir], [world], [ble], [lf], [[obstacles]])"
-        raise ValueError(f"{err}{extra}" if "the top level" in str(err) else str(err)) from None
+    parsed = [parse_obstacle(o, f"[[obstacles]][{i}]") for i, o in enumerate(obstacles)]
+    medium = MediumConfig.from_dict(data.get("medium", data))
     return Environment(medium, ir, world, ble, lf, parsed)
 
 
