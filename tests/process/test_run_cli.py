@@ -167,3 +167,18 @@ def test_an_experiment_file_runs_every_seed_with_its_fault_timeline(tmp_path):
     bad.write_text("[run]\nrobotz = 3\n")
     refused = subprocess.run(_petswarm("experiment", str(bad)), capture_output=True, text=True, timeout=60)
     assert refused.returncode == 2 and "robotz" in refused.stderr
+
+
+def test_the_shipped_example_experiment_passes(tmp_path):
+    out = tmp_path / "out"
+    proc = subprocess.run(
+        _petswarm("experiment", "examples/experiment-loss.toml", "--out", str(out)),
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=Path(__file__).resolve().parents[2],
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    results = json.loads((out / "results.json").read_text())
+    assert len(results["runs"]) == 3 and all(r["ok"] for r in results["runs"])
+    assert all(r["organize_ms"] is not None and r["members"] >= 1 for r in results["runs"])  # every run organized
