@@ -47,6 +47,8 @@ from cli.run import RunOptions, run
 from radio_hub.chaos import check_timed_fault
 from radio_hub.config import check_keys
 
+RADIO_KEYS = ("sent", "delivered", "collided", "lost", "filtered", "mac_retries")
+"""The hub's counters a run's row sums over its robots."""
 _TOP_KEYS = ("name", "repetitions", "seed", "seeds", "require", "run", "faults")
 WAIVABLE = {
     "all_pairs_heard": "not every robot heard every other robot",
@@ -154,7 +156,7 @@ def _one_run(spec: dict[str, Any], seed: int, record: Path) -> dict[str, Any]:
         "members": len(organization.get("members", [])),
         "organize_ms": round(organization["organize_time_s"] * 1000, 1) if "organize_time_s" in organization else None,
         "retries": organization.get("retries"),
-        **{k: sum(n[k] for n in nodes) for k in ("sent", "delivered", "collided", "lost", "mac_retries")},
+        **{k: sum(n.get(k, 0) for n in nodes) for k in RADIO_KEYS},
     }
 
 
@@ -176,8 +178,19 @@ def _aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "organize_ms_mean": round(float(np.mean(times)), 1) if times else None,
         "organize_ms_max": max(times) if times else None,
         "retry_probability": round(sum(1 for r in rows if r["retries"]) / len(rows), 3) if rows else None,
-        "lost_fraction": round(sum(r["lost"] for r in rows) / max(sum(r["delivered"] + r["lost"] for r in rows), 1), 4),
+        "lost_fraction": lost_fraction(rows),
     }
+
+
+def lost_fraction(rows: list[dict[str, Any]]) -> float:
+    """Of the receptions a loss could take, the fraction lost: lost / (delivered + filtered + lost).
+
+    Every counter counts at every receiver in range, and the medium decides collisions first, then loss,
+    then the address filter (radio_hub/medium.py), so a frame meant for another robot is still a reception
+    a fault can lose (filtered) and a collided one is not. A fault losing 30 % of receptions reads 0.3
+    (plus the range model's small loss); before the fault starts, or after it ends, nothing is lost."""
+    lost = sum(r["lost"] for r in rows)
+    return round(lost / max(sum(r["delivered"] + r.get("filtered", 0) + r["lost"] for r in rows), 1), 4)
 
 
 def table(results: dict[str, Any]) -> list[str]:

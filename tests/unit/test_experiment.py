@@ -38,3 +38,26 @@ def test_the_example_experiment_requires_what_it_is_about() -> None:
     assert spec["require"] == []  # the swarm's size and the ping phase under loss are measured, not required
     assert spec["run"]["organize"] == 3 and spec["faults"][0]["p"] == 0.3
     assert spec["faults"][0]["at"] == 0  # the whole run under the fault, so the measured loss is the fault's
+
+
+def test_the_lost_fraction_of_a_30_percent_loss_fault_reads_about_0_3() -> None:
+    """Five robots in the emulated air under a 30 % loss fault, each broadcasting a ping and answering every
+    ping with an acknowledged unicast pong (the robots' traffic): receptions are counted at every receiver in
+    range, and most of them are filtered (a pong is for one robot), which the fraction must count too."""
+    from cli.experiment import _aggregate
+    from tests.unit.helpers import data, medium, place, run_to_idle
+
+    m = medium(seed=3)
+    nodes = [place(m, short, 0.5 * short) for short in range(1, 6)]
+    m.chaos.add({"kind": "loss", "p": 0.3}, 0, 0.0)
+    now, token = 0, 0
+    for seq in range(60):
+        for src in range(1, 6):
+            for dst in [0xFFFF, *(d for d in range(1, 6) if d != src)]:
+                now, token = now + 20_000, token + 1  # 20 ms apart: nothing collides, only the fault loses frames
+                run_to_idle(m, m.submit(nodes[src - 1], data(src, dst=dst, seq=seq % 256), token, now))
+    counters = [m.node_counters[n].to_dict() for n in nodes]
+    assert sum(c["collided"] for c in counters) == 0 and sum(c["filtered"] for c in counters) > 0
+    radio = ("sent", "delivered", "collided", "lost", "filtered", "mac_retries")  # the counters a row sums
+    row = {"ok": True, "organize_ms": None, "retries": None, **{k: sum(c[k] for c in counters) for k in radio}}
+    assert 0.27 <= _aggregate([row])["lost_fraction"] <= 0.33
