@@ -142,6 +142,9 @@ def supervise(
 def _ping_and_organize(ctx: RunContext) -> dict[str, Any]:
     """The default run: robots ping each other for ``duration``, then robot 1 may organize a swarm."""
     opts, session, keys = ctx.opts, ctx.session, ctx.keys
+    notes = organize_shortfall(opts)
+    for note in notes:
+        progress(f"warning: {note}")
     for rid in range(1, opts.robots + 1):
         robot_args = ["robot", "--id", str(rid), "--hub", ctx.endpoint, "--world", ctx.world]
         robot_args += ["--record", str(ctx.record.events_of(f"robot-{rid}"))]
@@ -157,9 +160,24 @@ def _ping_and_organize(ctx: RunContext) -> dict[str, Any]:
     swarm = organize_and_disperse(session, keys, opts) if opts.organize else {}
     summary = _summarise(session, keys, opts, ctx.world, ctx.endpoint)
     summary["faults"] = timeline.applied
+    summary["notes"] = notes
     problems = summary["problems"] + swarm.pop("problems", [])
     summary.update(swarm, problems=problems, ok=not problems)
     return summary
+
+
+def organize_shortfall(opts: RunOptions) -> list[str]:
+    """Why the swarm will have fewer members than ``--organize`` asks, when the run itself makes it so.
+
+    Not a failure: the protocol takes every available robot when fewer are available than asked (Table 2),
+    so the run checks that all of them joined; the note tells the user why the swarm is smaller."""
+    others = opts.robots - 1
+    if opts.organize <= others:
+        return []
+    return [
+        f"--organize {opts.organize} asks for more robots than the {others} this run has besides the master "
+        f"(--robots {opts.robots}): at most {others} can join"
+    ]
 
 
 def _check_alive(sup: Supervisor) -> None:
@@ -388,4 +406,6 @@ def _print(summary: dict[str, Any], as_json: bool) -> None:
             print(describe("disperse", summary["dispersal"]))
     if "driving" in summary:
         print(describe_driving(summary["driving"]))
+    for note in summary.get("notes", []):
+        print(f"note: {note}")
     print("OK" if summary["ok"] else "PROBLEMS: " + "; ".join(summary["problems"]))

@@ -182,3 +182,18 @@ def test_the_shipped_example_experiment_passes(tmp_path):
     results = json.loads((out / "results.json").read_text())
     assert len(results["runs"]) == 3 and all(r["ok"] for r in results["runs"])
     assert all(r["organize_ms"] is not None and r["members"] >= 1 for r in results["runs"])  # every run organized
+
+
+def test_organizing_more_robots_than_the_run_has_warns_and_says_why_fewer_joined(tmp_path):
+    record = tmp_path / "rec"
+    argv = ("run", "--robots", "3", "--duration", "1", "--organize", "10", "--seed", "2", "--record", str(record))
+    proc = subprocess.run(_petswarm(*argv), capture_output=True, text=True, timeout=120)
+    # the protocol did what it should (Table 2: fewer available than asked, so all of them join): not a failure
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    warning = next((line for line in proc.stderr.splitlines() if "warning" in line), "")
+    assert "--organize 10" in warning and "2" in warning, proc.stderr
+    summary = json.loads((record / "summary.json").read_text())
+    assert len(summary["organization"]["members"]) == 2
+    [note] = summary["notes"]
+    assert "--organize 10" in note and "at most 2 can join" in note
+    assert f"note: {note}" in proc.stdout and proc.stdout.rstrip().endswith("OK")
