@@ -1,4 +1,4 @@
-"""The surround formation (spec/surround-swarm.md): each robot follows its local swarm's centroid and the human.
+"""The surround formation (docs/SURROUND.md): each robot follows its local swarm's centroid and the human.
 
 Pure and vectorised. ``SurroundLaw`` runs the control law of many robots at once (the simulation's path);
 ``SurroundController`` is one robot's law on its own sensing, in its own frame (the robot process's path):
