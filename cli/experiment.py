@@ -35,14 +35,14 @@ import json
 import sys
 import time
 import tomllib
-from contextlib import redirect_stdout
+from contextlib import redirect_stderr, redirect_stdout
 from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from cli.bench_output import save
+from cli.bench_output import emit, save
 from cli.run import RunOptions, run
 from radio_hub.chaos import check_timed_fault
 from radio_hub.config import check_keys
@@ -101,11 +101,12 @@ def experiment_command(args: argparse.Namespace) -> int:
         return 2
     out = Path(args.out or Path("runs") / f"experiment-{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}")
     out.mkdir(parents=True, exist_ok=True)
-    rows = []
-    for i, seed in enumerate(spec["seeds"]):
-        _bar(i, len(spec["seeds"]), spec.get("name", args.file))
+    rows: list[dict[str, Any]] = []
+    seeds = spec["seeds"]
+    print(f"[experiment] {spec.get('name') or args.file}: {len(seeds)} runs", file=sys.stderr, flush=True)
+    for i, seed in enumerate(seeds):
         rows.append(_one_run(spec, seed, out / f"run-{i + 1}-seed-{seed}"))
-    _bar(len(rows), len(rows), spec.get("name", args.file))
+        print(progress_line(len(rows), len(seeds), rows[-1]), file=sys.stderr, flush=True)
     results = {
         "name": spec.get("name"),
         "file": str(args.file),
@@ -114,9 +115,7 @@ def experiment_command(args: argparse.Namespace) -> int:
         "aggregate": _aggregate(rows),
     }
     save(results, out, "results", _plot)
-    for line in table(results):
-        print(line)
-    print(f"records and results in {out}")
+    emit([*table(results), f"records and results in {out}"], results, args.json)
     return 0 if all(r["ok"] for r in rows) else 1
 
 
@@ -134,8 +133,11 @@ def _one_run(spec: dict[str, Any], seed: int, record: Path) -> dict[str, Any]:
             "faults": tuple(spec.get("faults", [])),
         }
     )
-    with redirect_stdout(io.StringIO()) as captured:
+    # the run's own progress lines would break into the experiment's; they go to the run's record instead
+    with redirect_stdout(io.StringIO()) as captured, redirect_stderr(io.StringIO()) as run_progress:
         code = run(opts)
+    if record.is_dir():
+        (record / "progress.log").write_text(run_progress.getvalue())
     summary = json.loads(captured.getvalue()) if code in (0, 1) and captured.getvalue().strip() else {}
     if not summary:  # the run failed before its summary: the record still says why
         summary_file = record / "summary.json"
@@ -238,11 +240,11 @@ def _plot(results: dict[str, Any], path: Path) -> None:
     plt.close(fig)
 
 
-def _bar(done: int, total: int, name: str) -> None:
+def progress_line(done: int, total: int, row: dict[str, Any]) -> str:
+    """One line per finished run: the bar, the count, and how that run went (a line of its own, so nothing
+    else printed meanwhile can run into it)."""
     filled = int(30 * done / total) if total else 30
-    print(
-        f"\r[experiment] {name}: [{'#' * filled}{'.' * (30 - filled)}] {done}/{total} runs",
-        end="\n" if done == total else "",
-        file=sys.stderr,
-        flush=True,
-    )
+    org = "" if row["organize_ms"] is None else f", organized in {row['organize_ms']:.0f} ms"
+    members = f"members {row['members']}/{row['requested']}" if row.get("requested") else "no swarm"
+    how = f"ok ({members}{org})" if row["ok"] else "NO: " + "; ".join(row["problems"] or ["see its record"])
+    return f"[experiment] [{'#' * filled}{'.' * (30 - filled)}] {done}/{total} runs; seed {row['seed']} {how}"

@@ -21,6 +21,7 @@ from cli.records import RunRecord
 from cli.swarm import describe
 from petswarm import control
 from petswarm.robot import DEFAULT_PAN
+from radio_hub.chaos import describe_fault
 from radio_hub.interface import HubUnavailable, Keys, open_session, query_hub
 
 
@@ -259,8 +260,13 @@ class FaultTimeline:
             answer = query_hub(session, keys.chaos, payload=msgpack.packb(request, use_bin_type=True))
             if "error" in answer:
                 raise RunFailed(f"fault at {at} s refused by the hub: {answer['error']}")
-            progress(f"fault at {at:g} s: {request}")
+            what = describe_fault(request["fault"]) if request["op"] == "add" else _cleared(request.get("id"))
+            progress(f"fault at {at:g} s: {what}")
             self.applied.append({"at": at, **request})
+
+
+def _cleared(fault_id: int | None) -> str:
+    return "clear every fault" if fault_id is None else f"clear fault {fault_id}"
 
 
 def _totals(stats: dict[str, Any]) -> dict[str, int]:
@@ -385,14 +391,14 @@ def _print(summary: dict[str, Any], as_json: bool) -> None:
         print(json.dumps(summary, indent=2))
         return
     print(f"seed {summary['seed']}  world {summary['world']}  {summary['robots']} robots  {summary['duration_s']:g} s")
-    header = (
-        f"{'node':<10}{'sent':>7}{'delivered':>11}{'collided':>10}{'lost':>7}{'retries':>9}{'cca fail':>10}  heard from"
-    )
-    print(header)
+    pinged = "scenario" not in summary  # a scenario run has no ping phase: nobody is 'heard from'
+    header = f"{'node':<10}{'sent':>7}{'delivered':>11}{'collided':>10}{'lost':>7}{'retries':>9}{'cca fail':>10}"
+    print(header + ("  heard from" if pinged else ""))
     for name, n in summary["nodes"].items():
+        heard = "  " + (", ".join(map(str, n["heard_from"])) or "nobody") if pinged else ""
         print(
             f"{name:<10}{n['sent']:>7}{n['delivered']:>11}{n['collided']:>10}{n['lost']:>7}"
-            f"{n['mac_retries']:>9}{n['channel_access_failures']:>10}  {n['heard_from']}"
+            f"{n['mac_retries']:>9}{n['channel_access_failures']:>10}{heard}"
         )
     hub = summary["hub"]
     print(

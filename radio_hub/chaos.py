@@ -103,8 +103,11 @@ class Fault:
         return sa is not None and sb is not None and sa != sb
 
     def to_dict(self) -> dict[str, Any]:
-        """For the wire and the logs (only the fields that are set)."""
-        return {k: v for k, v in asdict(self).items() if v not in (None, ())}
+        """For the wire and the logs: the id, the kind and the fields of that kind that are set (a partition
+        has no ``p``, a loss no ``sigma``)."""
+        fields = asdict(self)
+        taken = {"fault_id", "kind", *fault_keys(self.kind)}
+        return {k: v for k, v in fields.items() if k in taken and v not in (None, ())}
 
     def delay_us(self, rng: np.random.Generator) -> int:
         """One draw of this delay fault's extra delay; never negative (no frame is handed up before it arrived)."""
@@ -166,6 +169,46 @@ def parse_fault(fault_id: int, spec: dict[str, Any], where: str = "the fault") -
         raise ValueError("a partition needs a group of node ids")
 
     return fault
+
+
+def describe_fault(fault: dict[str, Any]) -> str:
+    """A fault (``Fault.to_dict`` or a request's ``fault``) in words: ``fault 2: loss p=0.3 on robot-2's frames``."""
+    kind = fault.get("kind")
+    head = f"fault {fault['fault_id']}: " if "fault_id" in fault else ""
+    if kind == "partition":
+        others = ", ".join(fault.get("others") or ()) or "everyone else"
+        return f"{head}partition {', '.join(fault.get('group') or ())} | {others}"
+    if kind in ("ir_blind", "ir_noise"):
+        what = "ir-blind" if kind == "ir_blind" else f"ir-noise sigma={fault.get('sigma', 0):g} counts"
+        return f"{head}{what} on {fault.get('node') or 'every IR receiver'}"
+    if kind == "delay":
+        jitter = fault.get("jitter_ms") or 0
+        what = f"delay {fault.get('ms', 0):g} ms" + (f" +- {jitter:g} ms ({fault.get('jitter')})" if jitter else "")
+    elif kind == "burst":
+        what = "burst " + " ".join(f"{k}={fault.get(k, v):g}" for k, v in BURST_DEFAULTS.items())
+    else:
+        what = f"{kind} p={fault.get('p', 1.0):g}"
+    if fault.get("node"):
+        where = f"frames to or from {fault['node']}"
+    elif fault.get("link"):
+        where = f"frames from {fault['link'][0]} to {fault['link'][1]}"
+    elif fault.get("pan") is not None:
+        where = f"receivers on PAN {fault['pan']:#06x}"
+    elif fault.get("channel") is not None:
+        where = f"channel {fault['channel']}"
+    else:
+        where = "every reception"
+    return f"{head}{what} on {where}"
+
+
+def describe_change(entry: dict[str, Any]) -> str:
+    """One entry of the chaos log (``Chaos.log``) in words, with its model time."""
+    when = f"at model {entry.get('model_us', 0) / 1e6:.3f} s"
+    if entry.get("op") == "clear":
+        ended = entry.get("ended") or []
+        return f"{when}: cleared " + (f"fault {', '.join(map(str, ended))}" if ended else "nothing (no such fault)")
+    fault = {k: v for k, v in entry.items() if k not in ("op", "model_us", "wall")}
+    return f"{when}: added {describe_fault(fault)}"
 
 
 def check_timed_fault(spec: Any, where: str) -> None:

@@ -33,6 +33,7 @@ import zenoh
 
 from radio_hub import wire
 from radio_hub.ble import BleAir, BleConfig
+from radio_hub.chaos import describe_change
 from radio_hub.config import MediumConfig, check_keys
 from radio_hub.ir_air import IrAir
 from radio_hub.keys import Keys, check_name, reliable_publisher, session_config
@@ -508,11 +509,11 @@ class RadioHub:
                 raise ValueError("a chaos request is a map")
             op = request.get("op", "list")
             if op == "add":
-                fault = chaos.add(request["fault"], self.now_us(), time.time())
-                print(f"hub: chaos {fault.to_dict()} at model {self.now_us()} us", file=sys.stderr, flush=True)
+                chaos.add(request["fault"], self.now_us(), time.time())
+                print(f"hub: chaos {describe_change(chaos.log[-1])}", file=sys.stderr, flush=True)
             elif op == "clear":
-                ended = chaos.clear(request.get("id"), self.now_us(), time.time())
-                print(f"hub: chaos cleared {ended} at model {self.now_us()} us", file=sys.stderr, flush=True)
+                chaos.clear(request.get("id"), self.now_us(), time.time())
+                print(f"hub: chaos {describe_change(chaos.log[-1])}", file=sys.stderr, flush=True)
             elif op != "list":
                 raise ValueError(f"op must be add, clear or list, not {op!r}")
         except Exception as err:  # a bad request must not hurt the hub

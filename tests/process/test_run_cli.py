@@ -151,10 +151,11 @@ def test_an_experiment_file_runs_every_seed_with_its_fault_timeline(tmp_path):
     )
     out = tmp_path / "out"
     proc = subprocess.run(
-        _petswarm("experiment", str(spec), "--out", str(out)), capture_output=True, text=True, timeout=180
+        _petswarm("experiment", str(spec), "--out", str(out), "--json"), capture_output=True, text=True, timeout=180
     )
     assert proc.returncode in (0, 1), proc.stderr
-    results = json.loads((out / "results.json").read_text())
+    results = json.loads(proc.stdout)  # --json: the results on stdout, the table on stderr
+    assert results == json.loads((out / "results.json").read_text()) and "experiment robot 3 fades" in proc.stderr
     assert [r["seed"] for r in results["runs"]] == [4, 5]
     for i, seed in enumerate((4, 5), start=1):
         summary = json.loads((out / f"run-{i}-seed-{seed}" / "summary.json").read_text())
@@ -179,6 +180,9 @@ def test_the_shipped_example_experiment_passes(tmp_path):
         cwd=Path(__file__).resolve().parents[2],
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
+    # the runs' own progress goes to their records: nothing runs into the experiment's progress lines
+    assert all(line.startswith("[experiment] ") for line in proc.stderr.splitlines()), proc.stderr
+    assert "3/3 runs; seed 3 ok" in proc.stderr and (out / "run-1-seed-1" / "progress.log").stat().st_size > 0
     results = json.loads((out / "results.json").read_text())
     assert len(results["runs"]) == 3 and all(r["ok"] for r in results["runs"])
     assert all(r["organize_ms"] is not None and r["members"] >= 1 for r in results["runs"])  # every run organized
