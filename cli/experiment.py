@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 
 from cli.bench_output import emit, save
+from cli.records import runs_dir
 from cli.run import RunOptions, run
 from radio_hub.chaos import check_timed_fault
 from radio_hub.config import check_keys
@@ -99,7 +100,7 @@ def experiment_command(args: argparse.Namespace) -> int:
     except (OSError, ValueError, tomllib.TOMLDecodeError) as err:
         print(f"petswarm experiment: {args.file}: {err}", file=sys.stderr)
         return 2
-    out = Path(args.out or Path("runs") / f"experiment-{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}")
+    out = Path(args.out or runs_dir() / f"experiment-{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}")
     out.mkdir(parents=True, exist_ok=True)
     rows: list[dict[str, Any]] = []
     seeds = spec["seeds"]

@@ -225,7 +225,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument(
         "--record",
         metavar="DIR",
-        help="directory of the run record (default runs/<UTC time>-<seed>): manifest, events, logs, summary",
+        help="directory of the run record (default runs/<UTC time>-<seed>, or under $PETSWARM_RUNS): manifest, "
+        "events, logs, summary",
     )
     run.add_argument(
         "--organize",
@@ -251,7 +252,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     exp = sub.add_parser("experiment", help="run an experiment file: a run, a fault timeline, repetitions, seeds")
     exp.add_argument("file", help="a TOML experiment file (see examples/experiment-loss.toml)")
-    exp.add_argument("--out", help="directory for the records and results (default runs/experiment-<time>)")
+    exp.add_argument(
+        "--out", help="directory for the records and results (default runs/experiment-<time>, or under $PETSWARM_RUNS)"
+    )
     exp.add_argument("--json", action="store_true", help="print the results as JSON on stdout (the table on stderr)")
 
     rep = sub.add_parser("report", help="print a run record's summary and render its plots to PNG")
