@@ -3,7 +3,8 @@
 Each trial is one rotation of a standing user in front of a leading swarm of 3 (``scenarios/reaction.toml``:
 six rotations per run). A trial's times come from the run's ground truth (``cli.metrics.reactions``):
 from the start of the user's rotation to the first tick at which the master, and each slave, turns at
-``REACTION_OMEGA_RPS``. Scenario runs (seeds ``seed``, ``seed + 1``, ...) are repeated until ``--runs``
+``REACTION_OMEGA_RPS`` (a turn that starts after the user's does: one already under way is not a reaction).
+Scenario runs (seeds ``seed``, ``seed + 1``, ...) are repeated until ``--runs``
 trials are in; the CDFs of master and slave reaction times and of slave-minus-master are drawn and saved.
 """
 
@@ -56,7 +57,8 @@ def bench_reaction(args: argparse.Namespace) -> int:
             print(f"[bench reaction] run seed {seed}: {len(trials)}/{args.runs} trials so far", file=sys.stderr)
             summary = _run(args.scenario, seed, record, args.clock)
             if summary is None or not summary.get("ok"):
-                failures.append(f"seed {seed}: {None if summary is None else summary.get('problems')}")
+                why = "no summary (the run failed)" if summary is None else "; ".join(summary.get("problems", []))
+                failures.append(f"seed {seed}: {why}")
             else:
                 trials += [{**r, "seed": seed} for r in summary["driving"]["reactions"]]
             seed += 1
@@ -128,8 +130,7 @@ def table(results: dict[str, Any]) -> list[str]:
             f"{label:<22}{s['n']:>5}{s['mean']:>8.3f}{s['p10']:>8.3f}{s['p50']:>8.3f}{s['p90']:>8.3f}{s['max']:>8.3f}"
         )
     lines.append(f"missed reactions (no turn within 5 s): {results['missed_reactions']}")
-    if results.get("failed_runs"):
-        lines.append(f"failed runs: {results['failed_runs']}")
+    lines += [f"failed run (not counted): {failure}" for failure in results.get("failed_runs", [])]
     return lines
 
 

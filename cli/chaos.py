@@ -19,7 +19,7 @@ import msgpack
 from cli.args import int_auto
 from cli.hub_session import with_hub
 from petswarm import control
-from radio_hub.chaos import BURST_DEFAULTS, JITTERS, MAX_DELAY_MS, parse_fault
+from radio_hub.chaos import BURST_DEFAULTS, JITTERS, MAX_DELAY_MS, describe_change, describe_fault, parse_fault
 from radio_hub.interface import HubUnavailable, Keys, query_hub
 
 SIGNALS = {"kill": signal.SIGKILL, "pause": signal.SIGSTOP, "resume": signal.SIGCONT}
@@ -66,6 +66,11 @@ def add_arguments(sub: argparse._SubParsersAction, add_hub: Any, robot_id: Any, 
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     actions = chaos.add_subparsers(dest="action", required=True, metavar="ACTION")
+
+    def add_common(p: argparse.ArgumentParser) -> None:
+        add_hub(p)
+        p.add_argument("--json", action="store_true", help="print the hub's answer as JSON (default: in words)")
+
     for kind, what in (
         ("loss", "lose receptions"),
         ("corrupt", "spoil receptions' FCS (the MAC drops them)"),
@@ -74,28 +79,28 @@ def add_arguments(sub: argparse._SubParsersAction, add_hub: Any, robot_id: Any, 
         p = actions.add_parser(kind, help=f"{what} with probability --p")
         p.add_argument("--p", type=bounded(float, 0, 1), default=1.0, help="probability (default 1)")
         _add_selectors(p, bounded)
-        add_hub(p)
-    _add_delay(actions, add_hub, bounded)
-    _add_burst(actions, add_hub, bounded)
+        add_common(p)
+    _add_delay(actions, add_common, bounded)
+    _add_burst(actions, add_common, bounded)
     blind = actions.add_parser("ir-blind", help="an IR module reads full scale on every receiver (a lamp)")
     blind.add_argument("--node", help="the receiving robot (default: every one)")
-    add_hub(blind)
+    add_common(blind)
     noise = actions.add_parser("ir-noise", help="extra Gaussian noise on an IR module's readings")
     noise.add_argument("--node", help="the receiving robot (default: every one)")
     noise.add_argument("--sigma", type=bounded(float, 0, 1023), default=20.0, help="counts (default 20)")
-    add_hub(noise)
+    add_common(noise)
     part = actions.add_parser("partition", help="two sets of nodes that cannot hear each other")
     part.add_argument("--group", required=True, help="node ids on one side, comma-separated")
     part.add_argument("--others", help="node ids on the other side (default: everyone else)")
-    add_hub(part)
+    add_common(part)
     clear = actions.add_parser("clear", help="end one fault (--id) or all of them (heals partitions)")
     clear.add_argument("--id", type=int, help="the fault to end (default: all)")
-    add_hub(clear)
-    add_hub(actions.add_parser("list", help="the active faults and the log of changes"))
+    add_common(clear)
+    add_common(actions.add_parser("list", help="the active faults and the log of changes"))
     for action, sig in SIGNALS.items():
         p = actions.add_parser(action, help=f"send {sig.name} to a robot process on this host")
         p.add_argument("--robot", type=robot_id, required=True, help="the robot's id")
-        add_hub(p)
+        add_common(p)
 
 
 def _add_selectors(p: argparse.ArgumentParser, bounded: Any) -> None:
@@ -170,16 +175,30 @@ def chaos_command(args: argparse.Namespace) -> int:
         except ValueError as err:
             print(f"petswarm chaos {args.action}: refused: {err}", file=sys.stderr)
             return 1
-    return with_hub("chaos", args.hub, lambda session: _act(session, keys, request))
+    return with_hub("chaos", args.hub, lambda session: _act(session, keys, request, args.json))
 
 
-def _act(session: Any, keys: Keys, request: dict[str, Any]) -> int:
+def _act(session: Any, keys: Keys, request: dict[str, Any], as_json: bool) -> int:
     answer = _ask_hub(session, keys, request)
     if "error" in answer:
         print(f"petswarm chaos: the hub refused: {answer['error']}", file=sys.stderr)
         return 1
-    print(json.dumps(answer["faults"], indent=2))
+    print(json.dumps(answer, indent=2) if as_json else "\n".join(describe_answer(request, answer)))
     return 0
+
+
+def describe_answer(request: dict[str, Any], answer: dict[str, Any]) -> list[str]:
+    """The hub's answer to a chaos request in words: what changed, the active faults, and (list) the log."""
+    faults = answer.get("faults", [])
+    lines = []
+    if request["op"] in ("add", "clear") and answer.get("log"):
+        lines.append(describe_change(answer["log"][-1]).split(": ", 1)[1])  # what this request did
+    lines.append("active faults:" if faults else "no fault active")
+    lines += [f"  {describe_fault(f)}" for f in faults]
+    if request["op"] == "list" and answer.get("log"):
+        lines.append("log:")
+        lines += [f"  {describe_change(entry)}" for entry in answer["log"]]
+    return lines
 
 
 def _request(args: argparse.Namespace) -> dict[str, Any]:
@@ -225,7 +244,12 @@ def _signal_robot(session: Any, keys: Keys, args: argparse.Namespace) -> int:
         return 2
     if args.action == "pause":
         _remember_pid(keys, args.robot, pid)
-    print(f"robot {args.robot} (pid {pid}): {SIGNALS[args.action].name} sent")
+    name = SIGNALS[args.action].name
+    print(
+        json.dumps({"robot": args.robot, "pid": pid, "signal": name})
+        if args.json
+        else f"robot {args.robot} (pid {pid}): {name} sent"
+    )
     return 0
 
 

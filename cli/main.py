@@ -224,8 +224,8 @@ def build_parser() -> argparse.ArgumentParser:
     sts = swarm_sub.add_parser("status", help="one robot's state, radio, swarm, token schedule and IR fixes")
     sts.add_argument("--robot", type=robot_id, required=True, help="id of the robot")
     _add_hub(sts)
-    for p in (org, dis):
-        p.add_argument("--json", action="store_true", help="print the answer as JSON")
+    for p in (org, dis, sts):
+        p.add_argument("--json", action="store_true", help="print the robot's answer as JSON (default: in words)")
 
     run = sub.add_parser("run", help="run a hub and N robots on this machine and summarise the radio traffic")
     run.add_argument(
@@ -249,7 +249,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument(
         "--record",
         metavar="DIR",
-        help="directory of the run record (default runs/<UTC time>-<seed>): manifest, events, logs, summary",
+        help="directory of the run record (default runs/<UTC time>-<seed>, or under $PETSWARM_RUNS): manifest, "
+        "events, logs, summary",
     )
     run.add_argument(
         "--organize",
@@ -284,11 +285,15 @@ def build_parser() -> argparse.ArgumentParser:
 
     exp = sub.add_parser("experiment", help="run an experiment file: a run, a fault timeline, repetitions, seeds")
     exp.add_argument("file", help="a TOML experiment file (see examples/experiment-loss.toml)")
-    exp.add_argument("--out", help="directory for the records and results (default runs/experiment-<time>)")
+    exp.add_argument(
+        "--out", help="directory for the records and results (default runs/experiment-<time>, or under $PETSWARM_RUNS)"
+    )
+    exp.add_argument("--json", action="store_true", help="print the results as JSON on stdout (the table on stderr)")
 
     rep = sub.add_parser("report", help="print a run record's summary and render its plots to PNG")
     rep.add_argument("run", help="a run record directory (runs/<time>-<seed>)")
     rep.add_argument("--out", help="directory for report.png (default: the run directory)")
+    rep.add_argument("--json", action="store_true", help="print the record's figures and the plots' paths as JSON")
 
     stats = sub.add_parser("stats", help="print a running hub's counters")
     _add_hub(stats)
@@ -609,7 +614,17 @@ def _print_stats(stats: dict[str, Any]) -> None:
         print(f"{name:<14}{pan:>7}{n.get('channel', ''):>4}" + "".join(f"{n[c]:>10}" for c in cols))
     for ch, c in sorted(stats["channels"].items()):
         print(f"{'channel ' + ch:<25}" + "".join(f"{c[k]:>10}" for k in cols))
-    print("hub: " + ", ".join(f"{k} {v}" for k, v in stats["hub"].items()))
+    print(hub_line(stats["hub"]))
+
+
+def hub_line(hub: dict[str, Any]) -> str:
+    """The hub's own counters in one line: whole numbers, lags in microseconds rounded to 1 us."""
+    parts = []
+    for key, value in hub.items():
+        name = key.removesuffix("_us").replace("_", " ")
+        number = f"{value:.0f}" if isinstance(value, float) else str(value)
+        parts.append(f"{name} {number}" + (" us" if key.endswith("_us") else ""))
+    return "hub: " + ", ".join(parts)
 
 
 def _bench(args: argparse.Namespace) -> int:

@@ -2,8 +2,11 @@
 
 Pure: lines in, figures out. Formation error is a slave's distance from its reference (its slot, placed
 by the master's true pose; the slot is what the slave itself reported); reaction time is from the start
-of the user's rotation (the user's true yaw rate leaving zero) to the first tick at which a robot's own
-yaw rate passes ``REACTION_OMEGA_RPS``; surround figures are the swarm's extent r and connectivity.
+of the user's rotation (the user's true yaw rate leaving zero) to the first turn a robot starts after it:
+the first tick after the rotation's start at which the robot's own yaw rate reaches ``REACTION_OMEGA_RPS``
+from below. A robot already turning when the user starts (a correction of its own) has not reacted: its
+reaction is its next turn, or none within the window. Surround figures are the swarm's extent r and
+connectivity.
 """
 
 from __future__ import annotations
@@ -80,20 +83,27 @@ def driving_metrics(world: list[dict[str, Any]], sight_m: float = 1.0) -> dict[s
 
 
 def reactions(world: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """For each start of a user rotation: how long until the master and each slave turned."""
+    """For each start of a user rotation: how long until the master and each slave started a turn."""
     out = []
     for t0 in rotation_starts(world):
         roles: dict[str, str] = {}
         first: dict[str, float] = {}
+        was_turning: dict[str, bool] = {}
         for tick in world:
             t = tick["t_us"] / 1e6
-            if t < t0 or t > t0 + REACTION_WINDOW_S:
-                continue
+            if t > t0 + REACTION_WINDOW_S:
+                break
             for b in tick["bodies"]:
-                if b["kind"] != "robot" or b["id"] in first:
+                if b["kind"] != "robot":
+                    continue
+                turning = abs(b.get("omega", 0.0)) >= REACTION_OMEGA_RPS
+                # a turn counts once it starts after the user's: one under way at t0 is not a reaction to it
+                started = turning and was_turning.get(b["id"]) is False
+                was_turning[b["id"]] = turning
+                if t < t0:
                     continue
                 roles.setdefault(b["id"], b.get("role") or "")
-                if abs(b.get("omega", 0.0)) >= REACTION_OMEGA_RPS:
+                if started and t > t0 and b["id"] not in first:
                     first[b["id"]] = round(t - t0, 3)
         master = next((n for n, r in roles.items() if r in ("master", "single")), None)
         slaves = {n: first.get(n) for n, r in sorted(roles.items()) if r == "slave"}
@@ -171,9 +181,35 @@ def describe_driving(driving: dict[str, Any]) -> str:
     distance = driving.get("user_master_distance_m")
     if distance:
         lines.append(f"user-master distance: median {distance['median']:.2f} m, p90 {distance['p90']:.2f} m")
-    for reaction in driving.get("reactions", []):
-        lines.append(
-            f"user turn at {reaction['user_turn_at_s']:.1f} s: master reacted after {reaction['master_s']} s, "
-            f"slaves {reaction['slaves_s']}"
-        )
+    lines += reaction_table(driving.get("reactions", []))
     return "\n".join(lines)
+
+
+def reaction_table(reactions: list[dict[str, Any]]) -> list[str]:
+    """One row per user rotation: the master and its reaction, each slave's and (in brackets) its lag
+    behind the master; '-' where no turn started within the window."""
+    if not reactions:
+        return []
+    slaves = sorted({n for r in reactions for n in r["slaves_s"]}, key=lambda n: (len(n), n))
+
+    def seconds(value: float | None) -> str:
+        return "-" if value is None else f"{value:.2f}"
+
+    def cell(r: dict[str, Any], n: str) -> str:
+        gap = r["slave_minus_master_s"].get(n)
+        return seconds(r["slaves_s"].get(n)) + ("" if gap is None else f" ({gap:+.2f})")
+
+    rows = [[cell(r, n) for n in slaves] for r in reactions]
+    widths = [max(len(n), *(len(row[i]) for row in rows)) + 2 for i, n in enumerate(slaves)]
+    lines = [
+        f"reaction to the user's turns (s after each rotation starts; slave minus master in brackets; "
+        f"-: no turn within {REACTION_WINDOW_S:g} s)",
+        f"{'turn at':>8}  {'master':<10}{'master s':>8}  "
+        + "".join(f"{n:<{w}}" for n, w in zip(slaves, widths, strict=True)),
+    ]
+    for r, row in zip(reactions, rows, strict=True):
+        lines.append(
+            f"{r['user_turn_at_s']:>8.1f}  {r['master'] or '-':<10}{seconds(r['master_s']):>8}  "
+            + "".join(f"{c:<{w}}" for c, w in zip(row, widths, strict=True))
+        )
+    return [line.rstrip() for line in lines]

@@ -27,6 +27,7 @@ from cli.run import (
     RunOptions,
     _print,
     organize_and_disperse,
+    organize_shortfall,
     ping_robot_argv,
     progress,
     statuses,
@@ -301,6 +302,9 @@ async def _apply_faults(ctl: RelayControl, faults: FaultTimeline, elapsed: float
 
 
 async def _ping_and_organize(opts: RunOptions, ctl: RelayControl, faults: FaultTimeline, world: str) -> dict[str, Any]:
+    notes = organize_shortfall(opts)
+    for note in notes:
+        progress(f"warning: {note}")
     start = asyncio.get_running_loop().time()
     for second in range(1, math.ceil(opts.duration) + 1):
         until = min(float(second), opts.duration)
@@ -312,6 +316,7 @@ async def _ping_and_organize(opts: RunOptions, ctl: RelayControl, faults: FaultT
     swarm = await organize_and_disperse(ctl, opts) if opts.organize else {}
     summary = await _summary(opts, ctl, world)
     summary["faults"] = faults.applied
+    summary["notes"] = notes
     problems = summary["problems"] + swarm.pop("problems", [])
     summary.update(swarm, problems=problems, ok=not problems)
     return summary

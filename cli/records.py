@@ -9,12 +9,14 @@
         summary.json           the final summary (also written when the run fails or is interrupted)
 
 Files are written as the run goes (the robots flush every event), so a run that is killed midway
-still leaves a readable record.
+still leaves a readable record. Records go under ``runs/``, or under ``$PETSWARM_RUNS`` when it is set
+(the test suite points it into pytest's temporary directory), unless ``--record`` names the directory.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import platform
 import sys
 import time
@@ -24,6 +26,12 @@ from pathlib import Path
 from typing import Any
 
 _PACKAGES = ("petswarm", "eclipse-zenoh", "numpy", "msgpack")
+RUNS_ENV = "PETSWARM_RUNS"
+
+
+def runs_dir() -> Path:
+    """Where records go by default: ``$PETSWARM_RUNS``, else ``runs`` in the current directory."""
+    return Path(os.environ.get(RUNS_ENV) or "runs")
 
 
 @dataclass(frozen=True)
@@ -34,9 +42,9 @@ class RunRecord:
 
     @classmethod
     def create(cls, opts: Any, world: str, endpoint: str) -> RunRecord:
-        """Make the directory (``opts.record_dir``, or ``runs/<UTC time>-<seed>``) and write the manifest."""
+        """Make the directory (``opts.record_dir``, or ``<runs_dir()>/<UTC time>-<seed>``) and write the manifest."""
         stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
-        path = Path(opts.record_dir or Path("runs") / f"{stamp}-{opts.seed}")
+        path = Path(opts.record_dir or runs_dir() / f"{stamp}-{opts.seed}")
         (path / "events").mkdir(parents=True, exist_ok=True)
         manifest = {
             "seed": opts.seed,

@@ -29,7 +29,8 @@ STATE_COLOURS = {
 
 
 def report_command(args: argparse.Namespace) -> int:
-    """Print and plot one run record; 2 when the directory is not a run record."""
+    """Print and plot one run record (``--json``: its figures and the plots' paths as JSON); 2 when the
+    directory is not a run record."""
     run = Path(args.run)
     if not (run / "manifest.json").exists():
         print(f"petswarm report: {run} is not a run record (no manifest.json)", file=sys.stderr)
@@ -38,31 +39,39 @@ def report_command(args: argparse.Namespace) -> int:
     summary_file = run / "summary.json"
     summary = json.loads(summary_file.read_text()) if summary_file.exists() else None
     events = {p.stem: read_events(p) for p in sorted((run / "events").glob("*.jsonl"))}
-    for line in describe(manifest, summary, events):
-        print(line)
     out = Path(args.out) if args.out else run
     out.mkdir(parents=True, exist_ok=True)
-    plot(summary, events, out / "report.png")
-    print(f"plots: {out / 'report.png'}")
+    plots = [out / "report.png"]
+    plot(summary, events, plots[0])
+    driving = None
     if (run / "world.jsonl").exists():
-        for line in report_world(run / "world.jsonl", summary, out):
-            print(line)
+        driving, world_plots = plot_world(run / "world.jsonl", summary, out)
+        plots += world_plots
+    if getattr(args, "json", False):
+        states = {name: [e["to"] for e in evs if e["kind"] == "state"] for name, evs in events.items()}
+        report = {"run": str(run), "manifest": manifest, "summary": summary, "states": states}
+        print(json.dumps({**report, "driving": driving, "plots": [str(p) for p in plots]}, indent=2))
+        return 0
+    for line in describe(manifest, summary, events):
+        print(line)
+    if driving is not None:
+        print(describe_driving(driving) if driving else f"{run / 'world.jsonl'}: no world ticks")
+    print("plots: " + ", ".join(str(p) for p in plots))
     return 0
 
 
-def report_world(world_log: Path, summary: dict[str, Any] | None, out: Path) -> list[str]:
-    """Driving figures of a scenario run in text, and its trajectory and formation-error plots in ``out``."""
+def plot_world(world_log: Path, summary: dict[str, Any] | None, out: Path) -> tuple[dict[str, Any], list[Path]]:
+    """Driving figures of a scenario run ({} without world ticks), and its trajectory and formation-error
+    plots drawn in ``out`` (their paths)."""
     world = read_world(world_log)
     if not world:
-        return [f"{world_log}: no world ticks"]
+        return {}, []
     driving = driving_metrics(world)
     faults = (summary or {}).get("faults") or []
-    plot_trajectories(world, out / "trajectories.png")
-    plot_formation_error(driving, rotation_starts(world), faults, out / "formation_error.png")
-    return [
-        describe_driving(driving),
-        f"plots: {out / 'trajectories.png'}, {out / 'formation_error.png'}",
-    ]
+    plots = [out / "trajectories.png", out / "formation_error.png"]
+    plot_trajectories(world, plots[0])
+    plot_formation_error(driving, rotation_starts(world), faults, plots[1])
+    return driving, plots
 
 
 def describe(manifest: dict[str, Any], summary: dict[str, Any] | None, events: dict[str, list]) -> list[str]:

@@ -22,6 +22,7 @@ from cli.records import RunRecord
 from cli.swarm import describe
 from petswarm import control
 from petswarm.robot import DEFAULT_PAN
+from radio_hub.chaos import describe_fault
 from radio_hub.interface import HubUnavailable, Keys, open_session, query_hub
 
 
@@ -156,6 +157,9 @@ def supervise(
 def _ping_and_organize(ctx: RunContext) -> dict[str, Any]:
     """The default run: robots ping each other for ``duration``, then robot 1 may organize a swarm."""
     opts, session, keys = ctx.opts, ctx.session, ctx.keys
+    notes = organize_shortfall(opts)
+    for note in notes:
+        progress(f"warning: {note}")
     for rid in range(1, opts.robots + 1):
         ctx.sup.spawn(f"robot-{rid}", ping_robot_argv(opts, rid, ctx.endpoint, ctx.world, ctx.record))
     _wait_for_robots(ctx.sup, session, keys, opts.robots, opts.startup_timeout)
@@ -165,6 +169,7 @@ def _ping_and_organize(ctx: RunContext) -> dict[str, Any]:
     swarm = asyncio.run(organize_and_disperse(ZenohControl(session, keys), opts)) if opts.organize else {}
     summary = _summarise(session, keys, opts, ctx.world, ctx.endpoint)
     summary["faults"] = timeline.applied
+    summary["notes"] = notes
     problems = summary["problems"] + swarm.pop("problems", [])
     summary.update(swarm, problems=problems, ok=not problems)
     return summary
@@ -178,6 +183,20 @@ def ping_robot_argv(opts: RunOptions, rid: int, endpoint: str, world: str, recor
     if rid == 1 and opts.organize:
         argv += ["--user", "1", "--protocol", opts.protocol]
     return [*argv, "--ping-interval", str(opts.ping_interval), "--seed", str(opts.seed)]
+
+
+def organize_shortfall(opts: RunOptions) -> list[str]:
+    """Why the swarm will have fewer members than ``--organize`` asks, when the run itself makes it so.
+
+    Not a failure: the protocol takes every available robot when fewer are available than asked (Table 2),
+    so the run checks that all of them joined; the note tells the user why the swarm is smaller."""
+    others = opts.robots - 1
+    if opts.organize <= others:
+        return []
+    return [
+        f"--organize {opts.organize} asks for more robots than the {others} this run has besides the master "
+        f"(--robots {opts.robots}): at most {others} can join"
+    ]
 
 
 def _check_alive(sup: Supervisor) -> None:
@@ -268,13 +287,18 @@ class FaultTimeline:
         """Record a fault the hub took; RunFailed with the hub's reason when it refused it."""
         if "error" in answer:
             raise RunFailed(f"fault at {at:g} s refused by the hub: {answer['error']}")
-        progress(f"fault at {at:g} s: {request}")
+        what = describe_fault(request["fault"]) if request["op"] == "add" else _cleared(request.get("id"))
+        progress(f"fault at {at:g} s: {what}")
         self.applied.append({"at": at, **request})
 
 
 def hub_chaos(session: zenoh.Session, keys: Keys) -> Callable[[dict[str, Any]], dict[str, Any]]:
     """The hub's chaos queryable as a call."""
     return lambda request: query_hub(session, keys.chaos, payload=msgpack.packb(request, use_bin_type=True))
+
+
+def _cleared(fault_id: int | None) -> str:
+    return "clear every fault" if fault_id is None else f"clear fault {fault_id}"
 
 
 def _totals(stats: dict[str, Any]) -> dict[str, int]:
@@ -436,14 +460,14 @@ def _print(summary: dict[str, Any], as_json: bool) -> None:
         print(json.dumps(summary, indent=2))
         return
     print(f"seed {summary['seed']}  world {summary['world']}  {summary['robots']} robots  {summary['duration_s']:g} s")
-    header = (
-        f"{'node':<10}{'sent':>7}{'delivered':>11}{'collided':>10}{'lost':>7}{'retries':>9}{'cca fail':>10}  heard from"
-    )
-    print(header)
+    pinged = "scenario" not in summary  # a scenario run has no ping phase: nobody is 'heard from'
+    header = f"{'node':<10}{'sent':>7}{'delivered':>11}{'collided':>10}{'lost':>7}{'retries':>9}{'cca fail':>10}"
+    print(header + ("  heard from" if pinged else ""))
     for name, n in summary["nodes"].items():
+        heard = "  " + (", ".join(map(str, n["heard_from"])) or "nobody") if pinged else ""
         print(
             f"{name:<10}{n['sent']:>7}{n['delivered']:>11}{n['collided']:>10}{n['lost']:>7}"
-            f"{n['mac_retries']:>9}{n['channel_access_failures']:>10}  {n['heard_from']}"
+            f"{n['mac_retries']:>9}{n['channel_access_failures']:>10}{heard}"
         )
     hub = summary["hub"]
     print(
@@ -457,4 +481,6 @@ def _print(summary: dict[str, Any], as_json: bool) -> None:
             print(describe("disperse", summary["dispersal"]))
     if "driving" in summary:
         print(describe_driving(summary["driving"]))
+    for note in summary.get("notes", []):
+        print(f"note: {note}")
     print("OK" if summary["ok"] else "PROBLEMS: " + "; ".join(summary["problems"]))

@@ -1,4 +1,6 @@
-"""``petswarm swarm organize|disperse``: the user's watch requests, sent to a running robot."""
+"""``petswarm swarm organize|disperse|status``: the user's watch requests to a running robot, and its state.
+
+Every answer prints in words by default; ``--json`` prints the robot's answer as it came."""
 
 from __future__ import annotations
 
@@ -31,9 +33,7 @@ def _ask(session: Any, keys: Keys, args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 1
-    as_json = args.action == "status" or args.json
-    print(json.dumps(answer, indent=2) if as_json else describe(args.action, answer))
-
+    print(json.dumps(answer, indent=2) if args.json else describe(args.action, answer))
     return 0
 
 
@@ -65,6 +65,8 @@ def _request(session: Any, keys: Keys, args: argparse.Namespace) -> dict[str, An
 
 def describe(action: str, answer: dict[str, Any]) -> str:
     """One human line per figure."""
+    if action == "status":
+        return "\n".join(describe_status(answer))
     if action == "disperse":
         return (
             f"dispersed {len(answer['members'])} members in {answer['disperse_time_s'] * 1000:.1f} ms "
@@ -79,3 +81,75 @@ def describe(action: str, answer: dict[str, Any]) -> str:
         f"organized in {answer['organize_time_s'] * 1000:.1f} ms with {answer['retries']} retries ({steps}) "
         f"[{answer['protocol']} protocol]"
     )
+
+
+def describe_status(status: dict[str, Any]) -> list[str]:
+    """A robot's status (its ``status`` control command) as a person reads it: state, radio, swarm, token
+    schedule, the IR fixes of its neighbours, driving and message counters."""
+    radio = status["radio"]
+    x, y = radio["position"]
+    lines = [
+        f"robot {status['robot_id']} (pid {status['pid']}, up {status['uptime_s']:.1f} s): {status['state']}"
+        + (f", connected to user {status['user']}" if status.get("user") else ""),
+        f"radio: {radio['node_id']} short address {radio['short_addr']:#06x}, PAN {radio['pan_id']:#06x}, "
+        f"channel {radio['channel']}; attached at ({x:.2f}, {y:.2f}) m heading {radio['heading_deg']:.0f} deg",
+    ]
+    swarm = status.get("swarm")
+    if swarm:
+        role = "the master" if swarm["master"] == status["robot_id"] else f"member {swarm['number']}"
+        lines.append(
+            f"swarm: PAN {swarm['pan_id']:#06x}, master {swarm['master']}, members {_ids(swarm['members'])}; "
+            f"this robot is {role}, neighbours {_ids(swarm['neighbours'])}"
+        )
+    else:
+        lines.append("swarm: none")
+    ir = status.get("ir") or {}
+    if ir:
+        chain = " -> ".join(map(str, ir.get("chain") or [])) or "none"
+        lines.append(
+            f"IR token: round {ir.get('round')}, held {ir.get('rounds_held')} rounds, {ir.get('fixes')} fixes, "
+            f"{ir.get('regenerations')} regenerations; module {ir.get('ir_mode')}; chain {chain}"
+        )
+    fixes = status.get("relative_location") or {}
+    if fixes:
+        lines.append(f"  {'neighbour':<11}{'bearing':>9}{'distance':>10}{'heading':>9}{'age':>8}{'fixes':>7}")
+        for rid, fix in sorted(fixes.items(), key=lambda kv: int(kv[0]) if str(kv[0]).isdigit() else 0):
+            heading = fix.get("heading_deg")
+            lines.append(
+                f"  {'robot ' + str(rid):<11}{fix['bearing_deg']:>8.1f}°{fix['distance_m']:>8.2f} m"
+                f"{'-' if heading is None else f'{heading:.1f}°':>9}{fix['age_s']:>6.2f} s{fix.get('fixes', 0):>7}"
+            )
+    driving = status.get("driving") or {}
+    if driving:
+        vx, vy, omega = driving.get("command", (0.0, 0.0, 0.0))
+        lines.append(
+            f"driving: mode {driving.get('mode')}, owner {driving.get('owner') or 'none'}, command vx {vx:.2f} m/s "
+            f"vy {vy:.2f} m/s omega {omega:.2f} rad/s"
+        )
+    surround = status.get("surround")
+    if surround:
+        lines.append("surround: " + ", ".join(f"{k.replace('_', ' ')} {_value(v)}" for k, v in surround.items()))
+    tx = ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in sorted(status.get("tx_results", {}).items())) or "none"
+    heard = _ids(sorted(int(k) for k in status.get("heard_from", {})))
+    lines.append(
+        f"messages: {status.get('messages_received', 0)} received ({status.get('malformed_payloads', 0)} malformed), "
+        f"sends: {tx}; step retries {status.get('retries', 0)}, duplicates {status.get('duplicates', 0)}, "
+        f"late answers {status.get('late_responses', 0)}; transport gaps {status.get('transport_gaps', 0)}"
+    )
+    if status.get("pings_sent"):
+        lines.append(f"pings: {status['pings_sent']} sent, {status['pings_answered']} answered; heard from {heard}")
+    for organization in status.get("organizations", []):
+        lines.append("led: " + describe("organize", organization).replace("\n", "; "))
+    return lines
+
+
+def _ids(ids: list[int]) -> str:
+    return ", ".join(map(str, ids)) or "none"
+
+
+def _value(value: Any) -> str:
+    if isinstance(value, float):
+        return f"{value:.3g}"
+    if isinstance(value, list):
+        return "(" + ", ".join(_value(v) for v in value) + ")"
+    return str(value)

@@ -84,15 +84,17 @@ async def _serve(feed: LiveFeed | ReplayFeed, bind: str, port: int) -> int:
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
-    async with serve(feed.handle, bind, port, process_request=http) as server:
-        feed.server = server
-        print(f"watch: http://{_shown(bind)}:{_port_of(server)}/  ({feed.describe()})", flush=True)
-        runner = asyncio.create_task(feed.run())
-        await stop.wait()
-        runner.cancel()
-        with contextlib.suppress(asyncio.CancelledError):
-            await runner
-    feed.close()
+    try:
+        async with serve(feed.handle, bind, port, process_request=http) as server:
+            feed.server = server
+            print(f"watch: http://{_shown(bind)}:{_port_of(server)}/  ({feed.describe()})", flush=True)
+            runner = asyncio.create_task(feed.run())
+            await stop.wait()
+            runner.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await runner
+    finally:
+        feed.close()
     return 0
 
 
@@ -194,6 +196,9 @@ class ReplayFeed:
     async def run(self) -> None:
         """Nothing to do between pages: each page's clock runs in its handler."""
         await asyncio.Event().wait()
+
+    def close(self) -> None:
+        """Nothing to release: the record was read whole at the start (``_serve`` closes either feed)."""
 
     async def handle(self, ws: ServerConnection) -> None:
         """One page: hello, then frames on its clock while it asks to play, pause, seek or change speed."""

@@ -54,7 +54,7 @@ AUTO_ID = 0
 """``--id auto``: claim the lowest id no live robot of the world uses."""
 FORMATIONS = ("swarm", "surround")
 """``swarm``: the leader-follower middleware (organize, token IR, master and slaves); ``surround``: every
-robot runs the surround law on its own beacons and echoes (spec/surround-swarm.md)."""
+robot runs the surround law on its own beacons and echoes (docs/SURROUND.md)."""
 _GRID_SPACING_M = 1.5
 _GRID_ROW = 5
 

@@ -17,7 +17,8 @@ A scenario is one TOML file (``scenarios/*.toml`` ship with the project)::
     positions = [[0, -1, 90], [0, -1.6, 90]]   # x, y, heading (deg) per robot id 1, 2, ...
     [[faults]]               # as in experiment files: at = s, then a fault or an action
 
-Pure: parsing and the user's path as a function of time; every error names what is wrong.
+Pure: parsing and the user's path as a function of time; every error names what is wrong, and a key
+no table takes is refused with the nearest one it does take (``radio_hub.config.check_keys``).
 """
 
 from __future__ import annotations
@@ -28,12 +29,27 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from petswarm.formation_shapes import Mode, Shape
+from petswarm.gestures import Gesture
 from petswarm.motion import wrap
 from petswarm.surround import SurroundConfig
+from radio_hub.chaos import check_timed_fault
+from radio_hub.config import check_keys
 
 REQUESTS = ("follow", "lead", "remote", "cancel", "organize", "disperse", "mode", "return", "gesture")
 """Watch requests: select a main operation, cancel it, organize/disperse a swarm, change driving mode,
 return from an obstacle exception, or perform a gesture."""
+REQUEST_ARGS: dict[str, tuple[str, ...]] = {
+    "organize": ("robots", "shape", "spacing"),
+    "mode": ("mode", "change_master"),
+    "gesture": ("gesture",),
+}
+"""What each watch request takes besides ``at`` and ``request`` (as petswarm/driving.py reads them)."""
+_CHOICES = {"shape": tuple(Shape), "mode": tuple(Mode), "gesture": tuple(Gesture)}
+TOP_KEYS = ("name", "description", "duration_s", "seed", "hub", "obstacles", "user", "robots", "faults", "surround")
+ROBOTS_KEYS = ("count", "formation", "positions")
+USER_KEYS = ("id", "owner", "start", "walk_at", "path", "watch")
+LEG_KEYS = {"walk": ("walk", "speed"), "turn": ("turn", "rate"), "stop": ("stop",)}
 
 
 class ScenarioError(ValueError):
@@ -156,13 +172,11 @@ def load(path: str | Path) -> Scenario:
 
 
 def parse(data: dict[str, Any], path: Path | None = None) -> Scenario:
-    """A scenario from its tables."""
-    known = {"name", "description", "duration_s", "seed", "hub", "obstacles", "user", "robots", "faults", "surround"}
-    unknown = sorted(set(data) - known)
-    if unknown:
-        raise ValueError(f"unknown top-level keys {unknown}; known: {sorted(known)}")
+    """A scenario from its tables; ValueError naming the table and key of the first problem."""
+    check_keys(data, TOP_KEYS, "the top level")
     duration = _positive(data.get("duration_s", 30.0), "duration_s")
     robots = data.get("robots", {})
+    check_keys(robots, ROBOTS_KEYS, "[robots]")
     count = int(robots.get("count", 0))
     if not 0 <= count <= 64:
         raise ValueError(f"robots.count must be 0-64, got {count}")
@@ -170,26 +184,48 @@ def parse(data: dict[str, Any], path: Path | None = None) -> Scenario:
     if len(poses) < count:
         poses += [(1.5 * (i % 5), -1.5 * (i // 5) - 2.0, 90.0) for i in range(len(poses), count)]
     user = _user(data["user"]) if "user" in data else None
+    obstacles = list(data.get("obstacles", []))
+    faults = list(data.get("faults", []))
+    for i, fault in enumerate(faults):
+        check_timed_fault(fault, f"[[faults]][{i}]")
     return Scenario(
         name=str(data.get("name", path.stem if path else "scenario")),
         path=path,
         duration_s=duration,
-        hub=dict(data.get("hub", {})),
-        obstacles=list(data.get("obstacles", [])),
+        hub=_hub_tables(data.get("hub", {}), obstacles),
+        obstacles=obstacles,
         user=user,
         robot_count=count,
         robot_poses=poses[:count],
         formation=str(robots.get("formation", "column")),
-        faults=list(data.get("faults", [])),
+        faults=faults,
         surround=_surround(data.get("surround", {})),
         raw=data,
     )
 
 
+def _hub_tables(table: Any, obstacles: list[Any]) -> dict[str, Any]:
+    """``[hub]`` and ``[[obstacles]]``, checked here as the hub will read them, so a typo fails before a run starts."""
+    from radio_hub.world import parse_obstacle
+
+    for i, obstacle in enumerate(obstacles):
+        parse_obstacle(obstacle, f"[[obstacles]][{i}]")
+    from radio_hub.config import MediumConfig
+    from radio_hub.hub import environment_from_dict  # imported here: it brings zenoh, which parsing rarely needs
+
+    # no [hub.obstacles]: a scenario's obstacles are its own [[obstacles]]
+    check_keys(table, ("world", "ble", "lf", "ir", "medium", *MediumConfig().to_dict()), "[hub]")
+
+    try:
+        environment_from_dict(table)
+    except ValueError as err:
+        raise ValueError(f"[hub]: {err}") from None
+    return dict(table)
+
+
 def _surround(table: Any) -> dict[str, Any]:
     """``[surround]``: ``enabled`` and any ``SurroundConfig`` field (the law's gains), checked here."""
-    if not isinstance(table, dict):
-        raise ValueError("surround must be a table")
+    check_keys(table, ("enabled", *SurroundConfig().to_dict()), "[surround]")
     enabled = table.get("enabled", False)
     if not isinstance(enabled, bool):
         raise ValueError(f"surround.enabled must be true or false, not {enabled!r}")
@@ -198,6 +234,7 @@ def _surround(table: Any) -> dict[str, Any]:
 
 
 def _user(table: dict[str, Any]) -> UserPlan:
+    check_keys(table, USER_KEYS, "[user]")
     start = _pose(table.get("start", [0.0, 0.0, 0.0]), "user.start")
     plan = UserPlan(
         node_id=str(table.get("id", "user")),
@@ -213,7 +250,9 @@ def _user(table: dict[str, Any]) -> UserPlan:
 
 
 def _leg(spec: dict[str, Any], i: int) -> Leg:
-    where = f"user.path[{i}]"
+    where = f"[user] path[{i}]"
+    kind = next((k for k in LEG_KEYS if isinstance(spec, dict) and k in spec), None)
+    check_keys(spec, LEG_KEYS[kind] if kind else [k for keys in LEG_KEYS.values() for k in keys], where)
     if "walk" in spec:
         speed = _positive(spec.get("speed", 1.0), f"{where}.speed")
         if speed > 3.0:
@@ -229,14 +268,19 @@ def _leg(spec: dict[str, Any], i: int) -> Leg:
 
 
 def _request(spec: dict[str, Any], i: int) -> WatchRequest:
-    where = f"user.watch[{i}]"
+    where = f"[user] watch[{i}]"
+    check_keys(spec, {"at", "request", *(k for keys in REQUEST_ARGS.values() for k in keys)}, where)
     spec = dict(spec)
     at = float(spec.pop("at", math.nan))
     if not at >= 0:
         raise ValueError(f"{where} needs at = seconds (>= 0)")
     request = spec.pop("request", "gesture" if "gesture" in spec else None)
     if request not in REQUESTS:
-        raise ValueError(f"{where}.request must be one of {REQUESTS}, not {request!r}")
+        raise ValueError(f"{where}: request must be one of {', '.join(REQUESTS)}, not {request!r}")
+    check_keys({"at": at, "request": request, **spec}, ("at", "request", *REQUEST_ARGS.get(request, ())), where)
+    for name, choices in _CHOICES.items():
+        if name in spec and spec[name] not in choices:
+            raise ValueError(f"{where}: {name} must be one of {', '.join(choices)}, not {spec[name]!r}")
     return WatchRequest(at, request, spec)
 
 

@@ -1,4 +1,4 @@
-"""The surround formation (spec/surround-swarm.md): each robot follows its local swarm's centroid and the human.
+"""The surround formation (docs/SURROUND.md): each robot follows its local swarm's centroid and the human.
 
 Pure and vectorised. ``SurroundLaw`` runs the control law of many robots at once (the simulation's path);
 ``SurroundController`` is one robot's law on its own sensing, in its own frame (the robot process's path):
@@ -34,6 +34,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+
+from radio_hub.config import check_keys
 
 MIN_RANGE_M = 0.02
 """Sensed points closer than this are taken to be this far: a point at the centre has no direction, and
@@ -101,12 +103,7 @@ class SurroundConfig:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> SurroundConfig:
         """Build from a dict of field values (missing ones take the defaults); unknown keys raise ValueError."""
-        if not isinstance(data, dict):
-            raise ValueError(f"surround config: expected a table, got {type(data).__name__}")
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(data) - known)
-        if unknown:
-            raise ValueError(f"surround config: unknown keys {unknown}; known: {sorted(known)}")
+        check_keys(data, (f.name for f in dataclasses.fields(cls)), "surround config")
         return cls(**data)
 
 

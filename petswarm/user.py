@@ -220,9 +220,14 @@ async def run_user(config: UserConfig, log: EventLog, attach_timeout: float = 15
             print(f"user: cannot switch on the IR beacon: {err}", file=sys.stderr)
             await client.close()
             return 2
-    print(f"user {plan.node_id}: walking (owner robot {plan.owner})", file=sys.stderr, flush=True)
+    print(f"{user_name(plan.node_id)}: walking (owner robot {plan.owner})", file=sys.stderr, flush=True)
     try:
         await user.run()
     finally:
         await client.close()
     return 0
+
+
+def user_name(node_id: str) -> str:
+    """How logs name the user: its node id when that already says "user" (the default id is "user")."""
+    return node_id if node_id.startswith("user") else f"user {node_id}"

@@ -27,13 +27,14 @@ draws from it only for the receptions an active fault selects.
 
 from __future__ import annotations
 
+import difflib
 import itertools
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
 
-from radio_hub.config import GilbertElliottConfig
+from radio_hub.config import GilbertElliottConfig, check_keys
 from radio_hub.propagation import GilbertElliott
 
 KINDS = ("loss", "corrupt", "duplicate", "delay", "burst", "partition", "ir_blind", "ir_noise")
@@ -102,8 +103,11 @@ class Fault:
         return sa is not None and sb is not None and sa != sb
 
     def to_dict(self) -> dict[str, Any]:
-        """For the wire and the logs (only the fields that are set)."""
-        return {k: v for k, v in asdict(self).items() if v not in (None, ())}
+        """For the wire and the logs: the id, the kind and the fields of that kind that are set (a partition
+        has no ``p``, a loss no ``sigma``)."""
+        fields = asdict(self)
+        taken = {"fault_id", "kind", *fault_keys(self.kind)}
+        return {k: v for k, v in fields.items() if k in taken and v not in (None, ())}
 
     def delay_us(self, rng: np.random.Generator) -> int:
         """One draw of this delay fault's extra delay; never negative (no frame is handed up before it arrived)."""
@@ -119,22 +123,29 @@ class Fault:
         )
 
 
-def parse_fault(fault_id: int, spec: dict[str, Any]) -> Fault:
-    """A fault from a request map; ValueError with the reason on anything malformed."""
-    spec = dict(spec)
-    kind = spec.pop("kind", None)
+def fault_keys(kind: str) -> tuple[str, ...]:
+    """The keys a fault of ``kind`` takes besides ``kind`` (every kind's keys for an unknown kind)."""
     if kind not in KINDS:
-        raise ValueError(f"kind must be one of {KINDS}, not {kind!r}")
-    allowed = {
-        "partition": {"group", "others"},
-        "ir_blind": {"node"},
-        "ir_noise": {"node", "sigma"},
-        "delay": {"ms", "jitter_ms", "jitter", *_SELECTORS},
-        "burst": {*BURST_DEFAULTS, *_SELECTORS},
-    }.get(kind, {"p", *_SELECTORS})
-    unknown = set(spec) - allowed
-    if unknown:
-        raise ValueError(f"a {kind} fault takes {sorted(allowed)}, not {sorted(unknown)}")
+        return tuple(sorted({k for known in KINDS for k in fault_keys(known)}))
+    return {
+        "partition": ("group", "others"),
+        "ir_blind": ("node",),
+        "ir_noise": ("node", "sigma"),
+        "delay": ("ms", "jitter_ms", "jitter", *_SELECTORS),
+        "burst": (*BURST_DEFAULTS, *_SELECTORS),
+    }.get(kind, ("p", *_SELECTORS))
+
+
+def parse_fault(fault_id: int, spec: dict[str, Any], where: str = "the fault") -> Fault:
+    """A fault from a request map (``where`` names it in errors); ValueError with the reason on anything malformed."""
+    kind = spec.get("kind") if isinstance(spec, dict) else None
+    check_keys(spec, ("kind", *fault_keys(kind)), where)
+    if kind not in KINDS:
+        nearest = difflib.get_close_matches(str(kind), KINDS, n=1)
+        hint = f" (did you mean {nearest[0]!r}?)" if nearest else ""
+        raise ValueError(f"{where}: kind must be one of {', '.join(KINDS)}, not {kind!r}{hint}")
+    spec = dict(spec)
+    del spec["kind"]
     p = _probability("p", spec.get("p", 1.0))
     link = spec.get("link")
     if link is not None and (len(link) != 2 or not all(isinstance(n, str) for n in link)):
@@ -158,6 +169,60 @@ def parse_fault(fault_id: int, spec: dict[str, Any]) -> Fault:
         raise ValueError("a partition needs a group of node ids")
 
     return fault
+
+
+def describe_fault(fault: dict[str, Any]) -> str:
+    """A fault (``Fault.to_dict`` or a request's ``fault``) in words: ``fault 2: loss p=0.3 on robot-2's frames``."""
+    kind = fault.get("kind")
+    head = f"fault {fault['fault_id']}: " if "fault_id" in fault else ""
+    if kind == "partition":
+        others = ", ".join(fault.get("others") or ()) or "everyone else"
+        return f"{head}partition {', '.join(fault.get('group') or ())} | {others}"
+    if kind in ("ir_blind", "ir_noise"):
+        what = "ir-blind" if kind == "ir_blind" else f"ir-noise sigma={fault.get('sigma', 0):g} counts"
+        return f"{head}{what} on {fault.get('node') or 'every IR receiver'}"
+    if kind == "delay":
+        jitter = fault.get("jitter_ms") or 0
+        what = f"delay {fault.get('ms', 0):g} ms" + (f" +- {jitter:g} ms ({fault.get('jitter')})" if jitter else "")
+    elif kind == "burst":
+        what = "burst " + " ".join(f"{k}={fault.get(k, v):g}" for k, v in BURST_DEFAULTS.items())
+    else:
+        what = f"{kind} p={fault.get('p', 1.0):g}"
+    if fault.get("node"):
+        where = f"frames to or from {fault['node']}"
+    elif fault.get("link"):
+        where = f"frames from {fault['link'][0]} to {fault['link'][1]}"
+    elif fault.get("pan") is not None:
+        where = f"receivers on PAN {fault['pan']:#06x}"
+    elif fault.get("channel") is not None:
+        where = f"channel {fault['channel']}"
+    else:
+        where = "every reception"
+    return f"{head}{what} on {where}"
+
+
+def describe_change(entry: dict[str, Any]) -> str:
+    """One entry of the chaos log (``Chaos.log``) in words, with its model time."""
+    when = f"at model {entry.get('model_us', 0) / 1e6:.3f} s"
+    if entry.get("op") == "clear":
+        ended = entry.get("ended") or []
+        return f"{when}: cleared " + (f"fault {', '.join(map(str, ended))}" if ended else "nothing (no such fault)")
+    fault = {k: v for k, v in entry.items() if k not in ("op", "model_us", "wall")}
+    return f"{when}: added {describe_fault(fault)}"
+
+
+def check_timed_fault(spec: Any, where: str) -> None:
+    """A fault of a timeline (a scenario's or an experiment's ``[[faults]]``): ``at`` (seconds into the
+    traffic phase) and either a fault, as ``parse_fault`` takes it, or ``clear = true`` (with an ``id``,
+    else every fault). ValueError naming ``where`` and what is wrong, before any run starts."""
+    check_keys(spec, ("at", "clear", "id", "kind", *fault_keys("")), where)
+    at = spec.get("at")
+    if not isinstance(at, int | float) or isinstance(at, bool) or not at >= 0:
+        raise ValueError(f"{where} needs at = seconds (a number >= 0) into the traffic phase, not {at!r}")
+    if spec.get("clear", False):
+        check_keys(spec, ("at", "clear", "id"), f"{where} (clear)")
+        return
+    parse_fault(0, {k: v for k, v in spec.items() if k not in ("at", "clear")}, where)
 
 
 def _number(name: str, value: Any) -> float:

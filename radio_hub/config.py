@@ -1,14 +1,17 @@
 """Settings of the emulated air. Defaults follow IEEE 802.15.4-2006 (2.4 GHz O-QPSK PHY).
 
 A hub reads them from a TOML or JSON file (``petswarm hub --config FILE``) whose tables mirror these
-dataclasses; an unknown key is an error, not a silent default.
+dataclasses; an unknown key is an error, not a silent default. ``check_keys`` is that check for every
+table of every file petswarm reads (hub configs, scenarios, experiments).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import json
 import tomllib
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -172,17 +175,35 @@ class MediumConfig:
         path = Path(path)
         text = path.read_text()
         data = tomllib.loads(text) if path.suffix == ".toml" else json.loads(text)
-        return cls.from_dict(data.get("medium", data))
+        try:
+            return cls.from_dict(data.get("medium", data))
+        except ValueError as err:
+            raise ValueError(f"{path}: {err}") from None
+
+
+def check_keys(table: Any, known: Iterable[str], where: str) -> None:
+    """Refuse a table (``where`` names it, e.g. ``[robots]``) that is not a table or holds a key outside
+    ``known``: ValueError naming the table, each unknown key and the nearest known name, then every known one.
+
+    A misspelt key must never fall back silently to a default, so every file petswarm reads goes through here.
+    """
+    if not isinstance(table, dict):
+        raise ValueError(f"{where}: expected a table, got {type(table).__name__}")
+    names = sorted(known)
+    unknown = [str(key) for key in table if key not in names]
+    if not unknown:
+        return
+    parts = []
+    for key in unknown:
+        nearest = difflib.get_close_matches(key, names, n=1)
+        parts.append(f"unknown key {key!r}" + (f" (did you mean {nearest[0]!r}?)" if nearest else ""))
+    raise ValueError(f"{where}: {'; '.join(parts)}; known: {', '.join(names) or 'none'}")
 
 
 def _build(cls: type, data: dict[str, Any], where: str) -> Any:
     table = f"[{where.rstrip('.')}]" if where else "the top level"
-    if not isinstance(data, dict):
-        raise ValueError(f"{table}: expected a table, got {type(data).__name__}")
     fields = {f.name: f for f in dataclasses.fields(cls)}
-    unknown = sorted(set(data) - set(fields))
-    if unknown:
-        raise ValueError(f"{table}: unknown keys {unknown}; known: {sorted(fields)}")
+    check_keys(data, fields, table)
     kwargs = {}
     for name, value in data.items():
         default = getattr(cls(), name)

@@ -27,7 +27,8 @@ import numpy as np
 
 from radio_hub import wire
 from radio_hub.ble import BleAir, BleConfig
-from radio_hub.config import MediumConfig
+from radio_hub.chaos import describe_change
+from radio_hub.config import MediumConfig, check_keys
 from radio_hub.ir_air import IrAir
 from radio_hub.keys import check_name
 from radio_hub.lf import LfConfig, antenna_positions, lf_rssi
@@ -510,11 +511,11 @@ class Environment:
                 raise ValueError("a chaos request is a map")
             op = request.get("op", "list")
             if op == "add":
-                fault = chaos.add(request["fault"], self.now_us(), wall_s)
-                print(f"hub: chaos {fault.to_dict()} at model {self.now_us()} us", file=sys.stderr, flush=True)
+                chaos.add(request["fault"], self.now_us(), wall_s)
+                print(f"hub: chaos {describe_change(chaos.log[-1])}", file=sys.stderr, flush=True)
             elif op == "clear":
-                ended = chaos.clear(request.get("id"), self.now_us(), wall_s)
-                print(f"hub: chaos cleared {ended} at model {self.now_us()} us", file=sys.stderr, flush=True)
+                chaos.clear(request.get("id"), self.now_us(), wall_s)
+                print(f"hub: chaos {describe_change(chaos.log[-1])}", file=sys.stderr, flush=True)
             elif op != "list":
                 raise ValueError(f"op must be add, clear or list, not {op!r}")
         except Exception as err:  # a bad request must not hurt the hub
@@ -674,13 +675,17 @@ def load_config(path: str | Path) -> EnvironmentConfig:
     path = Path(path)
     text = path.read_text()
     data = tomllib.loads(text) if path.suffix == ".toml" else json.loads(text)
-    if not isinstance(data, dict):
-        raise ValueError("a hub config file holds tables")
-    return environment_from_dict(data)
+    try:
+        return environment_from_dict(data)
+    except ValueError as err:
+        raise ValueError(f"{path}: {err}") from None
 
 
 def environment_from_dict(data: dict[str, Any]) -> EnvironmentConfig:
     """The tables of a hub config (or a scenario's ``[hub]`` table plus its obstacles)."""
+    # the radio's tables sit at the top level or under [medium], not both
+    radio = ("medium",) if "medium" in data else tuple(MediumConfig().to_dict())
+    check_keys(data, ("ir", "world", "ble", "lf", "obstacles", *radio), "the top level")
     data = dict(data)
     ir = IrConfig.from_dict(data.pop("ir", {}))
     world = WorldConfig.from_dict(data.pop("world", {}))
@@ -689,10 +694,6 @@ def environment_from_dict(data: dict[str, Any]) -> EnvironmentConfig:
     obstacles = data.pop("obstacles", [])
     if not isinstance(obstacles, list):
         raise ValueError("obstacles is a list of [[obstacles]] tables")
-    parsed = [parse_obstacle(o) for o in obstacles]
-    try:
-        medium = MediumConfig.from_dict(data.get("medium", data))
-    except ValueError as err:
-        extra = " (and [ir], [world], [ble], [lf], [[obstacles]])"
-        raise ValueError(f"{err}{extra}" if "the top level" in str(err) else str(err)) from None
+    parsed = [parse_obstacle(o, f"[[obstacles]][{i}]") for i, o in enumerate(obstacles)]
+    medium = MediumConfig.from_dict(data.get("medium", data))
     return EnvironmentConfig(medium, ir, world, ble, lf, parsed)

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from radio_hub.config import _build
+from radio_hub.config import _build, check_keys
 
 KINDS = ("robot", "user")
 
@@ -119,16 +119,16 @@ class Obstacle:
         return {"kind": self.kind, **{k: getattr(self, k) for k in keys[self.kind]}}
 
 
-def parse_obstacle(spec: dict[str, Any]) -> Obstacle:
-    """An obstacle from a scenario table; ValueError naming what is wrong."""
-    kind = spec.get("kind")
+def parse_obstacle(spec: dict[str, Any], where: str = "obstacle") -> Obstacle:
+    """An obstacle from a scenario table (``where`` names it in errors); ValueError naming what is wrong."""
     needs = {"circle": ("x", "y", "r"), "wall": ("x0", "y0", "x1", "y1"), "rect": ("x0", "y0", "x1", "y1")}
+    kind = spec.get("kind") if isinstance(spec, dict) else None
+    check_keys(spec, ("kind", *needs.get(kind, ("x", "y", "r", "x0", "y0", "x1", "y1"))), where)
     if kind not in needs:
-        raise ValueError(f"obstacle kind must be circle, wall or rect, not {kind!r}")
-    extra = set(spec) - {"kind", *needs[kind]}
+        raise ValueError(f"{where}: obstacle kind must be circle, wall or rect, not {kind!r}")
     missing = [k for k in needs[kind] if k not in spec]
-    if extra or missing:
-        raise ValueError(f"a {kind} obstacle takes {list(needs[kind])} (missing {missing}, unknown {sorted(extra)})")
+    if missing:
+        raise ValueError(f"{where}: a {kind} obstacle takes {', '.join(needs[kind])}; missing {', '.join(missing)}")
     values = {k: float(spec[k]) for k in needs[kind]}
     if kind == "circle" and values["r"] <= 0:
         raise ValueError(f"a circle's r must be > 0, got {values['r']}")

@@ -31,17 +31,21 @@ def test_partition_and_heal(make_air):
     air = make_air()
     for rid, x in ((1, 0.0), (2, 1.0), (3, 2.0)):
         air.robot(rid, (x, 0.0))
-    cut = _chaos(air, "partition", "--group", "robot-3")
+    cut = _chaos(air, "partition", "--group", "robot-3", "--json")
     assert cut.returncode == 0, cut.stderr
-    assert json.loads(cut.stdout)[0]["kind"] == "partition"
+    assert json.loads(cut.stdout)["faults"] == [{"fault_id": 1, "kind": "partition", "group": ["robot-3"]}]
     assert _senders(air.cmd(1, "ping", wait=0.4)) == {2}
     assert air.node(3)["heard"] == 0
     healed = _chaos(air, "clear")
-    assert healed.returncode == 0 and json.loads(healed.stdout) == []
+    assert healed.returncode == 0 and healed.stdout.splitlines() == ["cleared fault 1", "no fault active"]
     assert _senders(air.cmd(1, "ping", wait=0.4)) == {2, 3}
-    log = json.loads(_chaos(air, "list").stdout or "[]")
-    assert log == []
+    listed = _chaos(air, "list")
+    assert listed.stdout.splitlines()[0] == "no fault active", listed.stdout
+    assert "added fault 1: partition robot-3 | everyone else" in listed.stdout and "{" not in listed.stdout
     assert air.stats()["chaos"] == []
+    hub_log = (air.sup.log_dir / "hub.log").read_text()
+    assert "hub: chaos at model " in hub_log and "added fault 1: partition robot-3 | everyone else" in hub_log
+    assert "{" not in "".join(line for line in hub_log.splitlines() if "chaos" in line)  # no Python dicts
 
 
 def test_loss_on_a_node_makes_unicast_fail_and_a_bad_fault_is_refused(make_air):

@@ -167,7 +167,7 @@ def test_robots_on_two_hosts_form_a_swarm_through_a_hub_on_a_third(hosts, tmp_pa
 
         time.sleep(0.3)  # the members have answered joined; let their status settle
         for rid in (2, 3):
-            status = json.loads(hosts.run("user", "swarm", "status", "--robot", str(rid), *where).stdout)
+            status = json.loads(hosts.run("user", "swarm", "status", "--robot", str(rid), "--json", *where).stdout)
             assert status["state"] == "slave-driving" and status["swarm"]["master"] == 1, status
             assert status["radio"]["pan_id"] == answer["pan_id"]
         dispersed = hosts.run("user", "swarm", "disperse", "--master", "1", "--json", *where)

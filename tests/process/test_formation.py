@@ -155,6 +155,9 @@ def test_swarm_commands_from_the_cli(make_air):
     organized = _cli("swarm", "organize", "--master", "1", "--count", "1", "--user", "1", "--json", *hub)
     assert organized.returncode == 0, organized.stderr
     assert json.loads(organized.stdout)["members"] == [2]
+    status = _cli("swarm", "status", "--robot", "2", *hub)  # in words by default, JSON with --json
+    assert status.returncode == 0 and status.stdout.startswith("robot 2 (pid") and "slave-driving" in status.stdout
+    assert json.loads(_cli("swarm", "status", "--robot", "2", "--json", *hub).stdout)["swarm"]["master"] == 1
     dispersed = _cli("swarm", "disperse", "--master", "1", *hub)
     assert dispersed.returncode == 0 and "dispersed 1 members" in dispersed.stdout
     assert _cli("swarm", "disperse", "--master", "9", *hub).returncode == 2  # no such robot: clear error

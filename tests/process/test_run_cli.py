@@ -151,10 +151,11 @@ def test_an_experiment_file_runs_every_seed_with_its_fault_timeline(tmp_path):
     )
     out = tmp_path / "out"
     proc = subprocess.run(
-        _petswarm("experiment", str(spec), "--out", str(out)), capture_output=True, text=True, timeout=180
+        _petswarm("experiment", str(spec), "--out", str(out), "--json"), capture_output=True, text=True, timeout=180
     )
     assert proc.returncode in (0, 1), proc.stderr
-    results = json.loads((out / "results.json").read_text())
+    results = json.loads(proc.stdout)  # --json: the results on stdout, the table on stderr
+    assert results == json.loads((out / "results.json").read_text()) and "experiment robot 3 fades" in proc.stderr
     assert [r["seed"] for r in results["runs"]] == [4, 5]
     for i, seed in enumerate((4, 5), start=1):
         summary = json.loads((out / f"run-{i}-seed-{seed}" / "summary.json").read_text())
@@ -167,3 +168,36 @@ def test_an_experiment_file_runs_every_seed_with_its_fault_timeline(tmp_path):
     bad.write_text("[run]\nrobotz = 3\n")
     refused = subprocess.run(_petswarm("experiment", str(bad)), capture_output=True, text=True, timeout=60)
     assert refused.returncode == 2 and "robotz" in refused.stderr
+
+
+def test_the_shipped_example_experiment_passes(tmp_path):
+    out = tmp_path / "out"
+    proc = subprocess.run(
+        _petswarm("experiment", "examples/experiment-loss.toml", "--out", str(out)),
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=Path(__file__).resolve().parents[2],
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    # the runs' own progress goes to their records: nothing runs into the experiment's progress lines
+    assert all(line.startswith("[experiment] ") for line in proc.stderr.splitlines()), proc.stderr
+    assert "3/3 runs; seed 3 ok" in proc.stderr and (out / "run-1-seed-1" / "progress.log").stat().st_size > 0
+    results = json.loads((out / "results.json").read_text())
+    assert len(results["runs"]) == 3 and all(r["ok"] for r in results["runs"])
+    assert all(r["organize_ms"] is not None and r["members"] >= 1 for r in results["runs"])  # every run organized
+
+
+def test_organizing_more_robots_than_the_run_has_warns_and_says_why_fewer_joined(tmp_path):
+    record = tmp_path / "rec"
+    argv = ("run", "--robots", "3", "--duration", "1", "--organize", "10", "--seed", "2", "--record", str(record))
+    proc = subprocess.run(_petswarm(*argv), capture_output=True, text=True, timeout=120)
+    # the protocol did what it should (Table 2: fewer available than asked, so all of them join): not a failure
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    warning = next((line for line in proc.stderr.splitlines() if "warning" in line), "")
+    assert "--organize 10" in warning and "2" in warning, proc.stderr
+    summary = json.loads((record / "summary.json").read_text())
+    assert len(summary["organization"]["members"]) == 2
+    [note] = summary["notes"]
+    assert "--organize 10" in note and "at most 2 can join" in note
+    assert f"note: {note}" in proc.stdout and proc.stdout.rstrip().endswith("OK")

@@ -1,7 +1,7 @@
 """The surround formation, process-level: a hub, a user process wearing an IR beacon and 20 robot processes,
 each robot sensing its neighbours and the human only through IR beacons and obstacles through ultrasonic.
 
-The spec's claim (spec/surround-swarm.md): past the cylinder (1.0 m) and through the corridor (1.2 m) no
+The paper's claim (docs/SURROUND.md): past the cylinder (1.0 m) and through the corridor (1.2 m) no
 collisions, the swarm stays connected, and r returns to r*. Past the cylinder the process emulation keeps
 the swarm connected at r* and with its human (tested here). Contacts are 0-1 per process run, so "no
 collisions" is asserted in model time instead (tests/unit/test_bench_surround.py: the same robot code on

@@ -65,7 +65,7 @@ def test_a_partition_blocks_reception_interference_and_carrier_sense():
     [
         ({"kind": "flood"}, "kind must be"),
         ({"kind": "loss", "p": 2}, "probability"),
-        ({"kind": "loss", "group": ["a"]}, "takes"),
+        ({"kind": "loss", "group": ["a"]}, "unknown key .group."),
         ({"kind": "partition"}, "needs a group"),
         ({"kind": "loss", "link": ["a"]}, "pair"),
     ],

@@ -197,12 +197,12 @@ def test_burst_and_delay_are_logged_with_their_parameters():
         ({"kind": "delay", "ms": 1, "jitter_ms": float("nan")}, "jitter_ms must be in"),
         ({"kind": "delay", "ms": 1, "jitter": "pink"}, "jitter must be one of"),
         ({"kind": "delay", "ms": 0}, "delays nothing"),
-        ({"kind": "delay", "ms": 1, "p": 0.5}, "takes"),
+        ({"kind": "delay", "ms": 1, "p": 0.5}, "unknown key .p."),
         ({"kind": "burst", "p_gb": 1.5}, "p_gb must be a probability"),
         ({"kind": "burst", "p_bg": 0}, "first burst never ends"),
         ({"kind": "burst", "p_gb": 0}, "never loses"),
         ({"kind": "burst", "loss_bad": 0}, "never loses"),
-        ({"kind": "burst", "sigma": 1}, "takes"),
+        ({"kind": "burst", "sigma": 1}, "unknown key .sigma."),
     ],
 )
 def test_absurd_delay_and_burst_specs_are_refused_with_a_reason(spec, reason):

@@ -274,7 +274,7 @@ def test_bad_input_is_refused_clearly():
 def test_config_loads_validates_and_round_trips():
     assert IrConfig.from_dict(CONFIG.to_dict()) == CONFIG
     assert IrConfig.from_dict({"relative_noise": 0.05}).relative_noise == 0.05
-    with pytest.raises(ValueError, match="unknown keys"):
+    with pytest.raises(ValueError, match="unknown key "):
         IrConfig.from_dict({"powr": 1})
     with pytest.raises(ValueError, match="max_range_m"):
         IrConfig.from_dict({"max_range_m": 0.05})

@@ -91,7 +91,7 @@ def test_bad_input_is_refused_clearly():
 def test_config_loads_validates_and_round_trips():
     assert LfConfig.from_dict(CONFIG.to_dict()) == CONFIG
     assert LfConfig.from_dict({"noise_db": 1.5}).noise_db == 1.5
-    with pytest.raises(ValueError, match="unknown keys"):
+    with pytest.raises(ValueError, match="unknown key "):
         LfConfig.from_dict({"noise": 1})
     for field, value in (
         ("noise_db", -1),

@@ -107,7 +107,7 @@ def test_counters_add_up_at_every_receiver(seed, sends):
 
 
 def test_config_rejects_unknown_keys_and_bad_values():
-    with pytest.raises(ValueError, match="unknown keys"):
+    with pytest.raises(ValueError, match="unknown key "):
         MediumConfig.from_dict({"mac": {"min_bee": 3}})
     with pytest.raises(ValueError, match="probability"):
         MediumConfig.from_dict({"loss": {"base": 1.5}})

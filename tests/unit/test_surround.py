@@ -30,7 +30,7 @@ def test_config_rejects_bad_fields_by_name_and_round_trips() -> None:
         SurroundConfig(avoidance_m=2.0)
     with pytest.raises(ValueError, match="inertia"):
         SurroundConfig(inertia=1.0)
-    with pytest.raises(ValueError, match="unknown keys"):
+    with pytest.raises(ValueError, match="unknown key "):
         SurroundConfig.from_dict({"sigth_m": 1.0})
     config = SurroundConfig(surround_force=1.0)
     assert SurroundConfig.from_dict(config.to_dict()) == config

@@ -115,7 +115,7 @@ def test_a_scenarios_surround_table_is_checked_and_passes_the_law_settings() -> 
     scenario = parse({"surround": {"enabled": True, "drag": 0.6}})
     assert scenario.surround_enabled and scenario.surround_law() == {"drag": 0.6}
     assert not parse({}).surround_enabled
-    with pytest.raises(ValueError, match="unknown keys"):
+    with pytest.raises(ValueError, match="unknown key "):
         parse({"surround": {"enabled": True, "stifness": 8}})
     with pytest.raises(ValueError, match=r"surround\.enabled"):
         parse({"surround": {"enabled": "yes"}})

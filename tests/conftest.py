@@ -1,0 +1,43 @@
+"""Every test keeps its run records out of the working tree: ``./runs`` is for people's runs.
+
+``petswarm run`` and ``petswarm experiment`` write to ``$PETSWARM_RUNS`` (default ``./runs``) unless given
+``--record`` / ``--out``; the whole session points it into pytest's temporary directory, and the child
+processes the tests start inherit it. Each test then checks that it left nothing new in ``./runs``.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="session", autouse=True)
+def run_records_in_tmp(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
+    """``PETSWARM_RUNS`` in pytest's temporary directory for the whole session."""
+    runs = tmp_path_factory.mktemp("runs")
+    before = os.environ.get("PETSWARM_RUNS")
+    os.environ["PETSWARM_RUNS"] = str(runs)
+    yield runs
+    if before is None:
+        os.environ.pop("PETSWARM_RUNS", None)
+    else:
+        os.environ["PETSWARM_RUNS"] = before
+
+
+def _listing(folders: set[Path]) -> set[Path]:
+    return {entry for folder in folders if folder.is_dir() for entry in folder.iterdir()}
+
+
+@pytest.fixture(autouse=True)
+def no_records_in_the_working_tree() -> Iterator[None]:
+    """Fail the test that leaves a new entry in ``./runs`` (of the repository or of the current directory)."""
+    folders = {ROOT / "runs", Path.cwd() / "runs"}
+    before = _listing(folders)
+    yield
+    new = sorted(str(p) for p in _listing(folders) - before)
+    assert not new, f"this test left run records in the working tree: {new} (pass --record/--out under tmp_path)"

@@ -1,0 +1,27 @@
+"""Where run records go: ``--record``, else ``$PETSWARM_RUNS``, else ``./runs``; the suite keeps them in tmp."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+from cli.records import RunRecord, runs_dir
+from cli.run import RunOptions
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_a_record_goes_under_petswarm_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("PETSWARM_RUNS", str(tmp_path / "elsewhere"))
+    record = RunRecord.create(RunOptions(robots=1, seed=7, duration=1.0, ping_interval=0.5), "w", "tcp/x:1")
+    assert record.path.parent == tmp_path / "elsewhere" and record.path.name.endswith("-7")
+    assert (record.path / "manifest.json").exists()
+    monkeypatch.delenv("PETSWARM_RUNS")
+    assert runs_dir() == Path("runs")
+
+
+def test_the_suite_keeps_run_records_out_of_the_working_tree() -> None:
+    runs = Path(os.environ["PETSWARM_RUNS"]).resolve()  # tests/conftest.py sets it for the whole session
+    assert not runs.is_relative_to(ROOT.resolve()) and not runs.is_relative_to(Path.cwd().resolve())
