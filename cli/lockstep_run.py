@@ -19,7 +19,7 @@ from cli.run import RunContext, RunOptions, progress, supervise
 from petswarm.clock import LockstepLoop
 from petswarm.control import RelayControl
 from petswarm.scenario import Scenario
-from radio_hub.interface import RadioClient
+from radio_hub.interface import RadioClient, query_hub
 from radio_hub.lockstep import LockstepLink
 
 
@@ -53,6 +53,7 @@ def run_lockstep(opts: RunOptions, scenario: Scenario | None) -> int:
         finally:
             clock["model_time_s"] = loop.time()
             loop.close()
+        summary["hub_process"] = query_hub(ctx.session, ctx.keys.stats, timeout=10.0).get("process")
         return summary
 
     def after_stop(summary: dict[str, Any], record: RunRecord) -> None:

@@ -351,6 +351,11 @@ def build_parser() -> argparse.ArgumentParser:
             "surround", help="surround scenarios in model time through each robot's own pipeline (seeds, plot)"
         )
     )
+    from cli.bench_scale import add_arguments as add_bench_scale_arguments
+
+    add_bench_scale_arguments(
+        bench_sub.add_parser("scale", help="wall time per model second, memory and digests vs robots, per clock")
+    )
     return parser
 
 
@@ -640,6 +645,10 @@ def _bench(args: argparse.Namespace) -> int:
         from cli.bench_surround import bench_surround
 
         return bench_surround(args)
+    if args.bench == "scale":
+        from cli.bench_scale import bench_scale
+
+        return bench_scale(args)
     if args.bench == "organize":
         from cli.bench_organize import bench_organize
 

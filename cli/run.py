@@ -430,6 +430,7 @@ def summarise(
             "transport_gaps": robot.get("transport_gaps", 0),
             "pings_sent": robot.get("pings_sent", 0),
             "pings_answered": robot.get("pings_answered", 0),
+            "peak_rss_mb": robot.get("peak_rss_mb"),
         }
     everyone = set(range(1, opts.robots + 1))
     all_pairs = all(set(n["heard_from"]) >= everyone - {rid} for rid, n in enumerate(nodes.values(), 1))
@@ -450,6 +451,7 @@ def summarise(
         "nodes": nodes,
         "channels": stats["channels"],
         "hub": stats["hub"],
+        "hub_process": stats.get("process"),
         "ir": stats["ir"],
         "medium": stats["config"],
     }

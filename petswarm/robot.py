@@ -9,6 +9,7 @@ from __future__ import annotations
 import asyncio
 import math
 import os
+import resource
 import signal
 import sys
 from collections import Counter, deque
@@ -372,6 +373,7 @@ class Robot:
         return {
             "robot_id": self.config.robot_id,
             "pid": os.getpid(),
+            "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
             "radio": _identity_dict(radio.identity),
             "uptime_s": round(clock.now() - self.started, 3),
             "pings_sent": self.pings_sent,

@@ -15,6 +15,7 @@ from __future__ import annotations
 import contextlib
 import json
 import math
+import resource
 import sys
 import tomllib
 from collections import deque
@@ -50,6 +51,12 @@ HUB = "hub"
 """The name a ``Relay`` gives the environment itself."""
 NODE_KINDS = ("robot", "user", "control")
 """``control``: a run's orchestrator in model and lockstep time (no body, no radio; it only relays)."""
+
+
+def process_usage() -> dict[str, float]:
+    """The calling process's CPU seconds and peak resident memory (MB): what a shell adds to its stats."""
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return {"cpu_s": round(usage.ru_utime + usage.ru_stime, 3), "peak_rss_mb": round(usage.ru_maxrss / 1024, 1)}
 
 
 class Downlink(Protocol):

@@ -32,6 +32,7 @@ from radio_hub.environment import (
     EnvironmentConfig,
     environment_from_dict,
     load_config,
+    process_usage,
 )
 from radio_hub.keys import Keys
 from radio_hub.light import IrConfig
@@ -221,7 +222,7 @@ class RadioHub:
 
     def stats(self) -> dict[str, Any]:
         """The environment's counters, with this hub's world name and model clock."""
-        return {"world": self.keys.world, **self.env.stats(self.now_us())}
+        return {"world": self.keys.world, **self.env.stats(self.now_us()), "process": process_usage()}
 
 
 def _tight_timer_slack() -> None:

@@ -37,7 +37,7 @@ import zenoh
 
 from radio_hub import wire
 from radio_hub.coordinator import MODEL_EPOCH_US, Coordinator
-from radio_hub.environment import EnvironmentConfig
+from radio_hub.environment import EnvironmentConfig, process_usage
 from radio_hub.keys import Keys
 from radio_hub.port import HubUnavailable
 from radio_hub.zenoh_link import ZenohLink, reliable_publisher, session_config
@@ -243,6 +243,7 @@ class LockstepHub:
             "nodes": len(self.nodes),
             "dead": self.dead,
         }
+        stats["process"] = process_usage()
         return stats
 
     # -- inputs ---------------------------------------------------------------------------------------------
