@@ -240,10 +240,8 @@ class Environment:
             self._record_world(now)
 
     def _send_sensors(self, now: int) -> None:
-        for node_id, kind in self._kinds.items():
-            if kind != "robot" or node_id not in self.world.bodies:
-                continue
-            own = self.world.sense(node_id, self._body_rng)
+        robots = [n for n, kind in self._kinds.items() if kind == "robot" and n in self.world.bodies]
+        for node_id, own in zip(robots, self.world.sense_many(robots, self._body_rng), strict=True):
             self._send_down(
                 node_id,
                 wire.Sensors(

@@ -182,6 +182,9 @@ class World:
         self.t = 0.0
         self._segments = _segment_array(self.obstacles)
         self._circles = np.array([(o.x, o.y, o.r) for o in self.obstacles if o.kind == "circle"]).reshape(-1, 3)
+        self._ultrasonic_rad = np.array([math.radians(a) for a in self.config.ultrasonic_angles_deg], dtype=float)
+        half = math.radians(self.config.ultrasonic_half_beam_deg)
+        self._ultrasonic_spread = np.array((-half, 0.0, half) if half > 0 else (0.0,))
 
     def set_obstacles(self, obstacles: list[Obstacle]) -> None:
         """Replace the obstacles (a scenario loaded at run time)."""
@@ -296,39 +299,79 @@ class World:
 
     def sense(self, body_id: str, rng: np.random.Generator) -> OwnSensors:
         """A robot's ultrasonic ranges, AHRS yaw and wheel odometry, with their noise."""
-        body = self.bodies[body_id]
+        return self.sense_many([body_id], rng)[0]
+
+    def sense_many(self, body_ids: list[str], rng: np.random.Generator) -> list[OwnSensors]:
+        """``sense`` for several robots: one ray computation for all, the noise drawn body by body in the
+        order given (the same draws as ``sense`` called for each in turn)."""
         cfg = self.config
-        ranges = self.ultrasonic(body_id)
-        seen = ~np.isnan(ranges)
-        ranges[seen] = np.maximum(0.02, ranges[seen] + rng.normal(0.0, cfg.ultrasonic_noise_m, int(seen.sum())))
-        yaw = _wrap(body.pose[2] + rng.normal(0.0, math.radians(cfg.yaw_noise_deg)))
-        c, s = math.cos(body.pose[2]), math.sin(body.pose[2])
-        vx, vy, omega = body.velocity
-        odometry = np.array([c * vx + s * vy, -s * vx + c * vy, omega])
-        odometry = odometry * (1.0 + rng.normal(0.0, cfg.odometry_noise, 3))
-        return OwnSensors(ranges, yaw, odometry)
+        out = []
+        for body_id, ranges in zip(body_ids, self.ultrasonic_many(body_ids), strict=True):
+            body = self.bodies[body_id]
+            seen = ~np.isnan(ranges)
+            ranges[seen] = np.maximum(0.02, ranges[seen] + rng.normal(0.0, cfg.ultrasonic_noise_m, int(seen.sum())))
+            yaw = _wrap(body.pose[2] + rng.normal(0.0, math.radians(cfg.yaw_noise_deg)))
+            c, s = math.cos(body.pose[2]), math.sin(body.pose[2])
+            vx, vy, omega = body.velocity
+            odometry = np.array([c * vx + s * vy, -s * vx + c * vy, omega])
+            odometry = odometry * (1.0 + rng.normal(0.0, cfg.odometry_noise, 3))
+            out.append(OwnSensors(ranges, yaw, odometry))
+        return out
 
     def ultrasonic(self, body_id: str) -> np.ndarray:
         """Noise-free range of the nearest echo in each sensor's cone (nan when nothing within range)."""
-        body = self.bodies[body_id]
+        return self.ultrasonic_many([body_id])[0]
+
+    def ultrasonic_many(self, body_ids: list[str]) -> np.ndarray:
+        """``ultrasonic`` of several bodies, shape (bodies, sensors): every ray of every body against every
+        circle (obstacles and the other bodies) and segment in one array computation.
+
+        Each sensor casts three rays (the cone's edges and its axis); a ray's echo is the nearest surface it
+        meets, measured from the body's skin, and a sensor reports the nearest of its rays within range."""
         cfg = self.config
-        half = math.radians(cfg.ultrasonic_half_beam_deg)
-        spread = (-half, 0.0, half) if half > 0 else (0.0,)
-        out = np.full(len(cfg.ultrasonic_angles_deg), np.nan)
-        others = np.array(
-            [(*b.pose[:2], b.radius) for b in self.bodies.values() if b.body_id != body_id], dtype=float
-        ).reshape(-1, 3)
-        circles = np.vstack([self._circles, others])
-        for i, angle in enumerate(cfg.ultrasonic_angles_deg):
-            directions = body.pose[2] + math.radians(angle) + np.array(spread)
-            hits = [
-                _ray_hit(body.pose[:2], d, circles, self._segments, body.radius, cfg.ultrasonic_range_m)
-                for d in directions
-            ]
-            nearest = min(hits)
-            if nearest <= cfg.ultrasonic_range_m:
-                out[i] = nearest
-        return out
+        n = len(body_ids)
+        bodies = [self.bodies[b] for b in body_ids]
+        everyone = list(self.bodies.values())
+        poses = np.array([b.pose for b in bodies], dtype=float).reshape(n, 3)
+        skin = np.array([b.radius for b in bodies], dtype=float)
+        origin = poses[:, :2]
+        # ray directions (bodies, sensors, rays): heading + sensor angle + spread, as one sensor's cone
+        directions = (poses[:, 2, None] + self._ultrasonic_rad)[:, :, None] + self._ultrasonic_spread
+        unit = np.stack([np.cos(directions), np.sin(directions)], axis=-1)  # (n, S, K, 2)
+        best = np.full(directions.shape, np.inf)
+        bodies_xyr = np.array([(*b.pose[:2], b.radius) for b in everyone], dtype=float).reshape(-1, 3)
+        circles = np.vstack([self._circles, bodies_xyr])
+        if len(circles):
+            # a body does not echo off itself
+            not_self = np.ones((n, len(circles)), dtype=bool)
+            index = {b.body_id: len(self._circles) + k for k, b in enumerate(everyone)}
+            not_self[np.arange(n), [index[b] for b in body_ids]] = False
+            rel = circles[None, :, :2] - origin[:, None, :]  # (n, M, 2)
+            # one matrix-vector product per ray (as rel @ d for a single ray)
+            along = np.matmul(rel[:, None, None], unit[..., None])[..., 0]  # (n, S, K, M)
+            perp2 = (rel[..., 0] * rel[..., 0] + rel[..., 1] * rel[..., 1])[:, None, None, :] - along**2
+            r2 = circles[:, 2] ** 2
+            hit = (perp2 <= r2) & (along > 0) & not_self[:, None, None, :]
+            with np.errstate(invalid="ignore"):
+                t = along - np.sqrt(r2 - perp2)
+            best = np.minimum(best, np.where(hit, np.maximum(t, 0.0), np.inf).min(axis=-1))
+        segments = self._segments
+        if len(segments):
+            e = segments[:, 2:] - segments[:, :2]  # (G, 2)
+            dx, dy = unit[..., 0, None], unit[..., 1, None]  # (n, S, K, 1)
+            denom = dx * e[:, 1] - dy * e[:, 0]  # (n, S, K, G)
+            ok = np.abs(denom) > 1e-12
+            w = segments[None, :, :2] - origin[:, None, :]  # (n, G, 2)
+            w0, w1 = w[:, None, None, :, 0], w[:, None, None, :, 1]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = (w0 * e[:, 1] - w1 * e[:, 0]) / denom
+                u = (w0 * dy - w1 * dx) / denom
+            hit = ok & (t > 0) & (u >= 0) & (u <= 1)
+            best = np.minimum(best, np.where(hit, t, np.inf).min(axis=-1))
+        reach = best - skin[:, None, None]
+        reach = np.where(reach <= cfg.ultrasonic_range_m, reach, np.inf)
+        nearest = reach.min(axis=-1)
+        return np.where(nearest <= cfg.ultrasonic_range_m, nearest, np.nan)
 
     def poses(self) -> dict[str, tuple[float, float, float]]:
         """Every body's pose (x, y, yaw) as plain floats, by id (for the IR light and the radio ranges)."""
@@ -350,36 +393,6 @@ class World:
             }
             for b in self.bodies.values()
         ]
-
-
-def _ray_hit(
-    origin: np.ndarray, direction: float, circles: np.ndarray, segments: np.ndarray, skin: float, max_range: float
-) -> float:
-    """Distance from the body's skin to the first thing the ray meets (inf when nothing)."""
-    d = np.array([math.cos(direction), math.sin(direction)])
-    best = math.inf
-    if len(circles):
-        rel = circles[:, :2] - origin
-        along = rel @ d
-        perp2 = np.einsum("ij,ij->i", rel, rel) - along**2
-        r2 = circles[:, 2] ** 2
-        hit = (perp2 <= r2) & (along > 0)
-        if hit.any():
-            t = along[hit] - np.sqrt(r2[hit] - perp2[hit])
-            best = min(best, float(np.min(np.maximum(t, 0.0))))
-    if len(segments):
-        a, b = segments[:, :2], segments[:, 2:]
-        e = b - a
-        denom = d[0] * e[:, 1] - d[1] * e[:, 0]
-        ok = np.abs(denom) > 1e-12
-        w = a - origin
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (w[:, 0] * e[:, 1] - w[:, 1] * e[:, 0]) / denom
-            u = (w[:, 0] * d[1] - w[:, 1] * d[0]) / denom
-        hit = ok & (t > 0) & (u >= 0) & (u <= 1)
-        if hit.any():
-            best = min(best, float(np.min(t[hit])))
-    return best - skin if best - skin <= max_range else math.inf
 
 
 def _segment_array(obstacles: list[Obstacle]) -> np.ndarray:
