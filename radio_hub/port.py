@@ -15,7 +15,7 @@ import contextlib
 import itertools
 import secrets
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
 import numpy as np
@@ -120,6 +120,16 @@ class BeaconSweep:
     t_us: int
     readings: dict[str, np.ndarray]
     gains: dict[str, float]
+    block: np.ndarray | None = field(default=None, compare=False, repr=False)
+    """The readings as one (sources, 12) array in ``readings``' order, when they came as one."""
+
+    def arrays(self) -> tuple[list[str], np.ndarray, list[float]]:
+        """The sources, their readings (sources, 12) and their gains (1 where none was given), in one order."""
+        names = list(self.readings)
+        block = self.block
+        if block is None or len(block) != len(names):
+            block = np.array([self.readings[n] for n in names], dtype=float).reshape(-1, IR_RECEIVERS)
+        return names, block, [self.gains.get(n, 1.0) for n in names]
 
 
 @dataclass(frozen=True)
@@ -497,8 +507,10 @@ class RadioClient:
         if not all(0 < g <= 1 for g in gains):
             self.malformed += 1
             return
-        readings = dict(zip(msg.sources, block.reshape(-1, IR_RECEIVERS), strict=True))
-        self.beacons = BeaconSweep(msg.t_us, readings, dict(zip(msg.sources, map(float, gains), strict=True)))
+        block = block.reshape(-1, IR_RECEIVERS)
+        readings = dict(zip(msg.sources, block, strict=True))
+        gains = dict(zip(msg.sources, map(float, gains), strict=True))
+        self.beacons = BeaconSweep(msg.t_us, readings, gains, block if len(readings) == len(block) else None)
 
     def _hub_seen(self, present: bool) -> None:
         self.hub_present = present
