@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from radio_hub.chaos import Chaos
-from radio_hub.light import IrConfig, IrMode, OverlapCounter, beacon_gain, receiver_gains, receiver_readings, sense
+from radio_hub.light import IrConfig, IrMode, OverlapCounter, beacon_gains, receiver_gains, receiver_readings, sense
 
 Pose = tuple[float, float, float]
 """x (m), y (m), heading (rad)."""
@@ -79,6 +79,7 @@ class IrAir:
         names = [n for n, mode in self.counter.modes.items() if mode is IrMode.BEACON and n in poses]
         if len(names) < 2:
             return {}
+        names_array = np.array(names, dtype=object)
         at = np.array([poses[n] for n in names], dtype=float)
         dx = at[None, :, 0] - at[:, None, 0]
         dy = at[None, :, 1] - at[:, None, 1]
@@ -88,16 +89,29 @@ class IrAir:
         light = strength[..., None] * receiver_gains(np.arctan2(dy, dx) - at[:, None, 2])
         seen = strength > 0
         out: dict[str, tuple[list[str], np.ndarray, list[float]]] = {}
-        for row, node in enumerate(names):
-            if not seen[row].any():
-                continue
-            lit = light[row, seen[row]]
-            gains = [beacon_gain(float(peak), self.config) for peak in lit.max(axis=1)]
-            readings = sense(lit * np.array(gains)[:, None], self.config, self.rng)
-            if chaos is not None and chaos.faults:
+        lit_rows = [row for row in range(len(names)) if seen[row].any()]
+        if not lit_rows:
+            return out
+        if chaos is not None and any(f.kind in ("ir_blind", "ir_noise") for f in chaos.faults.values()):
+            # a disturbed module draws its noise right after its own readings: module by module
+            for row in lit_rows:
+                node = names[row]
+                lit = light[row, seen[row]]
+                gains = beacon_gains(lit.max(axis=1), self.config)
+                readings = sense(lit * gains[:, None], self.config, self.rng)
                 readings = self._disturb(readings, [node] * len(readings), chaos)
-            sources = [n for n, s in zip(names, seen[row], strict=True) if s]
-            out[node] = (sources, readings.astype(np.float32), gains)
+                out[node] = (names_array[seen[row]].tolist(), readings.astype(np.float32), gains.tolist())
+            return out
+        # every module's sweep in one array, in module order: the same draws as module by module
+        lit = light[seen]  # (pairs, 12), rows of one module together, modules in order
+        gains = beacon_gains(lit.max(axis=1), self.config)
+        readings = sense(lit * gains[:, None], self.config, self.rng).astype(np.float32)
+        counts = np.count_nonzero(seen, axis=1)
+        start = 0
+        for row in lit_rows:
+            end = start + int(counts[row])
+            out[names[row]] = (names_array[seen[row]].tolist(), readings[start:end], gains[start:end].tolist())
+            start = end
         return out
 
     def _beacon_strength(self, distance: np.ndarray, names: list[str]) -> np.ndarray:

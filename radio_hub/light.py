@@ -203,6 +203,16 @@ def beacon_gain(peak_light: float, config: IrConfig) -> float:
     return BEACON_GAINS[-1]
 
 
+def beacon_gains(peak_light: ArrayLike, config: IrConfig) -> np.ndarray:
+    """``beacon_gain`` of every peak in an array at once."""
+    peak = np.asarray(peak_light, dtype=float)
+    limit = AGC_HEADROOM * config.saturation_counts - config.ambient_counts
+    gains = np.full(peak.shape, BEACON_GAINS[-1])
+    for gain in BEACON_GAINS[-2::-1]:  # from the smallest up: the largest gain that fits wins
+        gains = np.where(gain * peak <= limit, gain, gains)
+    return gains
+
+
 # == who is transmitting ==============================================================================
 
 
