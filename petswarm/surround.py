@@ -160,7 +160,7 @@ class SurroundLaw:
         if not dt > 0:
             raise ValueError(f"dt must be > 0, not {dt!r}")
         c = self.config
-        near = neighbour_seen & (np.linalg.norm(neighbours, axis=-1) <= c.sight_m)
+        near = neighbour_seen & (_norm(neighbours) <= c.sight_m)
         g, count = self._centroid(neighbours, near, dt)
         rate, accel = self._derivatives(g, count, dt)
         f_r = c.inertia * accel + c.damping * rate + c.stiffness * g
@@ -197,17 +197,17 @@ class SurroundLaw:
     ) -> np.ndarray:
         points = np.concatenate([neighbours, obstacles], axis=1)
         seen = np.concatenate([near, obstacle_seen], axis=1)
-        distance = np.linalg.norm(points, axis=-1)
+        distance = _norm(points)
         inside = seen & (distance <= self.config.avoidance_m) & (distance > 0)
         unit = points / np.maximum(distance, 1e-12)[..., None]
         push = np.where(inside, self.config.repulsion / np.maximum(distance, MIN_RANGE_M) ** 2, 0.0)[..., None] * unit
         return -push.sum(axis=1)
 
     def _surround(self, g: np.ndarray, human: np.ndarray, human_seen: np.ndarray, velocity: np.ndarray) -> np.ndarray:
-        human_distance = np.linalg.norm(human, axis=-1)
+        human_distance = _norm(human)
         toward_human = human / np.maximum(human_distance, 1e-9)[:, None]
-        g_unit = g / np.maximum(np.linalg.norm(g, axis=-1), 1e-9)[:, None]
-        speed = np.linalg.norm(velocity, axis=-1)
+        g_unit = g / np.maximum(_norm(g), 1e-9)[:, None]
+        speed = _norm(velocity)
         v_unit = velocity / np.maximum(speed, 1e-9)[:, None]
         # cos of a bearing difference is the dot product of unit vectors; an undefined bearing (g_i = 0,
         # or the robot still) gives cos = 0: neither for nor against.
@@ -371,8 +371,14 @@ def _pair_distances(p: np.ndarray) -> np.ndarray:
     return np.linalg.norm(p[:, None, :] - p[None, :, :], axis=-1)
 
 
+def _norm(v: np.ndarray) -> np.ndarray:
+    """Euclidean norm along the last axis, as ``np.linalg.norm(v, axis=-1)`` computes it (sqrt of the
+    summed squares), without its Python overhead: the robot's law calls it on tiny arrays at every step."""
+    return np.sqrt(np.add.reduce(v * v, axis=-1))
+
+
 def _clip_norm(v: np.ndarray, limit: float) -> np.ndarray:
-    norm = np.linalg.norm(v, axis=-1, keepdims=True)
+    norm = np.sqrt(np.add.reduce(v * v, axis=-1, keepdims=True))
     return v * np.minimum(1.0, limit / np.maximum(norm, 1e-12))
 
 

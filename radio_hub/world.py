@@ -235,23 +235,76 @@ class World:
         if dt <= 0:
             return
         cfg = self.config
-        for body in self.bodies.values():
-            if body.kind != "robot":
-                continue
-            wanted = body.command if t - body.command_t <= cfg.command_timeout_s else np.zeros(3)
-            yaw = body.pose[2]
-            c, s = math.cos(yaw), math.sin(yaw)
-            target = np.array([c * wanted[0] - s * wanted[1], s * wanted[0] + c * wanted[1], wanted[2]])
-            target = _limit_speed(target, cfg.max_speed_mps, cfg.max_omega_rps)
-            change = target - body.velocity
-            change[:2] = _clip_norm(change[:2], cfg.max_accel_mps2 * dt)
-            change[2] = float(np.clip(change[2], -cfg.max_alpha_rps2 * dt, cfg.max_alpha_rps2 * dt))
-            body.velocity = body.velocity + change
-            body.pose = body.pose + body.velocity * dt
-            body.pose[2] = _wrap(body.pose[2])
+        robots = [b for b in self.bodies.values() if b.kind == "robot"]
+        if robots:
+            # every robot at once, element by element the arithmetic of one
+            pose = np.array([b.pose for b in robots], dtype=float)
+            velocity = np.array([b.velocity for b in robots], dtype=float)
+            fresh = np.array([t - b.command_t <= cfg.command_timeout_s for b in robots])
+            wanted = np.where(fresh[:, None], np.array([b.command for b in robots], dtype=float), 0.0)
+            c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+            target = np.stack(
+                [c * wanted[:, 0] - s * wanted[:, 1], s * wanted[:, 0] + c * wanted[:, 1], wanted[:, 2]], axis=1
+            )
+            target[:, :2] = _clip_norms(target[:, :2], cfg.max_speed_mps)
+            target[:, 2] = np.clip(target[:, 2], -cfg.max_omega_rps, cfg.max_omega_rps)
+            change = target - velocity
+            change[:, :2] = _clip_norms(change[:, :2], cfg.max_accel_mps2 * dt)
+            change[:, 2] = np.clip(change[:, 2], -cfg.max_alpha_rps2 * dt, cfg.max_alpha_rps2 * dt)
+            velocity = velocity + change
+            pose = pose + velocity * dt
+            pose[:, 2] = (pose[:, 2] + math.pi) % (2 * math.pi) - math.pi
+            for k, body in enumerate(robots):
+                body.velocity, body.pose = velocity[k], pose[k]
         self._settle_contacts()
 
     def _settle_contacts(self) -> None:
+        if not self._may_touch():
+            contacts: set[tuple[str, str]] = set()
+        else:
+            contacts = self._settled_contacts()
+        for pair in sorted(contacts - self._contacts):
+            self.collisions += 1
+            self.collision_log.append({"t": round(self.t, 4), "a": pair[0], "b": pair[1]})
+        self._contacts = contacts
+
+    def _may_touch(self) -> bool:
+        """Whether any two bodies, or a body and an obstacle, are within a hair of touching (one array
+        computation; when none is, settling would move nothing and find no contact)."""
+        bodies = list(self.bodies.values())
+        if not bodies:
+            return False
+        xyr = np.array([(b.pose[0], b.pose[1], b.radius) for b in bodies], dtype=float)
+        p, radius = xyr[:, :2], xyr[:, 2]
+        slack = 1e-6
+        gap = p[:, None, :] - p[None, :, :]
+        reach = radius[:, None] + radius[None, :] + slack
+        close = np.hypot(gap[..., 0], gap[..., 1]) < reach
+        np.fill_diagonal(close, False)
+        if close.any():
+            return True
+        circles = self._circles
+        if len(circles):
+            gap = p[:, None, :] - circles[None, :, :2]
+            if (np.hypot(gap[..., 0], gap[..., 1]) < radius[:, None] + circles[None, :, 2] + slack).any():
+                return True
+        segments = self._segments
+        if len(segments):
+            a, e = segments[:, :2], segments[:, 2:] - segments[:, :2]
+            length2 = np.einsum("ij,ij->i", e, e)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                u = np.where(length2 > 0, np.einsum("bsj,sj->bs", p[:, None, :] - a[None], e) / length2, 0.0)
+            closest = a[None] + np.clip(u, 0.0, 1.0)[..., None] * e[None]
+            gap = p[:, None, :] - closest
+            if (np.hypot(gap[..., 0], gap[..., 1]) < radius[:, None] + slack).any():
+                return True
+        for o in self.obstacles:  # a centre inside a rectangle is pushed out whatever its distance to the sides
+            if o.kind == "rect" and ((o.x0 < p[:, 0]) & (p[:, 0] < o.x1) & (o.y0 < p[:, 1]) & (p[:, 1] < o.y1)).any():
+                return True
+        return False
+
+    def _settled_contacts(self) -> set[tuple[str, str]]:
+        """Push overlapping bodies apart and out of obstacles, pair by pair; the contacts found."""
         contacts: set[tuple[str, str]] = set()
         bodies = list(self.bodies.values())
         for i, a in enumerate(bodies):
@@ -266,10 +319,7 @@ class World:
                 contacts.add((a.body_id, f"obstacle-{k}"))
                 if a.kind == "robot":
                     a.pose[:2] += push
-        for pair in sorted(contacts - self._contacts):
-            self.collisions += 1
-            self.collision_log.append({"t": round(self.t, 4), "a": pair[0], "b": pair[1]})
-        self._contacts = contacts
+        return contacts
 
     def _obstacle_pushes(self, body: Body) -> list[tuple[int, np.ndarray]]:
         """(obstacle index, push-out vector) for every obstacle the body overlaps."""
@@ -429,16 +479,11 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return v / n if n > 1e-12 else np.array([1.0, 0.0])
 
 
-def _clip_norm(v: np.ndarray, limit: float) -> np.ndarray:
-    n = float(np.hypot(*v))
-    return v * (limit / n) if n > limit else v
-
-
-def _limit_speed(v: np.ndarray, max_speed: float, max_omega: float) -> np.ndarray:
-    out = v.copy()
-    out[:2] = _clip_norm(v[:2], max_speed)
-    out[2] = float(np.clip(v[2], -max_omega, max_omega))
-    return out
+def _clip_norms(v: np.ndarray, limit: float) -> np.ndarray:
+    """Every row of an (n, 2) array scaled down to the norm ``limit`` where it is longer (as v (limit / |v|))."""
+    n = np.hypot(v[:, 0], v[:, 1])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where((n > limit)[:, None], v * (limit / n)[:, None], v)
 
 
 def _wrap(angle: float) -> float:
