@@ -206,6 +206,8 @@ def lsq_fit(
     gain = np.cos(RECEIVER_AXES_RAD - bearing[:, None])
     start_usable = gain > 0
     start_predicted = strength[:, None] * gain
+    if not any_saturated and (noiseless or floor2 > 0) and np.isfinite(strengths).all():
+        return _lsq_unsaturated(strengths, start_usable, start_predicted, noiseless, floor2, relative)
     ab = start_predicted  # replaced by the first round's solution (below) before it is used as (a, b)
     fitted = None  # rows the fit has solved at least once (None: all of them)
     usable_count = np.zeros(len(strengths), dtype=int)
@@ -231,12 +233,7 @@ def lsq_fit(
                 weight = usable / (floor2 + (relative * predicted) ** 2)
             else:
                 weight = usable / (floor2 + (relative * np.maximum(predicted, 0.0)) ** 2)
-            sums = weight @ _NORMAL  # s_cc, s_cs, s_ss
-            y = (weight * strengths) @ _AXES.T  # y_c, y_s
-            s_cs = sums[:, 1:2]
-            det = sums[:, :1] * sums[:, 2:] - s_cs * s_cs
-            # (a, b) = (s_ss y_c - s_cs y_s, s_cc y_s - s_cs y_c) / det
-            solved = (sums[:, _CROSS] * y - s_cs * y[:, ::-1]) / det
+            solved = _solve(weight, strengths)
             ok = usable_count >= LSQ_MIN_RECEIVERS
             if round_ == 0 and not ok.all():
                 ab = strength[:, None] * np.stack([np.cos(bearing), np.sin(bearing)], axis=1)  # the start
@@ -246,6 +243,42 @@ def lsq_fit(
             ab = solved if ok.all() else np.where(ok[:, None], solved, ab)
     a, b = ab.T
     return np.hypot(a, b), np.arctan2(b, a), usable_count < LSQ_MIN_RECEIVERS
+
+
+def _lsq_unsaturated(
+    strengths: np.ndarray,
+    usable: np.ndarray,
+    predicted: np.ndarray,
+    noiseless: bool,
+    floor2: float,
+    relative: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``lsq_fit``'s rounds when no reading saturated and all are finite, from the start's receivers and
+    predicted strengths: every round then has at least five usable receivers for every sweep (a half plane
+    through the source holds five or six of the twelve axes), so none falls back and nothing is counted."""
+
+    def weights(usable: np.ndarray, predicted: np.ndarray) -> np.ndarray:
+        return usable.astype(float) if noiseless else usable / (floor2 + (relative * predicted) ** 2)
+
+    ab = _solve(weights(usable, predicted), strengths)
+    for _ in range(LSQ_ITERATIONS - 1):
+        predicted = ab @ _AXES
+        usable = predicted > 0
+        if not ab.all():  # a fit of exactly (0, 0) has bearing atan2(0, 0) = 0, and faces as that does
+            usable = np.where(~ab.any(axis=1)[:, None], _FACING_ZERO, usable)
+        ab = _solve(weights(usable, predicted), strengths)
+    a, b = ab.T
+    return np.hypot(a, b), np.arctan2(b, a), np.zeros(len(strengths), dtype=bool)
+
+
+def _solve(weight: np.ndarray, strengths: np.ndarray) -> np.ndarray:
+    """(a, b) per row (N, 2) minimising sum_k w_k (r_k - a cos_k - b sin_k)^2: the 2x2 normal equations."""
+    sums = weight @ _NORMAL  # s_cc, s_cs, s_ss
+    y = (weight * strengths) @ _AXES.T  # y_c, y_s
+    s_cs = sums[:, 1:2]
+    det = sums[:, :1] * sums[:, 2:] - s_cs * s_cs
+    # (a, b) = (s_ss y_c - s_cs y_s, s_cc y_s - s_cs y_c) / det
+    return (sums[:, _CROSS] * y - s_cs * y[:, ::-1]) / det
 
 
 def saturated_bearing(saturated: np.ndarray) -> np.ndarray:
