@@ -98,22 +98,24 @@ def estimate_many(
     saturated = raw >= config.saturation_counts
     fit = paper_fit if method == "paper" else lsq_fit
     strength, bearing, fallback = fit(strengths, saturated, config)
-    if fallback.any():
+    # (ufuncs and count_nonzero rather than the array methods: these arrays are small, the calls many)
+    if np.count_nonzero(fallback):
         strength = np.where(fallback, config.saturation_counts - config.ambient_counts, strength)
         bearing = np.where(fallback, saturated_bearing(saturated), bearing)
     return IrEstimates(
         bearing_rad=wrap_bearing(bearing),
         distance_m=distance_from_strength(strength, config, brightness),
         strength=strength,
-        valid=strengths.max(axis=1) > config.detection_threshold_counts,
-        saturated=saturated.any(axis=1),
+        valid=np.maximum.reduce(strengths, axis=1) > config.detection_threshold_counts,
+        saturated=np.logical_or.reduce(saturated, axis=1),
     )
 
 
 def wrap_bearing(bearing_rad: ArrayLike) -> np.ndarray:
     """Angles into [0, 2 pi) (np.mod alone gives 2 pi for tiny negative angles)."""
     wrapped = np.mod(np.asarray(bearing_rad, dtype=float), 2 * np.pi)
-    return np.where(wrapped >= 2 * np.pi, 0.0, wrapped)
+    full_turn = wrapped >= 2 * np.pi
+    return np.where(full_turn, 0.0, wrapped) if np.count_nonzero(full_turn) else wrapped
 
 
 def distance_from_strength(strength: ArrayLike, config: IrConfig, brightness: ArrayLike | None = None) -> np.ndarray:
@@ -128,17 +130,16 @@ def distance_from_strength(strength: ArrayLike, config: IrConfig, brightness: Ar
         power, max_range = _brighter(config, brightness)
     with np.errstate(divide="ignore"):
         d = np.sqrt(power / np.maximum(r, 0.0))
-    return np.clip(d, config.near_field_m, max_range)
+    return np.minimum(np.maximum(d, config.near_field_m), max_range)  # np.clip, without its overhead
 
 
 def _brighter(config: IrConfig, brightness: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-    """Per factor, the power and range of ``config.brighter(factor)`` (computed as it does)."""
-    factors = np.asarray(brightness, dtype=float).reshape(-1).tolist()
-    table = {f: (config.power_counts_at_1m * f, config.max_range_m * f**0.5) for f in set(factors)}
-    if any(not f > 0 for f in table):
-        raise ValueError(f"brightness must be > 0, got {sorted(table)}")
-    pairs = np.array([table[f] for f in factors], dtype=float).reshape(-1, 2)
-    return pairs[:, 0], pairs[:, 1]
+    """Per factor, the power and range of ``config.brighter(factor)``: P f and R sqrt(f) (``brighter`` takes
+    f ** 0.5, equal to sqrt(f) for the beacon gains times the person's power, and within an ulp for any f)."""
+    factors = np.asarray(brightness, dtype=float).reshape(-1)
+    if len(factors) and not np.minimum.reduce(factors) > 0:
+        raise ValueError(f"brightness must be > 0, got {sorted(set(factors.tolist()))}")
+    return config.power_counts_at_1m * factors, config.max_range_m * np.sqrt(factors)
 
 
 def paper_fit(
@@ -158,12 +159,13 @@ def paper_fit(
 def _paper(strengths: np.ndarray, saturated: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The paper's R and theta, with n (the strongest receiver) and where it saturated."""
     rows = np.arange(len(strengths))
-    n = np.argmax(strengths, axis=1)
+    n = strengths.argmax(axis=1)
     # r-1, r0, r1 in one gather: the sweep with its ends wrapped round, then three receivers from n - 1 on
     r_1, r0, r1 = strengths[:, _WRAPPED][rows[:, None], n[:, None] + _TRIO].T
     a = (r1 + r_1 + 2 * r0) / (2 * np.cos(SECTOR_RAD) + 2)
     b = (r1 - r_1) / (2 * np.sin(SECTOR_RAD))
-    return np.hypot(a, b), np.arctan2(b, a), n, saturated[rows, n]
+    strongest_saturated = saturated[rows, n] if np.count_nonzero(saturated) else np.zeros(len(rows), dtype=bool)
+    return np.hypot(a, b), np.arctan2(b, a), n, strongest_saturated
 
 
 _WRAPPED = np.r_[RECEIVERS - 1, np.arange(RECEIVERS), 0]
@@ -195,8 +197,8 @@ def lsq_fit(
     """
     strength, theta, n, paper_saturated = _paper(strengths, saturated)
     bearing = n * SECTOR_RAD + theta
-    any_saturated = bool(saturated.any())
-    if any_saturated and paper_saturated.any():
+    any_saturated = np.count_nonzero(saturated) > 0
+    if any_saturated and np.count_nonzero(paper_saturated):
         bearing = np.where(paper_saturated, saturated_bearing(saturated), bearing)
     unsaturated = ~saturated
     noiseless = config.noiseless
@@ -206,7 +208,7 @@ def lsq_fit(
     gain = np.cos(RECEIVER_AXES_RAD - bearing[:, None])
     start_usable = gain > 0
     start_predicted = strength[:, None] * gain
-    if not any_saturated and (noiseless or floor2 > 0) and np.isfinite(strengths).all():
+    if not any_saturated and (noiseless or floor2 > 0) and np.count_nonzero(np.isfinite(strengths)) == strengths.size:
         return _lsq_unsaturated(strengths, start_usable, start_predicted, noiseless, floor2, relative)
     ab = start_predicted  # replaced by the first round's solution (below) before it is used as (a, b)
     fitted = None  # rows the fit has solved at least once (None: all of them)
@@ -264,8 +266,8 @@ def _lsq_unsaturated(
     for _ in range(LSQ_ITERATIONS - 1):
         predicted = ab @ _AXES
         usable = predicted > 0
-        if not ab.all():  # a fit of exactly (0, 0) has bearing atan2(0, 0) = 0, and faces as that does
-            usable = np.where(~ab.any(axis=1)[:, None], _FACING_ZERO, usable)
+        if np.count_nonzero(ab) != ab.size:  # a fit of exactly (0, 0) has bearing atan2(0, 0) = 0, and faces
+            usable = np.where(~ab.any(axis=1)[:, None], _FACING_ZERO, usable)  # as that one does
         ab = _solve(weights(usable, predicted), strengths)
     a, b = ab.T
     return np.hypot(a, b), np.arctan2(b, a), np.zeros(len(strengths), dtype=bool)

@@ -222,7 +222,8 @@ def _nearest_allowed(v: tuple[float, float], constraints: list[tuple[float, floa
     """
 
     def allowed(c: tuple[float, float]) -> bool:
-        return all(ux * c[0] + uy * c[1] <= limit + 1e-12 for ux, uy, limit in constraints)
+        cx, cy = c
+        return all(ux * cx + uy * cy <= limit + 1e-12 for ux, uy, limit in constraints)
 
     candidates = [v, (0.0, 0.0)]
     for ux, uy, limit in constraints:

@@ -170,8 +170,8 @@ class SurroundLaw:
         return self._command(f_r + f_o + f_g, velocity, dt)
 
     def _centroid(self, neighbours: np.ndarray, near: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        count = near.sum(axis=1)
-        g = np.where(near[..., None], neighbours, 0.0).sum(axis=1) / (count + 1)[:, None]
+        count = np.add.reduce(near, axis=1)
+        g = np.add.reduce(np.where(near[..., None], neighbours, 0.0), axis=1) / (count + 1)[:, None]
         tau = self.config.centroid_filter_s
         if tau > 0 and self._g is not None:
             # A robot entering or leaving the sight moves g at once: filtering that step would smear the jump
@@ -201,7 +201,7 @@ class SurroundLaw:
         inside = seen & (distance <= self.config.avoidance_m) & (distance > 0)
         unit = points / np.maximum(distance, 1e-12)[..., None]
         push = np.where(inside, self.config.repulsion / np.maximum(distance, MIN_RANGE_M) ** 2, 0.0)[..., None] * unit
-        return -push.sum(axis=1)
+        return -np.add.reduce(push, axis=1)
 
     def _surround(self, g: np.ndarray, human: np.ndarray, human_seen: np.ndarray, velocity: np.ndarray) -> np.ndarray:
         human_distance = _norm(human)
@@ -211,8 +211,8 @@ class SurroundLaw:
         v_unit = velocity / np.maximum(speed, 1e-9)[:, None]
         # cos of a bearing difference is the dot product of unit vectors; an undefined bearing (g_i = 0,
         # or the robot still) gives cos = 0: neither for nor against.
-        cos_human = np.sum(toward_human * g_unit, axis=-1)
-        cos_motion = np.where(speed > STILL_MPS, np.sum(v_unit * g_unit, axis=-1), 0.0)
+        cos_human = np.add.reduce(toward_human * g_unit, axis=-1)
+        cos_motion = np.where(speed > STILL_MPS, np.add.reduce(v_unit * g_unit, axis=-1), 0.0)
         c_i = (1 + cos_human) * (1 + cos_motion) / 4
         active = human_seen & (human_distance > 0)
         return np.where(active[:, None], self.config.surround_force * c_i[:, None] * toward_human, 0.0)
@@ -388,13 +388,13 @@ def _points(name: str, value: np.ndarray) -> np.ndarray:
         return np.zeros((0, 2))
     if array.ndim != 2 or array.shape[1] != 2:
         raise ValueError(f"{name} must have shape (k, 2), not {array.shape}")
-    if not np.isfinite(array).all():
+    if np.count_nonzero(np.isfinite(array)) != array.size:
         raise ValueError(f"{name} must be finite")
     return array
 
 
 def _vector(name: str, value: np.ndarray) -> np.ndarray:
     array = np.asarray(value, dtype=float)
-    if array.shape != (2,) or not np.isfinite(array).all():
+    if array.shape != (2,) or np.count_nonzero(np.isfinite(array)) != 2:
         raise ValueError(f"{name} must be a finite (2,) vector, not {value!r}")
     return array

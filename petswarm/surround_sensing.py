@@ -97,9 +97,11 @@ def beacon_fixes(
         return [], np.zeros((0, 2))
     brightness = [(PERSON_BEACON_POWER if n == person else 1.0) * g for n, g in zip(names, gains, strict=True)]
     found = estimate_many(readings, ir, method, brightness)
-    xy = np.stack([np.cos(found.bearing_rad), np.sin(found.bearing_rad)], axis=1) * found.distance_m[:, None]
+    xy = np.empty((len(names), 2))
+    np.multiply(np.cos(found.bearing_rad), found.distance_m, out=xy[:, 0])
+    np.multiply(np.sin(found.bearing_rad), found.distance_m, out=xy[:, 1])
     valid = found.valid
-    if valid.all():
+    if np.count_nonzero(valid) == len(names):
         return list(names), xy
     return [n for n, v in zip(names, valid.tolist(), strict=True) if v], xy[valid]
 
@@ -182,11 +184,15 @@ class BeaconTracker:
         if period <= 0 or not kept:
             position, velocity = fixed, np.tile(own, (len(order), 1))
         else:
-            rows = [old[n] for n in kept]
             k = len(kept)
-            innovation = fixed[:k] - self._position[rows]
-            position = self._position[rows] + self.alpha * innovation
-            velocity = self._velocity[rows] + self.beta * innovation / period
+            if kept == self._names:  # every track goes on, in its row
+                tracked, moving = self._position, self._velocity
+            else:
+                rows = [old[n] for n in kept]
+                tracked, moving = self._position[rows], self._velocity[rows]
+            innovation = fixed[:k] - tracked
+            position = tracked + self.alpha * innovation
+            velocity = moving + self.beta * innovation / period
             if new:
                 position = np.concatenate([position, fixed[k:]])
                 velocity = np.concatenate([velocity, np.tile(own, (len(new), 1))])
@@ -207,7 +213,11 @@ def echo_points(ranges_m: np.ndarray, angles_rad: np.ndarray, robot_radius_m: fl
         raise ValueError(f"ranges_m {ranges.shape} and angles_rad {angles.shape} must match")
     heard = np.isfinite(ranges)
     reach = robot_radius_m + ranges[heard]
-    return np.stack([np.cos(angles[heard]), np.sin(angles[heard])], axis=1) * reach[:, None]
+    toward = angles[heard]
+    points = np.empty((len(reach), 2))
+    np.multiply(np.cos(toward), reach, out=points[:, 0])
+    np.multiply(np.sin(toward), reach, out=points[:, 1])
+    return points
 
 
 def sense(
@@ -243,7 +253,7 @@ def sense_many(
         if at is not None:
             reach[at] = config.person_radius_m + config.echo_match_m
         gap = echoes[:, None, :] - xy[None, :, :]
-        explained = (np.sqrt(np.add.reduce(gap * gap, axis=-1)) <= reach).any(axis=1)
+        explained = np.logical_or.reduce(np.sqrt(np.add.reduce(gap * gap, axis=-1)) <= reach, axis=1)
         explained_count = int(np.count_nonzero(explained))
         if explained_count:
             obstacles = echoes[~explained]
