@@ -218,7 +218,7 @@ class Environment:
             self._send_down(node_id, wire.IrSample(readings=readings.astype("<f4").tobytes(), t_us=now))
         if self.ir.sweeps % BEACONS_EVERY == 0:
             for node_id, (sources, block, gains) in self.ir.beacon_sweep(poses, chaos).items():
-                readings = block.astype("<f4").tobytes()
+                readings = block.astype("<f4", copy=False).tobytes()
                 self._send_down(node_id, wire.IrBeacons(sources=sources, readings=readings, t_us=now, gains=gains))
 
     def _tick_world(self) -> None:

@@ -79,39 +79,39 @@ class IrAir:
         names = [n for n, mode in self.counter.modes.items() if mode is IrMode.BEACON and n in poses]
         if len(names) < 2:
             return {}
-        names_array = np.array(names, dtype=object)
         at = np.array([poses[n] for n in names], dtype=float)
         dx = at[None, :, 0] - at[:, None, 0]
         dy = at[None, :, 1] - at[:, None, 1]
         distance = np.hypot(dx, dy)
         np.fill_diagonal(distance, np.inf)  # a module does not see its own beacon
         strength = self._beacon_strength(distance, names)
-        light = strength[..., None] * receiver_gains(np.arctan2(dy, dx) - at[:, None, 2])
         seen = strength > 0
         out: dict[str, tuple[list[str], np.ndarray, list[float]]] = {}
-        lit_rows = [row for row in range(len(names)) if seen[row].any()]
+        counts = np.count_nonzero(seen, axis=1)
+        lit_rows = np.flatnonzero(counts).tolist()
         if not lit_rows:
             return out
+        # the light of every (module, source) pair in sight, rows of one module together, modules in order
+        module, source = np.nonzero(seen)
+        lit = strength[seen][:, None] * receiver_gains(np.arctan2(dy[seen], dx[seen]) - at[module, 2])
+        names_array = np.array(names, dtype=object)
         if chaos is not None and any(f.kind in ("ir_blind", "ir_noise") for f in chaos.faults.values()):
             # a disturbed module draws its noise right after its own readings: module by module
             for row in lit_rows:
                 node = names[row]
-                lit = light[row, seen[row]]
-                gains = beacon_gains(lit.max(axis=1), self.config)
-                readings = sense(lit * gains[:, None], self.config, self.rng)
+                mine = lit[module == row]
+                gains = beacon_gains(mine.max(axis=1), self.config)
+                readings = sense(mine * gains[:, None], self.config, self.rng)
                 readings = self._disturb(readings, [node] * len(readings), chaos)
                 out[node] = (names_array[seen[row]].tolist(), readings.astype(np.float32), gains.tolist())
             return out
         # every module's sweep in one array, in module order: the same draws as module by module
-        lit = light[seen]  # (pairs, 12), rows of one module together, modules in order
-        gains = beacon_gains(lit.max(axis=1), self.config)
+        gains = beacon_gains(np.maximum.reduce(lit, axis=1), self.config)
         readings = sense(lit * gains[:, None], self.config, self.rng).astype(np.float32)
-        counts = np.count_nonzero(seen, axis=1)
-        start = 0
+        sources, gain_list, ends = names_array[source].tolist(), gains.tolist(), np.cumsum(counts).tolist()
         for row in lit_rows:
-            end = start + int(counts[row])
-            out[names[row]] = (names_array[seen[row]].tolist(), readings[start:end], gains[start:end].tolist())
-            start = end
+            start, end = ends[row] - int(counts[row]), ends[row]
+            out[names[row]] = (sources[start:end], readings[start:end], gain_list[start:end])
         return out
 
     def _beacon_strength(self, distance: np.ndarray, names: list[str]) -> np.ndarray:

@@ -337,7 +337,9 @@ def _check_types(msg: Message) -> None:
         if value is None and nullable:
             continue
         if kind == _STRINGS:
-            ok = isinstance(value, list) and all(isinstance(v, str) for v in value)
+            ok = isinstance(value, list) and (
+                _STR.issuperset(map(type, value)) or all(isinstance(v, str) for v in value)
+            )
         elif kind == _NUMBERS:
             ok = isinstance(value, list) and len(value) in lengths and _numbers(value)
         else:
@@ -348,6 +350,7 @@ def _check_types(msg: Message) -> None:
 
 _STRINGS, _NUMBERS, _BOOL, _SCALAR = range(4)
 _PLAIN_NUMBERS = frozenset((int, float))
+_STR = frozenset((str,))
 
 
 @functools.cache

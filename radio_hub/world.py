@@ -352,21 +352,32 @@ class World:
         return self.sense_many([body_id], rng)[0]
 
     def sense_many(self, body_ids: list[str], rng: np.random.Generator) -> list[OwnSensors]:
-        """``sense`` for several robots: one ray computation for all, the noise drawn body by body in the
-        order given (the same draws as ``sense`` called for each in turn)."""
+        """``sense`` for several robots: one ray computation for all, and the noise drawn as ``sense`` called
+        for each in turn draws it (per body: its echoes' ranges, the yaw, the three odometry values)."""
         cfg = self.config
-        out = []
-        for body_id, ranges in zip(body_ids, self.ultrasonic_many(body_ids), strict=True):
-            body = self.bodies[body_id]
-            seen = ~np.isnan(ranges)
-            ranges[seen] = np.maximum(0.02, ranges[seen] + rng.normal(0.0, cfg.ultrasonic_noise_m, int(seen.sum())))
-            yaw = _wrap(body.pose[2] + rng.normal(0.0, math.radians(cfg.yaw_noise_deg)))
-            c, s = math.cos(body.pose[2]), math.sin(body.pose[2])
-            vx, vy, omega = body.velocity
-            odometry = np.array([c * vx + s * vy, -s * vx + c * vy, omega])
-            odometry = odometry * (1.0 + rng.normal(0.0, cfg.odometry_noise, 3))
-            out.append(OwnSensors(ranges, yaw, odometry))
-        return out
+        n = len(body_ids)
+        if not n:
+            return []
+        ranges = self.ultrasonic_many(body_ids)
+        bodies = [self.bodies[b] for b in body_ids]
+        pose = np.array([b.pose for b in bodies], dtype=float).reshape(n, 3)
+        velocity = np.array([b.velocity for b in bodies], dtype=float).reshape(n, 3)
+        # one draw of standard normals for all, cut as the draws body by body would have been
+        seen = ~np.isnan(ranges)
+        echoes = np.count_nonzero(seen, axis=1)
+        ends = np.cumsum(echoes + 4)
+        starts = ends - (echoes + 4)
+        z = rng.standard_normal(int(ends[-1]))
+        at_echo = starts[:, None] + np.cumsum(seen, axis=1) - 1
+        ranges[seen] = np.maximum(0.02, ranges[seen] + (0.0 + cfg.ultrasonic_noise_m * z[at_echo[seen]]))
+        yaw_noise = 0.0 + math.radians(cfg.yaw_noise_deg) * z[starts + echoes]
+        yaw = np.mod(pose[:, 2] + yaw_noise + math.pi, 2 * math.pi) - math.pi
+        odometry_noise = 0.0 + cfg.odometry_noise * z[(starts + echoes + 1)[:, None] + np.arange(3)]
+        c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+        vx, vy, omega = velocity.T
+        odometry = np.stack([c * vx + s * vy, -s * vx + c * vy, omega], axis=1) * (1.0 + odometry_noise)
+        yaws = yaw.tolist()
+        return [OwnSensors(ranges[k], yaws[k], odometry[k]) for k in range(n)]
 
     def ultrasonic(self, body_id: str) -> np.ndarray:
         """Noise-free range of the nearest echo in each sensor's cone (nan when nothing within range)."""
@@ -429,19 +440,24 @@ class World:
 
     def snapshot(self) -> list[dict[str, Any]]:
         """Every body's truth as plain values (for the world publication and records)."""
+        bodies = list(self.bodies.values())
+        if not bodies:
+            return []
+        # every pose and velocity as Python floats in one conversion, then rounded as before
+        values = np.array([(*b.pose, *b.velocity) for b in bodies], dtype=float).tolist()
         return [
             {
                 "id": b.body_id,
                 "kind": b.kind,
-                "x": round(float(b.pose[0]), 4),
-                "y": round(float(b.pose[1]), 4),
-                "yaw": round(float(b.pose[2]), 4),
-                "vx": round(float(b.velocity[0]), 4),
-                "vy": round(float(b.velocity[1]), 4),
-                "omega": round(float(b.velocity[2]), 4),
+                "x": round(x, 4),
+                "y": round(y, 4),
+                "yaw": round(yaw, 4),
+                "vx": round(vx, 4),
+                "vy": round(vy, 4),
+                "omega": round(omega, 4),
                 "radius": b.radius,
             }
-            for b in self.bodies.values()
+            for b, (x, y, yaw, vx, vy, omega) in zip(bodies, values, strict=True)
         ]
 
 
