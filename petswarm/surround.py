@@ -30,6 +30,7 @@ differences in the world's.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass
 from typing import Any
 
@@ -254,18 +255,32 @@ class SurroundController:
         neighbours = _points("neighbours_xy", neighbours_xy)
         obstacles = _points("obstacle_points", obstacle_points)
         velocity = _vector("own_velocity", own_velocity)
-        human = np.zeros(2) if human_xy is None else _vector("human_xy", human_xy)
+        human = _NO_HUMAN if human_xy is None else _vector("human_xy", human_xy)
         command = self._law.step(
             neighbours[None],
-            np.ones((1, len(neighbours)), dtype=bool),
+            _all_seen(len(neighbours)),
             obstacles[None],
-            np.ones((1, len(obstacles)), dtype=bool),
+            _all_seen(len(obstacles)),
             human[None],
-            np.array([human_xy is not None]),
+            _HUMAN_UNSEEN if human_xy is None else _HUMAN_SEEN,
             velocity[None],
             dt,
         )
         return command[0]
+
+
+_NO_HUMAN = np.zeros(2)
+_HUMAN_SEEN, _HUMAN_UNSEEN = np.array([True]), np.array([False])
+for _constant in (_NO_HUMAN, _HUMAN_SEEN, _HUMAN_UNSEEN):
+    _constant.flags.writeable = False
+
+
+@functools.cache
+def _all_seen(count: int) -> np.ndarray:
+    """A (1, count) mask of True (read-only: shared by every step with that many points)."""
+    mask = np.ones((1, count), dtype=bool)
+    mask.flags.writeable = False
+    return mask
 
 
 def extent(positions: np.ndarray) -> float:
