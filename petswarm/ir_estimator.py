@@ -128,8 +128,12 @@ def distance_from_strength(strength: ArrayLike, config: IrConfig, brightness: Ar
     power, max_range = config.power_counts_at_1m, config.max_range_m
     if brightness is not None:
         power, max_range = _brighter(config, brightness)
-    with np.errstate(divide="ignore"):
-        d = np.sqrt(power / np.maximum(r, 0.0))
+    positive = np.maximum(r, 0.0)
+    if np.count_nonzero(positive) == positive.size:
+        d = np.sqrt(power / positive)
+    else:
+        with np.errstate(divide="ignore"):
+            d = np.sqrt(power / positive)
     return np.minimum(np.maximum(d, config.near_field_m), max_range)  # np.clip, without its overhead
 
 
@@ -200,7 +204,6 @@ def lsq_fit(
     any_saturated = np.count_nonzero(saturated) > 0
     if any_saturated and np.count_nonzero(paper_saturated):
         bearing = np.where(paper_saturated, saturated_bearing(saturated), bearing)
-    unsaturated = ~saturated
     noiseless = config.noiseless
     floor2, relative = config.noise_floor_counts**2, config.relative_noise
     # the first round goes from the start's bearing as a bearing: the saturated fallback's is an axis or
@@ -210,6 +213,7 @@ def lsq_fit(
     start_predicted = strength[:, None] * gain
     if not any_saturated and (noiseless or floor2 > 0) and np.count_nonzero(np.isfinite(strengths)) == strengths.size:
         return _lsq_unsaturated(strengths, start_usable, start_predicted, noiseless, floor2, relative)
+    unsaturated = ~saturated
     ab = start_predicted  # replaced by the first round's solution (below) before it is used as (a, b)
     fitted = None  # rows the fit has solved at least once (None: all of them)
     usable_count = np.zeros(len(strengths), dtype=int)
