@@ -11,7 +11,9 @@ ACKs) is modelled in the environment as in the hub.
 
 from __future__ import annotations
 
+import argparse
 import asyncio
+import functools
 import math
 import time
 from collections.abc import Callable
@@ -246,15 +248,23 @@ def robot_argvs(
 
 async def _run_robot(argv: list[str], air: MemoryAir) -> None:
     """The robot a ``petswarm robot`` command line describes, attached through memory, until told to stop."""
-    from cli.main import build_parser, robot_config
+    from cli.main import robot_config
 
-    config = robot_config(build_parser().parse_args(argv))
+    config = robot_config(_parser().parse_args(argv))
     radio = await RadioClient.connect(config.identity(), world=config.world, link=air.link(), timeout=5.0)
     robot = Robot(config, radio)
     try:
         await robot.run()
     finally:
         await robot.close()
+
+
+@functools.cache
+def _parser() -> argparse.ArgumentParser:
+    # building the CLI's parser costs milliseconds: once per run, not once per robot
+    from cli.main import build_parser
+
+    return build_parser()
 
 
 def _start_user(

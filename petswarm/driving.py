@@ -662,8 +662,8 @@ class EchoRanges:
     def ranges(self, sensors: OwnSensors) -> Ranges:
         """The latest readings (nan = no echo) with their receding speeds."""
         readings = tuple(
-            (float(a), None if math.isnan(r) else float(r))
-            for a, r in zip(sensors.angles_rad, sensors.ranges_m, strict=True)
+            (a, None if math.isnan(r) else r)
+            for a, r in zip(_floats(sensors.angles_rad), _floats(sensors.ranges_m), strict=True)
         )
         return Ranges(readings, receding_mps=self._receding(sensors))
 
@@ -680,4 +680,9 @@ class EchoRanges:
         rates = (sensors.ranges_m - oldest.ranges_m) / dt
         vx, vy, _ = sensors.odometry
         own = vx * np.cos(sensors.angles_rad) + vy * np.sin(sensors.angles_rad)
-        return tuple(0.0 if math.isnan(r) else float(r + o) for r, o in zip(rates, own, strict=True))
+        return tuple(0.0 if math.isnan(r) else r + o for r, o in zip(rates.tolist(), own.tolist(), strict=True))
+
+
+def _floats(values: Any) -> list[float]:
+    """A sequence of numbers as Python floats (one conversion for the whole array, not one per value)."""
+    return np.asarray(values, dtype=float).tolist()

@@ -83,8 +83,14 @@ def estimate(readings: ArrayLike, config: IrConfig, method: str = "lsq") -> IrEs
     return estimate_many(sweep[None, :], config, method).at(0)
 
 
-def estimate_many(readings: ArrayLike, config: IrConfig, method: str = "lsq") -> IrEstimates:
-    """``estimate`` for an array of sweeps, shape (N, 12), vectorised."""
+def estimate_many(
+    readings: ArrayLike, config: IrConfig, method: str = "lsq", brightness: ArrayLike | None = None
+) -> IrEstimates:
+    """``estimate`` for an array of sweeps, shape (N, 12), vectorised.
+
+    ``brightness``: per sweep, how many times brighter than ``config``'s emitter its source is (default 1
+    for all): sweep i is read with the calibration ``config.brighter(brightness[i])``, so sources of
+    different brightness go through one call."""
     if method not in METHODS:
         raise ValueError(f"unknown IR estimator {method!r}; known: {', '.join(METHODS)}")
     raw = np.asarray(readings, dtype=float).reshape(-1, RECEIVERS)
@@ -92,33 +98,52 @@ def estimate_many(readings: ArrayLike, config: IrConfig, method: str = "lsq") ->
     saturated = raw >= config.saturation_counts
     fit = paper_fit if method == "paper" else lsq_fit
     strength, bearing, fallback = fit(strengths, saturated, config)
-    clipped_strength = np.full_like(strength, config.saturation_counts - config.ambient_counts)
-    strength = np.where(fallback, clipped_strength, strength)
-    bearing = np.where(fallback, saturated_bearing(saturated), bearing)
+    # (ufuncs and count_nonzero rather than the array methods: these arrays are small, the calls many)
+    if np.count_nonzero(fallback):
+        strength = np.where(fallback, config.saturation_counts - config.ambient_counts, strength)
+        bearing = np.where(fallback, saturated_bearing(saturated), bearing)
     return IrEstimates(
         bearing_rad=wrap_bearing(bearing),
-        distance_m=distance_from_strength(strength, config),
+        distance_m=distance_from_strength(strength, config, brightness),
         strength=strength,
-        valid=strengths.max(axis=1) > config.detection_threshold_counts,
-        saturated=saturated.any(axis=1),
+        valid=np.maximum.reduce(strengths, axis=1) > config.detection_threshold_counts,
+        saturated=np.logical_or.reduce(saturated, axis=1),
     )
 
 
 def wrap_bearing(bearing_rad: ArrayLike) -> np.ndarray:
     """Angles into [0, 2 pi) (np.mod alone gives 2 pi for tiny negative angles)."""
     wrapped = np.mod(np.asarray(bearing_rad, dtype=float), 2 * np.pi)
-    return np.where(wrapped >= 2 * np.pi, 0.0, wrapped)
+    full_turn = wrapped >= 2 * np.pi
+    return np.where(full_turn, 0.0, wrapped) if np.count_nonzero(full_turn) else wrapped
 
 
-def distance_from_strength(strength: ArrayLike, config: IrConfig) -> np.ndarray:
+def distance_from_strength(strength: ArrayLike, config: IrConfig, brightness: ArrayLike | None = None) -> np.ndarray:
     """Inverse of the module's law strength = P / d^2: d = sqrt(P / R), kept within the near field and range.
 
-    Strengths at or below 0 give the maximum range (the weakest signal the module can mean).
+    Strengths at or below 0 give the maximum range (the weakest signal the module can mean). ``brightness``
+    (per strength, default 1): read each with the calibration ``config.brighter(brightness)``.
     """
     r = np.asarray(strength, dtype=float)
-    with np.errstate(divide="ignore"):
-        d = np.sqrt(config.power_counts_at_1m / np.maximum(r, 0.0))
-    return np.clip(d, config.near_field_m, config.max_range_m)
+    power, max_range = config.power_counts_at_1m, config.max_range_m
+    if brightness is not None:
+        power, max_range = _brighter(config, brightness)
+    positive = np.maximum(r, 0.0)
+    if np.count_nonzero(positive) == positive.size:
+        d = np.sqrt(power / positive)
+    else:
+        with np.errstate(divide="ignore"):
+            d = np.sqrt(power / positive)
+    return np.minimum(np.maximum(d, config.near_field_m), max_range)  # np.clip, without its overhead
+
+
+def _brighter(config: IrConfig, brightness: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    """Per factor, the power and range of ``config.brighter(factor)``: P f and R sqrt(f) (``brighter`` takes
+    f ** 0.5, equal to sqrt(f) for the beacon gains times the person's power, and within an ulp for any f)."""
+    factors = np.asarray(brightness, dtype=float).reshape(-1)
+    if len(factors) and not np.minimum.reduce(factors) > 0:
+        raise ValueError(f"brightness must be > 0, got {sorted(set(factors.tolist()))}")
+    return config.power_counts_at_1m * factors, config.max_range_m * np.sqrt(factors)
 
 
 def paper_fit(
@@ -131,15 +156,32 @@ def paper_fit(
     (as atan2, equal while a > 0, which holds when r0 is the strongest), R = sqrt(a^2 + b^2),
     phi = n pi/6 + theta.
     """
+    strength, theta, n, fallback = _paper(strengths, saturated)
+    return strength, n * SECTOR_RAD + theta, fallback
+
+
+def _paper(strengths: np.ndarray, saturated: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The paper's R and theta, with n (the strongest receiver) and where it saturated."""
     rows = np.arange(len(strengths))
-    n = np.argmax(strengths, axis=1)
-    r0 = strengths[rows, n]
-    r1 = strengths[rows, (n + 1) % RECEIVERS]
-    r_1 = strengths[rows, (n - 1) % RECEIVERS]
+    n = strengths.argmax(axis=1)
+    # r-1, r0, r1 in one gather: the sweep with its ends wrapped round, then three receivers from n - 1 on
+    r_1, r0, r1 = strengths[:, _WRAPPED][rows[:, None], n[:, None] + _TRIO].T
     a = (r1 + r_1 + 2 * r0) / (2 * np.cos(SECTOR_RAD) + 2)
     b = (r1 - r_1) / (2 * np.sin(SECTOR_RAD))
-    theta = np.arctan2(b, a)
-    return np.hypot(a, b), n * SECTOR_RAD + theta, saturated[rows, n]
+    strongest_saturated = saturated[rows, n] if np.count_nonzero(saturated) else np.zeros(len(rows), dtype=bool)
+    return np.hypot(a, b), np.arctan2(b, a), n, strongest_saturated
+
+
+_WRAPPED = np.r_[RECEIVERS - 1, np.arange(RECEIVERS), 0]
+"""Receiver indices 11, 0, 1, ..., 11, 0: receiver n's neighbours are columns n and n + 2 of a wrapped sweep."""
+_TRIO = np.arange(3)
+_AXES = np.stack([_COS, _SIN])
+"""(2, 12): a source (a, b) = R (cos phi, sin phi) gives receiver k the response a cos_k + b sin_k."""
+_NORMAL = np.stack([_COS * _COS, _COS * _SIN, _SIN * _SIN], axis=1)
+"""(12, 3): weights @ this = the normal equations' sums (s_cc, s_cs, s_ss)."""
+_CROSS = np.array([2, 0])
+_FACING_ZERO = np.cos(RECEIVER_AXES_RAD) > 0
+"""The receivers a source at bearing 0 faces."""
 
 
 def lsq_fit(
@@ -149,45 +191,103 @@ def lsq_fit(
 
     On the receivers k facing the source (cos(axis_k - phi) > 0) the response is linear in
     (a, b) = R (cos phi, sin phi): r_k = a cos(axis_k) + b sin(axis_k). Each round picks those receivers
-    from the current bearing, leaves out saturated ones, weights each by the inverse variance of its
+    from the current estimate, leaves out saturated ones, weights each by the inverse variance of its
     reading (noise floor plus relative noise of its predicted strength) and solves the 2x2 normal
     equations. It starts from the paper's estimate; with fewer than LSQ_MIN_RECEIVERS usable receivers
     it falls back (see ``saturated_bearing``).
+
+    The estimate is carried as (a, b): receiver k's predicted strength R max(cos(axis_k - phi), 0) is
+    max(a cos_k + b sin_k, 0), which faces the source exactly where it is positive.
     """
-    strength, bearing, paper_saturated = paper_fit(strengths, saturated, config)
-    bearing = np.where(paper_saturated, saturated_bearing(saturated), bearing)
+    strength, theta, n, paper_saturated = _paper(strengths, saturated)
+    bearing = n * SECTOR_RAD + theta
+    any_saturated = np.count_nonzero(saturated) > 0
+    if any_saturated and np.count_nonzero(paper_saturated):
+        bearing = np.where(paper_saturated, saturated_bearing(saturated), bearing)
+    noiseless = config.noiseless
+    floor2, relative = config.noise_floor_counts**2, config.relative_noise
+    # the first round goes from the start's bearing as a bearing: the saturated fallback's is an axis or
+    # between two, and receivers at exactly 90 degrees from it are in or out by the rounding of their cosine
+    gain = np.cos(RECEIVER_AXES_RAD - bearing[:, None])
+    start_usable = gain > 0
+    start_predicted = strength[:, None] * gain
+    if not any_saturated and (noiseless or floor2 > 0) and np.count_nonzero(np.isfinite(strengths)) == strengths.size:
+        return _lsq_unsaturated(strengths, start_usable, start_predicted, noiseless, floor2, relative)
+    unsaturated = ~saturated
+    ab = start_predicted  # replaced by the first round's solution (below) before it is used as (a, b)
+    fitted = None  # rows the fit has solved at least once (None: all of them)
     usable_count = np.zeros(len(strengths), dtype=int)
-    for _ in range(LSQ_ITERATIONS):
-        gain = np.cos(RECEIVER_AXES_RAD - bearing[:, None])
-        usable = (gain > 0) & ~saturated
-        usable_count = usable.sum(axis=1)
-        weight = usable / _reading_variance(strength[:, None] * np.clip(gain, 0, None), config)
-        solved = _weighted_solve(weight, strengths)
-        ok = usable_count >= LSQ_MIN_RECEIVERS
-        strength = np.where(ok, np.hypot(*solved), strength)
-        bearing = np.where(ok, np.arctan2(solved[1], solved[0]), bearing)
-    return strength, bearing, usable_count < LSQ_MIN_RECEIVERS
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for round_ in range(LSQ_ITERATIONS):
+            if round_ == 0:
+                usable, predicted = start_usable, start_predicted
+            else:
+                predicted = ab @ _AXES
+                usable = predicted > 0
+                if not ab.all():  # a fit of exactly (0, 0) has bearing atan2(0, 0) = 0, and faces as that does
+                    zero = ~ab.any(axis=1)
+                    usable = np.where(zero[:, None], _FACING_ZERO, usable)
+                if fitted is not None:  # rows still at their start stay on its receivers
+                    usable = np.where(fitted[:, None], usable, start_usable)
+                    predicted = np.where(fitted[:, None], predicted, start_predicted)
+            if any_saturated:
+                usable = usable & unsaturated
+            usable_count = usable.view(np.uint8).sum(axis=1)
+            if noiseless:
+                weight = usable.astype(float)
+            elif floor2 > 0:  # a receiver left out has weight 0 whatever its predicted strength
+                weight = usable / (floor2 + (relative * predicted) ** 2)
+            else:
+                weight = usable / (floor2 + (relative * np.maximum(predicted, 0.0)) ** 2)
+            solved = _solve(weight, strengths)
+            ok = usable_count >= LSQ_MIN_RECEIVERS
+            if round_ == 0 and not ok.all():
+                ab = strength[:, None] * np.stack([np.cos(bearing), np.sin(bearing)], axis=1)  # the start
+                fitted = ok
+            elif fitted is not None:
+                fitted = fitted | ok
+            ab = solved if ok.all() else np.where(ok[:, None], solved, ab)
+    a, b = ab.T
+    return np.hypot(a, b), np.arctan2(b, a), usable_count < LSQ_MIN_RECEIVERS
+
+
+def _lsq_unsaturated(
+    strengths: np.ndarray,
+    usable: np.ndarray,
+    predicted: np.ndarray,
+    noiseless: bool,
+    floor2: float,
+    relative: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``lsq_fit``'s rounds when no reading saturated and all are finite, from the start's receivers and
+    predicted strengths: every round then has at least five usable receivers for every sweep (a half plane
+    through the source holds five or six of the twelve axes), so none falls back and nothing is counted."""
+
+    def weights(usable: np.ndarray, predicted: np.ndarray) -> np.ndarray:
+        return usable.astype(float) if noiseless else usable / (floor2 + (relative * predicted) ** 2)
+
+    ab = _solve(weights(usable, predicted), strengths)
+    for _ in range(LSQ_ITERATIONS - 1):
+        predicted = ab @ _AXES
+        usable = predicted > 0
+        if np.count_nonzero(ab) != ab.size:  # a fit of exactly (0, 0) has bearing atan2(0, 0) = 0, and faces
+            usable = np.where(~ab.any(axis=1)[:, None], _FACING_ZERO, usable)  # as that one does
+        ab = _solve(weights(usable, predicted), strengths)
+    a, b = ab.T
+    return np.hypot(a, b), np.arctan2(b, a), np.zeros(len(strengths), dtype=bool)
+
+
+def _solve(weight: np.ndarray, strengths: np.ndarray) -> np.ndarray:
+    """(a, b) per row (N, 2) minimising sum_k w_k (r_k - a cos_k - b sin_k)^2: the 2x2 normal equations."""
+    sums = weight @ _NORMAL  # s_cc, s_cs, s_ss
+    y = (weight * strengths) @ _AXES.T  # y_c, y_s
+    s_cs = sums[:, 1:2]
+    det = sums[:, :1] * sums[:, 2:] - s_cs * s_cs
+    # (a, b) = (s_ss y_c - s_cs y_s, s_cc y_s - s_cs y_c) / det
+    return (sums[:, _CROSS] * y - s_cs * y[:, ::-1]) / det
 
 
 def saturated_bearing(saturated: np.ndarray) -> np.ndarray:
     """Fallback bearing when full-scale readings hide the strength: the circular mean of the saturated
     receivers' axes (they form an arc centred on the source, so this is within 15 degrees of it)."""
     return np.arctan2(saturated @ _SIN, saturated @ _COS)
-
-
-def _reading_variance(predicted: np.ndarray, config: IrConfig) -> np.ndarray:
-    if config.noiseless:
-        return np.ones_like(predicted)
-    return config.noise_floor_counts**2 + (config.relative_noise * predicted) ** 2
-
-
-def _weighted_solve(weight: np.ndarray, strengths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(a, b) minimising sum_k w_k (r_k - a cos_k - b sin_k)^2 per row; NaN where singular."""
-    s_cc = weight @ (_COS * _COS)
-    s_cs = weight @ (_COS * _SIN)
-    s_ss = weight @ (_SIN * _SIN)
-    y_c = (weight * strengths) @ _COS
-    y_s = (weight * strengths) @ _SIN
-    det = s_cc * s_ss - s_cs**2
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return (s_ss * y_c - s_cs * y_s) / det, (s_cc * y_s - s_cs * y_c) / det

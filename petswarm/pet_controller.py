@@ -222,8 +222,11 @@ def _nearest_allowed(v: tuple[float, float], constraints: list[tuple[float, floa
     """
 
     def allowed(c: tuple[float, float]) -> bool:
-        return all(ux * c[0] + uy * c[1] <= limit + 1e-12 for ux, uy, limit in constraints)
+        cx, cy = c
+        return all(ux * cx + uy * cy <= limit + 1e-12 for ux, uy, limit in constraints)
 
+    if allowed(v):  # nearest of all (the common case: nothing in the way)
+        return v
     candidates = [v, (0.0, 0.0)]
     for ux, uy, limit in constraints:
         excess = ux * v[0] + uy * v[1] - limit
@@ -233,8 +236,9 @@ def _nearest_allowed(v: tuple[float, float], constraints: list[tuple[float, floa
             det = ax * by - ay * bx
             if abs(det) > 1e-9:
                 candidates.append(((a_lim * by - ay * b_lim) / det, (ax * b_lim - a_lim * bx) / det))
-    feasible = [c for c in candidates if allowed(c)]
-    return min(feasible, key=lambda c: (c[0] - v[0]) ** 2 + (c[1] - v[1]) ** 2)
+    # the nearest allowed one (the first in candidate order among equally near ones): try them nearest first
+    nearest_first = sorted(candidates, key=lambda c: (c[0] - v[0]) ** 2 + (c[1] - v[1]) ** 2)
+    return next(c for c in nearest_first if allowed(c))
 
 
 def obstacle_ahead(ranges: Ranges, cfg: PetControllerConfig) -> bool:

@@ -30,6 +30,7 @@ differences in the world's.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass
 from typing import Any
 
@@ -157,7 +158,7 @@ class SurroundLaw:
         if not dt > 0:
             raise ValueError(f"dt must be > 0, not {dt!r}")
         c = self.config
-        near = neighbour_seen & (np.linalg.norm(neighbours, axis=-1) <= c.sight_m)
+        near = neighbour_seen & (_norm(neighbours) <= c.sight_m)
         g, count = self._centroid(neighbours, near, dt)
         rate, accel = self._derivatives(g, count, dt)
         f_r = c.inertia * accel + c.damping * rate + c.stiffness * g
@@ -167,8 +168,8 @@ class SurroundLaw:
         return self._command(f_r + f_o + f_g, velocity, dt)
 
     def _centroid(self, neighbours: np.ndarray, near: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        count = near.sum(axis=1)
-        g = np.where(near[..., None], neighbours, 0.0).sum(axis=1) / (count + 1)[:, None]
+        count = np.add.reduce(near, axis=1)
+        g = np.add.reduce(np.where(near[..., None], neighbours, 0.0), axis=1) / (count + 1)[:, None]
         tau = self.config.centroid_filter_s
         if tau > 0 and self._g is not None:
             # A robot entering or leaving the sight moves g at once: filtering that step would smear the jump
@@ -194,22 +195,22 @@ class SurroundLaw:
     ) -> np.ndarray:
         points = np.concatenate([neighbours, obstacles], axis=1)
         seen = np.concatenate([near, obstacle_seen], axis=1)
-        distance = np.linalg.norm(points, axis=-1)
+        distance = _norm(points)
         inside = seen & (distance <= self.config.avoidance_m) & (distance > 0)
         unit = points / np.maximum(distance, 1e-12)[..., None]
         push = np.where(inside, self.config.repulsion / np.maximum(distance, MIN_RANGE_M) ** 2, 0.0)[..., None] * unit
-        return -push.sum(axis=1)
+        return -np.add.reduce(push, axis=1)
 
     def _surround(self, g: np.ndarray, human: np.ndarray, human_seen: np.ndarray, velocity: np.ndarray) -> np.ndarray:
-        human_distance = np.linalg.norm(human, axis=-1)
+        human_distance = _norm(human)
         toward_human = human / np.maximum(human_distance, 1e-9)[:, None]
-        g_unit = g / np.maximum(np.linalg.norm(g, axis=-1), 1e-9)[:, None]
-        speed = np.linalg.norm(velocity, axis=-1)
+        g_unit = g / np.maximum(_norm(g), 1e-9)[:, None]
+        speed = _norm(velocity)
         v_unit = velocity / np.maximum(speed, 1e-9)[:, None]
         # cos of a bearing difference is the dot product of unit vectors; an undefined bearing (g_i = 0,
         # or the robot still) gives cos = 0: neither for nor against.
-        cos_human = np.sum(toward_human * g_unit, axis=-1)
-        cos_motion = np.where(speed > STILL_MPS, np.sum(v_unit * g_unit, axis=-1), 0.0)
+        cos_human = np.add.reduce(toward_human * g_unit, axis=-1)
+        cos_motion = np.where(speed > STILL_MPS, np.add.reduce(v_unit * g_unit, axis=-1), 0.0)
         c_i = (1 + cos_human) * (1 + cos_motion) / 4
         active = human_seen & (human_distance > 0)
         return np.where(active[:, None], self.config.surround_force * c_i[:, None] * toward_human, 0.0)
@@ -251,18 +252,32 @@ class SurroundController:
         neighbours = _points("neighbours_xy", neighbours_xy)
         obstacles = _points("obstacle_points", obstacle_points)
         velocity = _vector("own_velocity", own_velocity)
-        human = np.zeros(2) if human_xy is None else _vector("human_xy", human_xy)
+        human = _NO_HUMAN if human_xy is None else _vector("human_xy", human_xy)
         command = self._law.step(
             neighbours[None],
-            np.ones((1, len(neighbours)), dtype=bool),
+            _all_seen(len(neighbours)),
             obstacles[None],
-            np.ones((1, len(obstacles)), dtype=bool),
+            _all_seen(len(obstacles)),
             human[None],
-            np.array([human_xy is not None]),
+            _HUMAN_UNSEEN if human_xy is None else _HUMAN_SEEN,
             velocity[None],
             dt,
         )
         return command[0]
+
+
+_NO_HUMAN = np.zeros(2)
+_HUMAN_SEEN, _HUMAN_UNSEEN = np.array([True]), np.array([False])
+for _constant in (_NO_HUMAN, _HUMAN_SEEN, _HUMAN_UNSEEN):
+    _constant.flags.writeable = False
+
+
+@functools.cache
+def _all_seen(count: int) -> np.ndarray:
+    """A (1, count) mask of True (read-only: shared by every step with that many points)."""
+    mask = np.ones((1, count), dtype=bool)
+    mask.flags.writeable = False
+    return mask
 
 
 def extent(positions: np.ndarray) -> float:
@@ -368,8 +383,14 @@ def _pair_distances(p: np.ndarray) -> np.ndarray:
     return np.linalg.norm(p[:, None, :] - p[None, :, :], axis=-1)
 
 
+def _norm(v: np.ndarray) -> np.ndarray:
+    """Euclidean norm along the last axis, as ``np.linalg.norm(v, axis=-1)`` computes it (sqrt of the
+    summed squares), without its Python overhead: the robot's law calls it on tiny arrays at every step."""
+    return np.sqrt(np.add.reduce(v * v, axis=-1))
+
+
 def _clip_norm(v: np.ndarray, limit: float) -> np.ndarray:
-    norm = np.linalg.norm(v, axis=-1, keepdims=True)
+    norm = np.sqrt(np.add.reduce(v * v, axis=-1, keepdims=True))
     return v * np.minimum(1.0, limit / np.maximum(norm, 1e-12))
 
 
@@ -379,13 +400,13 @@ def _points(name: str, value: np.ndarray) -> np.ndarray:
         return np.zeros((0, 2))
     if array.ndim != 2 or array.shape[1] != 2:
         raise ValueError(f"{name} must have shape (k, 2), not {array.shape}")
-    if not np.isfinite(array).all():
+    if np.count_nonzero(np.isfinite(array)) != array.size:
         raise ValueError(f"{name} must be finite")
     return array
 
 
 def _vector(name: str, value: np.ndarray) -> np.ndarray:
     array = np.asarray(value, dtype=float)
-    if array.shape != (2,) or not np.isfinite(array).all():
+    if array.shape != (2,) or np.count_nonzero(np.isfinite(array)) != 2:
         raise ValueError(f"{name} must be a finite (2,) vector, not {value!r}")
     return array

@@ -36,7 +36,7 @@ from petswarm.driving import EchoRanges
 from petswarm.motion import DriveLimits, MotorCommand
 from petswarm.pet_controller import PetControllerConfig, safety
 from petswarm.surround import SurroundConfig, SurroundController
-from petswarm.surround_sensing import BeaconTracker, SensingConfig, beacon_points, echo_points, sense
+from petswarm.surround_sensing import BeaconTracker, SensingConfig, beacon_fixes, echo_points, sense_many
 from radio_hub.interface import BeaconSweep, IrConfig, OwnSensors
 
 STALE_AFTER_S = 0.2
@@ -79,6 +79,7 @@ class SurroundPilot:
         """True once the human's beacon was seen: the robot drives from then on."""
         self.counters = {"steps": 0, "stale_steps": 0, "human_seen": 0, "echoes_dropped": 0, "beacons": 0}
         self._echoes = EchoRanges()
+        self._sensing = config.sensing
         self._last_us: int | None = None
         self._sweep_t_us = 0
         self._sweep_at = -float("inf")
@@ -100,17 +101,18 @@ class SurroundPilot:
         if sweep.t_us != self._sweep_t_us:
             self._sweep_t_us, self._sweep_at = sweep.t_us, now_s
             config = self.config
-            fixes = beacon_points(sweep.readings, config.ir, config.estimator, config.human_id, sweep.gains)
-            self.tracker.update(fixes, own_velocity)
+            names, readings, gains = sweep.arrays()
+            seen, xy = beacon_fixes(names, readings, gains, config.ir, config.estimator, config.human_id)
+            self.tracker.update_many(seen, xy, own_velocity)
         elif now_s - self._sweep_at > STALE_AFTER_S:
             self.tracker.clear()
             self.counters["stale_steps"] += 1
 
     def _drive(self, sensors: OwnSensors, dt: float) -> tuple[float, float] | None:
         config = self.config
-        points = self.tracker.points
+        tracker = self.tracker
         echoes = echo_points(sensors.ranges_m, sensors.angles_rad, config.law.robot_radius_m)
-        seen = sense(points, echoes, config.human_id, config.sensing)
+        seen = sense_many(tracker.names, tracker.positions, echoes, config.human_id, self._sensing)
         if not self.engaged and seen.human is None:
             return None
         self.engaged = True
@@ -122,5 +124,5 @@ class SurroundPilot:
         self.counters["steps"] += 1
         self.counters["human_seen"] += seen.human is not None
         self.counters["echoes_dropped"] += seen.echoes_dropped
-        self.counters["beacons"] = len(points)
+        self.counters["beacons"] = len(tracker.names)
         return safe.vx, safe.vy

@@ -17,6 +17,7 @@ ultrasonic echoes. Pure: readings in, points out (the robot process's ``surround
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -74,19 +75,35 @@ def beacon_points(
     g times as bright, so each gain has its own calibration."""
     if not beacons:
         return {}
+    names = list(beacons)
     gains = gains or {}
-    groups: dict[float, list[str]] = {}
-    for name in beacons:
-        power = (PERSON_BEACON_POWER if name == person else 1.0) * gains.get(name, 1.0)
-        groups.setdefault(power, []).append(name)
-    points: dict[str, np.ndarray] = {}
-    for power, group in groups.items():
-        config = ir if power == 1.0 else ir.brighter(power)
-        readings = np.stack([np.asarray(beacons[n], dtype=float) for n in group])
-        found = estimate_many(readings, config, method)
-        xy = np.stack([np.cos(found.bearing_rad), np.sin(found.bearing_rad)], axis=1) * found.distance_m[:, None]
-        points.update({n: xy[i] for i, n in enumerate(group) if found.valid[i]})
-    return points
+    readings = np.array([np.asarray(beacons[n], dtype=float) for n in names], dtype=float)
+    seen, xy = beacon_fixes(names, readings, [gains.get(n, 1.0) for n in names], ir, method, person)
+    return dict(zip(seen, xy, strict=True))
+
+
+def beacon_fixes(
+    names: list[str],
+    readings: np.ndarray,
+    gains: list[float],
+    ir: IrConfig,
+    method: str = "lsq",
+    person: str | None = None,
+) -> tuple[list[str], np.ndarray]:
+    """``beacon_points`` of one sweep as arrays: ``readings`` (k, 12) of the beacons ``names`` read at
+    ``gains``, all through one estimate (each with its own calibration); returns the names of those with a
+    signal, in the order given, and their positions (m, 2)."""
+    if not names:
+        return [], np.zeros((0, 2))
+    brightness = [(PERSON_BEACON_POWER if n == person else 1.0) * g for n, g in zip(names, gains, strict=True)]
+    found = estimate_many(readings, ir, method, brightness)
+    xy = np.empty((len(names), 2))
+    np.multiply(np.cos(found.bearing_rad), found.distance_m, out=xy[:, 0])
+    np.multiply(np.sin(found.bearing_rad), found.distance_m, out=xy[:, 1])
+    valid = found.valid
+    if np.count_nonzero(valid) == len(names):
+        return list(names), xy
+    return [n for n, v in zip(names, valid.tolist(), strict=True) if v], xy[valid]
 
 
 TRACK_ALPHA = 0.5
@@ -106,53 +123,86 @@ class BeaconTracker:
     of the cylinder scenario the swarm ended 8 m behind its human (1.6 m with this tracker). Here each beacon
     keeps a velocity of its own (an alpha-beta filter on its fixes, in the robot's non-turning frame), so a
     neighbour driving along stays put relative to us.
+
+    The tracks are kept as arrays (one row per beacon, in the order they were first seen), so a step costs
+    a few array operations whatever the number of beacons.
     """
 
     def __init__(self, alpha: float = TRACK_ALPHA, beta: float = TRACK_BETA) -> None:
         if not 0 < alpha <= 1 or not 0 <= beta < 2:
             raise ValueError(f"alpha must be in (0, 1] and beta in [0, 2), not {alpha}, {beta}")
         self.alpha, self.beta = alpha, beta
-        self._position: dict[str, np.ndarray] = {}
-        self._velocity: dict[str, np.ndarray] = {}
+        self._names: list[str] = []
+        self._rows: dict[str, int] = {}
+        self._position = np.zeros((0, 2))
+        self._velocity = np.zeros((0, 2))
         """Each beacon's own velocity (not relative to us), in our frame."""
         self._since_fix = 0.0
 
     @property
     def points(self) -> dict[str, np.ndarray]:
         """The tracked beacons' positions now, in the robot's frame."""
-        return dict(self._position)
+        return dict(zip(self._names, self._position, strict=True))
+
+    @property
+    def names(self) -> list[str]:
+        """The tracked beacons, in the order of ``positions``."""
+        return list(self._names)
+
+    @property
+    def positions(self) -> np.ndarray:
+        """The tracked beacons' positions now (k, 2), in the order of ``names``."""
+        return self._position
 
     def predict(self, own_velocity: np.ndarray, dt: float) -> None:
         """Move every track ``dt`` seconds on: it drives at its velocity, we at ``own_velocity`` (odometry)."""
         if not dt >= 0:
             raise ValueError(f"dt must be >= 0, not {dt!r}")
-        own = np.asarray(own_velocity, dtype=float)
-        for name, velocity in self._velocity.items():
-            self._position[name] = self._position[name] + (velocity - own) * dt
+        if self._names:
+            # a new array, never written in place: points handed out before stay as they were
+            self._position = self._position + (self._velocity - np.asarray(own_velocity, dtype=float)) * dt
         self._since_fix += dt
 
     def update(self, fixes: dict[str, np.ndarray], own_velocity: np.ndarray) -> None:
         """A sweep's fixes: tracks of beacons in it are corrected, new ones start at rest relative to us, and
         beacons missing from it are dropped (out of sight)."""
+        names = list(fixes)
+        xy = np.array([np.asarray(fixes[n], dtype=float) for n in names], dtype=float).reshape(-1, 2)
+        self.update_many(names, xy, own_velocity)
+
+    def update_many(self, names: list[str], xy: np.ndarray, own_velocity: np.ndarray) -> None:
+        """``update`` with the fixes as arrays: ``names`` (k) and their positions ``xy`` (k, 2)."""
         own = np.asarray(own_velocity, dtype=float)
         period = self._since_fix
         self._since_fix = 0.0
-        for name in list(self._position):
-            if name not in fixes:
-                del self._position[name], self._velocity[name]
-        for name, fix in fixes.items():
-            fix = np.asarray(fix, dtype=float)
-            if name not in self._position or period <= 0:
-                self._position[name], self._velocity[name] = fix, own.copy()
-                continue
-            innovation = fix - self._position[name]
-            self._position[name] = self._position[name] + self.alpha * innovation
-            self._velocity[name] = self._velocity[name] + self.beta * innovation / period
+        fix_row = {n: i for i, n in enumerate(names)}
+        old = self._rows
+        kept = [n for n in self._names if n in fix_row]  # tracks go on in their order, new ones after
+        new = [n for n in names if n not in old]
+        order = kept + new
+        fixed = xy[[fix_row[n] for n in order]] if order != names else np.asarray(xy, dtype=float)
+        if period <= 0 or not kept:
+            position, velocity = fixed, np.tile(own, (len(order), 1))
+        else:
+            k = len(kept)
+            if kept == self._names:  # every track goes on, in its row
+                tracked, moving = self._position, self._velocity
+            else:
+                rows = [old[n] for n in kept]
+                tracked, moving = self._position[rows], self._velocity[rows]
+            innovation = fixed[:k] - tracked
+            position = tracked + self.alpha * innovation
+            velocity = moving + self.beta * innovation / period
+            if new:
+                position = np.concatenate([position, fixed[k:]])
+                velocity = np.concatenate([velocity, np.tile(own, (len(new), 1))])
+        self._names, self._rows = order, {n: i for i, n in enumerate(order)}
+        self._position, self._velocity = position.reshape(-1, 2), velocity.reshape(-1, 2)
 
     def clear(self) -> None:
         """Forget every beacon (the sweeps stopped)."""
-        self._position.clear()
-        self._velocity.clear()
+        self._names, self._rows = [], {}
+        self._position, self._velocity = np.zeros((0, 2)), np.zeros((0, 2))
 
 
 def echo_points(ranges_m: np.ndarray, angles_rad: np.ndarray, robot_radius_m: float) -> np.ndarray:
@@ -163,7 +213,11 @@ def echo_points(ranges_m: np.ndarray, angles_rad: np.ndarray, robot_radius_m: fl
         raise ValueError(f"ranges_m {ranges.shape} and angles_rad {angles.shape} must match")
     heard = np.isfinite(ranges)
     reach = robot_radius_m + ranges[heard]
-    return np.stack([np.cos(angles[heard]), np.sin(angles[heard])], axis=1) * reach[:, None]
+    toward = angles[heard]
+    points = np.empty((len(reach), 2))
+    np.multiply(np.cos(toward), reach, out=points[:, 0])
+    np.multiply(np.sin(toward), reach, out=points[:, 1])
+    return points
 
 
 def sense(
@@ -174,26 +228,44 @@ def sense(
 ) -> SurroundSensing:
     """Sort beacons into neighbours and the human, add the human's body to the obstacles, and drop the echoes
     that a beacon explains."""
-    human = beacon_xy.get(human_id)
-    others = [np.asarray(p, dtype=float) for n, p in beacon_xy.items() if n != human_id]
-    neighbours = np.array(others, dtype=float).reshape(-1, 2)
+    names = list(beacon_xy)
+    xy = np.array([np.asarray(beacon_xy[n], dtype=float) for n in names], dtype=float).reshape(-1, 2)
+    return sense_many(names, xy, echoes, human_id, config)
+
+
+def sense_many(
+    names: list[str], xy: np.ndarray, echoes: np.ndarray, human_id: str, config: SensingConfig
+) -> SurroundSensing:
+    """``sense`` with the beacons as arrays: ``names`` (k) at ``xy`` (k, 2)."""
     echoes = np.asarray(echoes, dtype=float).reshape(-1, 2)
-    bodies = [(p, config.robot_radius_m) for p in neighbours]
+    at = names.index(human_id) if human_id in names else None
+    if at is None:
+        human, neighbours = None, xy
+    else:
+        human = xy[at]
+        neighbours = np.concatenate([xy[:at], xy[at + 1 :]])
+    explained_count = 0
+    obstacles = echoes
+    if len(echoes) and len(xy):
+        # an echo within a beacon's body (its radius plus the slack) came off it
+        radius = config.robot_radius_m + config.echo_match_m
+        reach = np.full(len(xy), radius)
+        if at is not None:
+            reach[at] = config.person_radius_m + config.echo_match_m
+        gap = echoes[:, None, :] - xy[None, :, :]
+        explained = np.logical_or.reduce(np.sqrt(np.add.reduce(gap * gap, axis=-1)) <= reach, axis=1)
+        explained_count = int(np.count_nonzero(explained))
+        if explained_count:
+            obstacles = echoes[~explained]
     if human is not None:
-        bodies.append((np.asarray(human, dtype=float), config.person_radius_m))
-    explained = np.zeros(len(echoes), dtype=bool)
-    for centre, radius in bodies:
-        explained |= np.linalg.norm(echoes - centre, axis=1) <= radius + config.echo_match_m
-    obstacles = [echoes[~explained]]
-    if human is not None:
-        obstacles.append(_surface_toward_me(np.asarray(human, dtype=float), config.person_radius_m)[None])
-    return SurroundSensing(neighbours, np.concatenate(obstacles), human, int(explained.sum()))
+        obstacles = np.concatenate([obstacles, _surface_toward_me(human, config.person_radius_m)[None]])
+    return SurroundSensing(neighbours, obstacles, human, explained_count)
 
 
 def _surface_toward_me(centre: np.ndarray, radius: float) -> np.ndarray:
     """The point of a disc's surface nearest the robot; a centre estimated inside the disc's radius (the robot
     pressed against him, or a short estimate) puts it a hair in front of the robot, pushing straight away."""
-    distance = float(np.linalg.norm(centre))
+    distance = math.sqrt(float(centre.dot(centre)))
     if distance <= 1e-9:
         return np.zeros(2)
     reach = max(distance - radius, 0.01)

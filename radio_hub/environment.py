@@ -237,7 +237,7 @@ class Environment:
             self._send_down(node_id, wire.IrSample(readings=readings.astype("<f4").tobytes(), t_us=now))
         if self.ir.sweeps % BEACONS_EVERY == 0:
             for node_id, (sources, block, gains) in self.ir.beacon_sweep(poses, chaos).items():
-                readings = block.astype("<f4").tobytes()
+                readings = block.astype("<f4", copy=False).tobytes()
                 self._send_down(node_id, wire.IrBeacons(sources=sources, readings=readings, t_us=now, gains=gains))
 
     def _tick_world(self) -> None:
@@ -259,10 +259,8 @@ class Environment:
             self._record_world(now)
 
     def _send_sensors(self, now: int) -> None:
-        for node_id, kind in self._kinds.items():
-            if kind != "robot" or node_id not in self.world.bodies:
-                continue
-            own = self.world.sense(node_id, self._body_rng)
+        robots = [n for n, kind in self._kinds.items() if kind == "robot" and n in self.world.bodies]
+        for node_id, own in zip(robots, self.world.sense_many(robots, self._body_rng), strict=True):
             self._send_down(
                 node_id,
                 wire.Sensors(

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from radio_hub.chaos import Chaos
-from radio_hub.light import IrConfig, IrMode, OverlapCounter, beacon_gain, receiver_gains, receiver_readings, sense
+from radio_hub.light import IrConfig, IrMode, OverlapCounter, beacon_gains, receiver_gains, receiver_readings, sense
 
 Pose = tuple[float, float, float]
 """x (m), y (m), heading (rad)."""
@@ -85,19 +85,33 @@ class IrAir:
         distance = np.hypot(dx, dy)
         np.fill_diagonal(distance, np.inf)  # a module does not see its own beacon
         strength = self._beacon_strength(distance, names)
-        light = strength[..., None] * receiver_gains(np.arctan2(dy, dx) - at[:, None, 2])
         seen = strength > 0
         out: dict[str, tuple[list[str], np.ndarray, list[float]]] = {}
-        for row, node in enumerate(names):
-            if not seen[row].any():
-                continue
-            lit = light[row, seen[row]]
-            gains = [beacon_gain(float(peak), self.config) for peak in lit.max(axis=1)]
-            readings = sense(lit * np.array(gains)[:, None], self.config, self.rng)
-            if chaos is not None and chaos.faults:
+        counts = np.count_nonzero(seen, axis=1)
+        lit_rows = np.flatnonzero(counts).tolist()
+        if not lit_rows:
+            return out
+        # the light of every (module, source) pair in sight, rows of one module together, modules in order
+        module, source = np.nonzero(seen)
+        lit = strength[seen][:, None] * receiver_gains(np.arctan2(dy[seen], dx[seen]) - at[module, 2])
+        names_array = np.array(names, dtype=object)
+        if chaos is not None and any(f.kind in ("ir_blind", "ir_noise") for f in chaos.faults.values()):
+            # a disturbed module draws its noise right after its own readings: module by module
+            for row in lit_rows:
+                node = names[row]
+                mine = lit[module == row]
+                gains = beacon_gains(mine.max(axis=1), self.config)
+                readings = sense(mine * gains[:, None], self.config, self.rng)
                 readings = self._disturb(readings, [node] * len(readings), chaos)
-            sources = [n for n, s in zip(names, seen[row], strict=True) if s]
-            out[node] = (sources, readings.astype(np.float32), gains)
+                out[node] = (names_array[seen[row]].tolist(), readings.astype(np.float32), gains.tolist())
+            return out
+        # every module's sweep in one array, in module order: the same draws as module by module
+        gains = beacon_gains(np.maximum.reduce(lit, axis=1), self.config)
+        readings = sense(lit * gains[:, None], self.config, self.rng).astype(np.float32)
+        sources, gain_list, ends = names_array[source].tolist(), gains.tolist(), np.cumsum(counts).tolist()
+        for row in lit_rows:
+            start, end = ends[row] - int(counts[row]), ends[row]
+            out[names[row]] = (sources[start:end], readings[start:end], gain_list[start:end])
         return out
 
     def _beacon_strength(self, distance: np.ndarray, names: list[str]) -> np.ndarray:

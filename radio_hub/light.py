@@ -203,6 +203,19 @@ def beacon_gain(peak_light: float, config: IrConfig) -> float:
     return BEACON_GAINS[-1]
 
 
+def beacon_gains(peak_light: ArrayLike, config: IrConfig) -> np.ndarray:
+    """``beacon_gain`` of every peak in an array at once."""
+    peak = np.asarray(peak_light, dtype=float)
+    limit = AGC_HEADROOM * config.saturation_counts - config.ambient_counts
+    # gain 2^-k fits when 2^-k peak <= limit, that is (scaling by a power of two being exact) when
+    # peak <= limit 2^k: the first of those thresholds at or above the peak is the gain's index
+    step = np.searchsorted(limit / _GAINS, peak, side="left")
+    return _GAINS[np.minimum(step, len(_GAINS) - 1)]
+
+
+_GAINS = np.array(BEACON_GAINS)
+
+
 # == who is transmitting ==============================================================================
 
 

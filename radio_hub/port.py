@@ -117,14 +117,56 @@ class OwnSensors:
     odometry: tuple[float, float, float]
 
 
-@dataclass(frozen=True)
 class BeaconSweep:
     """One beacon-mode sweep at model time ``t_us``: each coded beacon's 12 readings (counts) and the gain its
-    channel's AGC read them at (divide the light above ambient by it)."""
+    channel's AGC read them at (divide the light above ambient by it).
 
-    t_us: int
-    readings: dict[str, np.ndarray]
-    gains: dict[str, float]
+    Made from maps (``BeaconSweep(t_us, readings, gains)``) or, as it comes off the air, from one (sources, 12)
+    block (``of_block``); either way ``readings``/``gains`` are the maps and ``arrays()`` the block, each
+    worked out from the other only when asked for (a robot reads the block, 20 to 100 times a second)."""
+
+    __slots__ = ("_block", "_gain_list", "_gains", "_readings", "_sources", "t_us")
+
+    def __init__(self, t_us: int, readings: dict[str, np.ndarray], gains: dict[str, float]) -> None:
+        self.t_us = t_us
+        self._readings: dict[str, np.ndarray] | None = readings
+        self._gains: dict[str, float] | None = gains
+        self._sources: list[str] | None = None
+        self._block: np.ndarray | None = None
+        self._gain_list: list[float] | None = None
+
+    @classmethod
+    def of_block(cls, t_us: int, sources: list[str], block: np.ndarray, gains: list[float]) -> BeaconSweep:
+        """A sweep of distinct ``sources``, ``block[i]`` (12 readings) read at ``gains[i]``."""
+        sweep = cls(t_us, {}, {})
+        sweep._readings = sweep._gains = None
+        sweep._sources, sweep._block, sweep._gain_list = sources, block, gains
+        return sweep
+
+    @property
+    def readings(self) -> dict[str, np.ndarray]:
+        """Each source's 12 readings."""
+        if self._readings is None:
+            self._readings = dict(zip(self._sources or [], self._block if self._block is not None else [], strict=True))
+        return self._readings
+
+    @property
+    def gains(self) -> dict[str, float]:
+        """Each source's gain."""
+        if self._gains is None:
+            self._gains = dict(zip(self._sources or [], self._gain_list or [], strict=True))
+        return self._gains
+
+    def arrays(self) -> tuple[list[str], np.ndarray, list[float]]:
+        """The sources, their readings (sources, 12) and their gains (1 where none was given), in one order."""
+        if self._block is not None and self._sources is not None and self._gain_list is not None:
+            return list(self._sources), self._block, list(self._gain_list)
+        names = list(self.readings)
+        block = np.array([self.readings[n] for n in names], dtype=float).reshape(-1, IR_RECEIVERS)
+        return names, block, [self.gains.get(n, 1.0) for n in names]
+
+    def __repr__(self) -> str:
+        return f"BeaconSweep(t_us={self.t_us}, sources={list(self.readings)})"
 
 
 @dataclass(frozen=True)
@@ -512,8 +554,13 @@ class RadioClient:
         if not all(0 < g <= 1 for g in gains):
             self.malformed += 1
             return
-        readings = dict(zip(msg.sources, block.reshape(-1, IR_RECEIVERS), strict=True))
-        self.beacons = BeaconSweep(msg.t_us, readings, dict(zip(msg.sources, map(float, gains), strict=True)))
+        block = block.reshape(-1, IR_RECEIVERS)
+        gains = [float(g) for g in gains]
+        if len(set(msg.sources)) == len(msg.sources):
+            self.beacons = BeaconSweep.of_block(msg.t_us, msg.sources, block, gains)
+        else:  # a source named twice: its last sweep counts, as in a map
+            readings = dict(zip(msg.sources, block, strict=True))
+            self.beacons = BeaconSweep(msg.t_us, readings, dict(zip(msg.sources, gains, strict=True)))
 
     def _hub_seen(self, present: bool) -> None:
         self.hub_present = present

@@ -377,21 +377,48 @@ holds at most 64 values."""
 
 
 def _check_types(msg: Message) -> None:
-    for f in fields(msg):
-        value: Any = getattr(msg, f.name)
-        annotation = str(f.type)
-        if value is None and "None" in annotation:
+    for name, nullable, kind, accepted, lengths in _checks(type(msg)):
+        value: Any = getattr(msg, name)
+        if value is None and nullable:
             continue
+        if kind == _STRINGS:
+            ok = isinstance(value, list) and (
+                _STR.issuperset(map(type, value)) or all(isinstance(v, str) for v in value)
+            )
+        elif kind == _NUMBERS:
+            ok = isinstance(value, list) and len(value) in lengths and _numbers(value)
+        else:
+            ok = isinstance(value, accepted) and (kind == _BOOL) == isinstance(value, bool)
+        if not ok:
+            raise WireError(f"{msg.TYPE}.{name} has the wrong type ({type(value).__name__})")
+
+
+_STRINGS, _NUMBERS, _BOOL, _SCALAR = range(4)
+_PLAIN_NUMBERS = frozenset((int, float))
+_STR = frozenset((str,))
+
+
+@functools.cache
+def _checks(cls: type[Message]) -> tuple[tuple[str, bool, int, tuple[type, ...], Any], ...]:
+    """Per field of a message type: its name, whether None is allowed, what kind of value it takes, the
+    scalar types accepted and the lengths a number list may have (worked out once, not per message)."""
+    checks = []
+    for f in fields(cls):
+        annotation = str(f.type)
         base = annotation.split(" |")[0]
         if base == "list[str]":
-            ok = isinstance(value, list) and all(isinstance(v, str) for v in value)
+            kind = _STRINGS
         elif base.startswith("list"):
-            ok = (
-                isinstance(value, list)
-                and len(value) in _LIST_LENGTHS.get(f.name, range(65))
-                and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
-            )
+            kind = _NUMBERS
         else:
-            ok = isinstance(value, _SCALARS.get(base, (object,))) and (base == "bool") == isinstance(value, bool)
-        if not ok:
-            raise WireError(f"{msg.TYPE}.{f.name} has the wrong type ({type(value).__name__})")
+            kind = _BOOL if base == "bool" else _SCALAR
+        lengths = _LIST_LENGTHS.get(f.name, range(65))
+        checks.append((f.name, "None" in annotation, kind, _SCALARS.get(base, (object,)), lengths))
+    return tuple(checks)
+
+
+def _numbers(values: list[Any]) -> bool:
+    """Every value an int or a float, and none a bool."""
+    if _PLAIN_NUMBERS.issuperset(map(type, values)):  # what msgpack decodes to: the common case, quickly
+        return True
+    return all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values)

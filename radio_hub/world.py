@@ -182,6 +182,9 @@ class World:
         self.t = 0.0
         self._segments = _segment_array(self.obstacles)
         self._circles = np.array([(o.x, o.y, o.r) for o in self.obstacles if o.kind == "circle"]).reshape(-1, 3)
+        self._ultrasonic_rad = np.array([math.radians(a) for a in self.config.ultrasonic_angles_deg], dtype=float)
+        half = math.radians(self.config.ultrasonic_half_beam_deg)
+        self._ultrasonic_spread = np.array((-half, 0.0, half) if half > 0 else (0.0,))
 
     def set_obstacles(self, obstacles: list[Obstacle]) -> None:
         """Replace the obstacles (a scenario loaded at run time)."""
@@ -232,23 +235,76 @@ class World:
         if dt <= 0:
             return
         cfg = self.config
-        for body in self.bodies.values():
-            if body.kind != "robot":
-                continue
-            wanted = body.command if t - body.command_t <= cfg.command_timeout_s else np.zeros(3)
-            yaw = body.pose[2]
-            c, s = math.cos(yaw), math.sin(yaw)
-            target = np.array([c * wanted[0] - s * wanted[1], s * wanted[0] + c * wanted[1], wanted[2]])
-            target = _limit_speed(target, cfg.max_speed_mps, cfg.max_omega_rps)
-            change = target - body.velocity
-            change[:2] = _clip_norm(change[:2], cfg.max_accel_mps2 * dt)
-            change[2] = float(np.clip(change[2], -cfg.max_alpha_rps2 * dt, cfg.max_alpha_rps2 * dt))
-            body.velocity = body.velocity + change
-            body.pose = body.pose + body.velocity * dt
-            body.pose[2] = _wrap(body.pose[2])
+        robots = [b for b in self.bodies.values() if b.kind == "robot"]
+        if robots:
+            # every robot at once, element by element the arithmetic of one
+            pose = np.array([b.pose for b in robots], dtype=float)
+            velocity = np.array([b.velocity for b in robots], dtype=float)
+            fresh = np.array([t - b.command_t <= cfg.command_timeout_s for b in robots])
+            wanted = np.where(fresh[:, None], np.array([b.command for b in robots], dtype=float), 0.0)
+            c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+            target = np.stack(
+                [c * wanted[:, 0] - s * wanted[:, 1], s * wanted[:, 0] + c * wanted[:, 1], wanted[:, 2]], axis=1
+            )
+            target[:, :2] = _clip_norms(target[:, :2], cfg.max_speed_mps)
+            target[:, 2] = np.clip(target[:, 2], -cfg.max_omega_rps, cfg.max_omega_rps)
+            change = target - velocity
+            change[:, :2] = _clip_norms(change[:, :2], cfg.max_accel_mps2 * dt)
+            change[:, 2] = np.clip(change[:, 2], -cfg.max_alpha_rps2 * dt, cfg.max_alpha_rps2 * dt)
+            velocity = velocity + change
+            pose = pose + velocity * dt
+            pose[:, 2] = (pose[:, 2] + math.pi) % (2 * math.pi) - math.pi
+            for k, body in enumerate(robots):
+                body.velocity, body.pose = velocity[k], pose[k]
         self._settle_contacts()
 
     def _settle_contacts(self) -> None:
+        if not self._may_touch():
+            contacts: set[tuple[str, str]] = set()
+        else:
+            contacts = self._settled_contacts()
+        for pair in sorted(contacts - self._contacts):
+            self.collisions += 1
+            self.collision_log.append({"t": round(self.t, 4), "a": pair[0], "b": pair[1]})
+        self._contacts = contacts
+
+    def _may_touch(self) -> bool:
+        """Whether any two bodies, or a body and an obstacle, are within a hair of touching (one array
+        computation; when none is, settling would move nothing and find no contact)."""
+        bodies = list(self.bodies.values())
+        if not bodies:
+            return False
+        xyr = np.array([(b.pose[0], b.pose[1], b.radius) for b in bodies], dtype=float)
+        p, radius = xyr[:, :2], xyr[:, 2]
+        slack = 1e-6
+        gap = p[:, None, :] - p[None, :, :]
+        reach = radius[:, None] + radius[None, :] + slack
+        close = np.hypot(gap[..., 0], gap[..., 1]) < reach
+        np.fill_diagonal(close, False)
+        if close.any():
+            return True
+        circles = self._circles
+        if len(circles):
+            gap = p[:, None, :] - circles[None, :, :2]
+            if (np.hypot(gap[..., 0], gap[..., 1]) < radius[:, None] + circles[None, :, 2] + slack).any():
+                return True
+        segments = self._segments
+        if len(segments):
+            a, e = segments[:, :2], segments[:, 2:] - segments[:, :2]
+            length2 = np.einsum("ij,ij->i", e, e)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                u = np.where(length2 > 0, np.einsum("bsj,sj->bs", p[:, None, :] - a[None], e) / length2, 0.0)
+            closest = a[None] + np.clip(u, 0.0, 1.0)[..., None] * e[None]
+            gap = p[:, None, :] - closest
+            if (np.hypot(gap[..., 0], gap[..., 1]) < radius[:, None] + slack).any():
+                return True
+        for o in self.obstacles:  # a centre inside a rectangle is pushed out whatever its distance to the sides
+            if o.kind == "rect" and ((o.x0 < p[:, 0]) & (p[:, 0] < o.x1) & (o.y0 < p[:, 1]) & (p[:, 1] < o.y1)).any():
+                return True
+        return False
+
+    def _settled_contacts(self) -> set[tuple[str, str]]:
+        """Push overlapping bodies apart and out of obstacles, pair by pair; the contacts found."""
         contacts: set[tuple[str, str]] = set()
         bodies = list(self.bodies.values())
         for i, a in enumerate(bodies):
@@ -263,10 +319,7 @@ class World:
                 contacts.add((a.body_id, f"obstacle-{k}"))
                 if a.kind == "robot":
                     a.pose[:2] += push
-        for pair in sorted(contacts - self._contacts):
-            self.collisions += 1
-            self.collision_log.append({"t": round(self.t, 4), "a": pair[0], "b": pair[1]})
-        self._contacts = contacts
+        return contacts
 
     def _obstacle_pushes(self, body: Body) -> list[tuple[int, np.ndarray]]:
         """(obstacle index, push-out vector) for every obstacle the body overlaps."""
@@ -296,39 +349,90 @@ class World:
 
     def sense(self, body_id: str, rng: np.random.Generator) -> OwnSensors:
         """A robot's ultrasonic ranges, AHRS yaw and wheel odometry, with their noise."""
-        body = self.bodies[body_id]
+        return self.sense_many([body_id], rng)[0]
+
+    def sense_many(self, body_ids: list[str], rng: np.random.Generator) -> list[OwnSensors]:
+        """``sense`` for several robots: one ray computation for all, and the noise drawn as ``sense`` called
+        for each in turn draws it (per body: its echoes' ranges, the yaw, the three odometry values)."""
         cfg = self.config
-        ranges = self.ultrasonic(body_id)
+        n = len(body_ids)
+        if not n:
+            return []
+        ranges = self.ultrasonic_many(body_ids)
+        bodies = [self.bodies[b] for b in body_ids]
+        pose = np.array([b.pose for b in bodies], dtype=float).reshape(n, 3)
+        velocity = np.array([b.velocity for b in bodies], dtype=float).reshape(n, 3)
+        # one draw of standard normals for all, cut as the draws body by body would have been
         seen = ~np.isnan(ranges)
-        ranges[seen] = np.maximum(0.02, ranges[seen] + rng.normal(0.0, cfg.ultrasonic_noise_m, int(seen.sum())))
-        yaw = _wrap(body.pose[2] + rng.normal(0.0, math.radians(cfg.yaw_noise_deg)))
-        c, s = math.cos(body.pose[2]), math.sin(body.pose[2])
-        vx, vy, omega = body.velocity
-        odometry = np.array([c * vx + s * vy, -s * vx + c * vy, omega])
-        odometry = odometry * (1.0 + rng.normal(0.0, cfg.odometry_noise, 3))
-        return OwnSensors(ranges, yaw, odometry)
+        echoes = np.count_nonzero(seen, axis=1)
+        ends = np.cumsum(echoes + 4)
+        starts = ends - (echoes + 4)
+        z = rng.standard_normal(int(ends[-1]))
+        at_echo = starts[:, None] + np.cumsum(seen, axis=1) - 1
+        ranges[seen] = np.maximum(0.02, ranges[seen] + (0.0 + cfg.ultrasonic_noise_m * z[at_echo[seen]]))
+        yaw_noise = 0.0 + math.radians(cfg.yaw_noise_deg) * z[starts + echoes]
+        yaw = np.mod(pose[:, 2] + yaw_noise + math.pi, 2 * math.pi) - math.pi
+        odometry_noise = 0.0 + cfg.odometry_noise * z[(starts + echoes + 1)[:, None] + np.arange(3)]
+        c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+        vx, vy, omega = velocity.T
+        odometry = np.stack([c * vx + s * vy, -s * vx + c * vy, omega], axis=1) * (1.0 + odometry_noise)
+        yaws = yaw.tolist()
+        return [OwnSensors(ranges[k], yaws[k], odometry[k]) for k in range(n)]
 
     def ultrasonic(self, body_id: str) -> np.ndarray:
         """Noise-free range of the nearest echo in each sensor's cone (nan when nothing within range)."""
-        body = self.bodies[body_id]
+        return self.ultrasonic_many([body_id])[0]
+
+    def ultrasonic_many(self, body_ids: list[str]) -> np.ndarray:
+        """``ultrasonic`` of several bodies, shape (bodies, sensors): every ray of every body against every
+        circle (obstacles and the other bodies) and segment in one array computation.
+
+        Each sensor casts three rays (the cone's edges and its axis); a ray's echo is the nearest surface it
+        meets, measured from the body's skin, and a sensor reports the nearest of its rays within range."""
         cfg = self.config
-        half = math.radians(cfg.ultrasonic_half_beam_deg)
-        spread = (-half, 0.0, half) if half > 0 else (0.0,)
-        out = np.full(len(cfg.ultrasonic_angles_deg), np.nan)
-        others = np.array(
-            [(*b.pose[:2], b.radius) for b in self.bodies.values() if b.body_id != body_id], dtype=float
-        ).reshape(-1, 3)
-        circles = np.vstack([self._circles, others])
-        for i, angle in enumerate(cfg.ultrasonic_angles_deg):
-            directions = body.pose[2] + math.radians(angle) + np.array(spread)
-            hits = [
-                _ray_hit(body.pose[:2], d, circles, self._segments, body.radius, cfg.ultrasonic_range_m)
-                for d in directions
-            ]
-            nearest = min(hits)
-            if nearest <= cfg.ultrasonic_range_m:
-                out[i] = nearest
-        return out
+        n = len(body_ids)
+        bodies = [self.bodies[b] for b in body_ids]
+        everyone = list(self.bodies.values())
+        poses = np.array([b.pose for b in bodies], dtype=float).reshape(n, 3)
+        skin = np.array([b.radius for b in bodies], dtype=float)
+        origin = poses[:, :2]
+        # ray directions (bodies, sensors, rays): heading + sensor angle + spread, as one sensor's cone
+        directions = (poses[:, 2, None] + self._ultrasonic_rad)[:, :, None] + self._ultrasonic_spread
+        unit = np.stack([np.cos(directions), np.sin(directions)], axis=-1)  # (n, S, K, 2)
+        best = np.full(directions.shape, np.inf)
+        bodies_xyr = np.array([(*b.pose[:2], b.radius) for b in everyone], dtype=float).reshape(-1, 3)
+        circles = np.vstack([self._circles, bodies_xyr])
+        if len(circles):
+            # a body does not echo off itself
+            not_self = np.ones((n, len(circles)), dtype=bool)
+            index = {b.body_id: len(self._circles) + k for k, b in enumerate(everyone)}
+            not_self[np.arange(n), [index[b] for b in body_ids]] = False
+            rel = circles[None, :, :2] - origin[:, None, :]  # (n, M, 2)
+            # one matrix-vector product per ray (as rel @ d for a single ray)
+            along = np.matmul(rel[:, None, None], unit[..., None])[..., 0]  # (n, S, K, M)
+            perp2 = (rel[..., 0] * rel[..., 0] + rel[..., 1] * rel[..., 1])[:, None, None, :] - along**2
+            r2 = circles[:, 2] ** 2
+            hit = (perp2 <= r2) & (along > 0) & not_self[:, None, None, :]
+            with np.errstate(invalid="ignore"):
+                t = along - np.sqrt(r2 - perp2)
+            best = np.minimum(best, np.where(hit, np.maximum(t, 0.0), np.inf).min(axis=-1))
+        segments = self._segments
+        if len(segments):
+            e = segments[:, 2:] - segments[:, :2]  # (G, 2)
+            dx, dy = unit[..., 0, None], unit[..., 1, None]  # (n, S, K, 1)
+            denom = dx * e[:, 1] - dy * e[:, 0]  # (n, S, K, G)
+            ok = np.abs(denom) > 1e-12
+            w = segments[None, :, :2] - origin[:, None, :]  # (n, G, 2)
+            w0, w1 = w[:, None, None, :, 0], w[:, None, None, :, 1]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = (w0 * e[:, 1] - w1 * e[:, 0]) / denom
+                u = (w0 * dy - w1 * dx) / denom
+            hit = ok & (t > 0) & (u >= 0) & (u <= 1)
+            best = np.minimum(best, np.where(hit, t, np.inf).min(axis=-1))
+        reach = best - skin[:, None, None]
+        reach = np.where(reach <= cfg.ultrasonic_range_m, reach, np.inf)
+        nearest = reach.min(axis=-1)
+        return np.where(nearest <= cfg.ultrasonic_range_m, nearest, np.nan)
 
     def poses(self) -> dict[str, tuple[float, float, float]]:
         """Every body's pose (x, y, yaw) as plain floats, by id (for the IR light and the radio ranges)."""
@@ -336,50 +440,25 @@ class World:
 
     def snapshot(self) -> list[dict[str, Any]]:
         """Every body's truth as plain values (for the world publication and records)."""
+        bodies = list(self.bodies.values())
+        if not bodies:
+            return []
+        # every pose and velocity as Python floats in one conversion, then rounded as before
+        values = np.array([(*b.pose, *b.velocity) for b in bodies], dtype=float).tolist()
         return [
             {
                 "id": b.body_id,
                 "kind": b.kind,
-                "x": round(float(b.pose[0]), 4),
-                "y": round(float(b.pose[1]), 4),
-                "yaw": round(float(b.pose[2]), 4),
-                "vx": round(float(b.velocity[0]), 4),
-                "vy": round(float(b.velocity[1]), 4),
-                "omega": round(float(b.velocity[2]), 4),
+                "x": round(x, 4),
+                "y": round(y, 4),
+                "yaw": round(yaw, 4),
+                "vx": round(vx, 4),
+                "vy": round(vy, 4),
+                "omega": round(omega, 4),
                 "radius": b.radius,
             }
-            for b in self.bodies.values()
+            for b, (x, y, yaw, vx, vy, omega) in zip(bodies, values, strict=True)
         ]
-
-
-def _ray_hit(
-    origin: np.ndarray, direction: float, circles: np.ndarray, segments: np.ndarray, skin: float, max_range: float
-) -> float:
-    """Distance from the body's skin to the first thing the ray meets (inf when nothing)."""
-    d = np.array([math.cos(direction), math.sin(direction)])
-    best = math.inf
-    if len(circles):
-        rel = circles[:, :2] - origin
-        along = rel @ d
-        perp2 = np.einsum("ij,ij->i", rel, rel) - along**2
-        r2 = circles[:, 2] ** 2
-        hit = (perp2 <= r2) & (along > 0)
-        if hit.any():
-            t = along[hit] - np.sqrt(r2[hit] - perp2[hit])
-            best = min(best, float(np.min(np.maximum(t, 0.0))))
-    if len(segments):
-        a, b = segments[:, :2], segments[:, 2:]
-        e = b - a
-        denom = d[0] * e[:, 1] - d[1] * e[:, 0]
-        ok = np.abs(denom) > 1e-12
-        w = a - origin
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (w[:, 0] * e[:, 1] - w[:, 1] * e[:, 0]) / denom
-            u = (w[:, 0] * d[1] - w[:, 1] * d[0]) / denom
-        hit = ok & (t > 0) & (u >= 0) & (u <= 1)
-        if hit.any():
-            best = min(best, float(np.min(t[hit])))
-    return best - skin if best - skin <= max_range else math.inf
 
 
 def _segment_array(obstacles: list[Obstacle]) -> np.ndarray:
@@ -416,16 +495,11 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return v / n if n > 1e-12 else np.array([1.0, 0.0])
 
 
-def _clip_norm(v: np.ndarray, limit: float) -> np.ndarray:
-    n = float(np.hypot(*v))
-    return v * (limit / n) if n > limit else v
-
-
-def _limit_speed(v: np.ndarray, max_speed: float, max_omega: float) -> np.ndarray:
-    out = v.copy()
-    out[:2] = _clip_norm(v[:2], max_speed)
-    out[2] = float(np.clip(v[2], -max_omega, max_omega))
-    return out
+def _clip_norms(v: np.ndarray, limit: float) -> np.ndarray:
+    """Every row of an (n, 2) array scaled down to the norm ``limit`` where it is longer (as v (limit / |v|))."""
+    n = np.hypot(v[:, 0], v[:, 1])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where((n > limit)[:, None], v * (limit / n)[:, None], v)
 
 
 def _wrap(angle: float) -> float:
