@@ -12,10 +12,12 @@ ACKs) is modelled in the environment as in the hub.
 from __future__ import annotations
 
 import asyncio
+import contextvars
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Coroutine
 from contextlib import AsyncExitStack
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
 from cli.checker import check_record
@@ -33,7 +35,7 @@ from cli.run import (
     summarise,
 )
 from petswarm.clock import MODEL_EPOCH_S, ModelClockLoop
-from petswarm.robot import Robot
+from petswarm.robot import Robot, RobotConfig
 from petswarm.scenario import Scenario
 from petswarm.sequence import EventLog
 from petswarm.user import UserConfig, run_user
@@ -45,19 +47,19 @@ ENDPOINT = "memory"
 
 
 class MemoryAir:
-    """The environment on the running ``ModelClockLoop``, its nodes linked in memory (a ``Downlink``)."""
+    """The environment on the running ``ModelClockLoop``, its nodes linked in memory (a ``Downlink``).
 
-    def __init__(self, config: EnvironmentConfig, seed: int, record: RunRecord, world_log: bool) -> None:
+    ``pcap_path`` and ``world_log``: where the air's frames and the world's ground truth go (a run's record);
+    None keeps them in memory only (tests)."""
+
+    def __init__(
+        self, config: EnvironmentConfig, seed: int, *, pcap_path: Path | None = None, world_log: Path | None = None
+    ) -> None:
         self.loop = asyncio.get_running_loop()
         if not isinstance(self.loop, ModelClockLoop):
             raise TypeError("MemoryAir runs on a ModelClockLoop")
         self.env = Environment(
-            config,
-            seed,
-            self,
-            wall_epoch_us=round(MODEL_EPOCH_S * 1e6),
-            pcap_path=record.path / "air.pcap",
-            world_log=record.path / "world.jsonl" if world_log else None,
+            config, seed, self, wall_epoch_us=round(MODEL_EPOCH_S * 1e6), pcap_path=pcap_path, world_log=world_log
         )
         self._nodes: dict[str, Callable[[bytes], None]] = {}
         self._wake: asyncio.TimerHandle | None = None
@@ -103,6 +105,13 @@ class MemoryAir:
         self.env.node_gone(node_id, instance, self.now_us())
         self._schedule()
 
+    def chaos(self, request: dict[str, Any]) -> dict[str, Any]:
+        """A chaos request (``{"op": "add", "fault": {...}}``, ``{"op": "clear"}``...) now, as the hub's chaos
+        queryable takes it; the answer, with ``error`` when the request was refused."""
+        answer = self.env.chaos_request(request, self.now_us(), MODEL_EPOCH_S + self.now_us() / 1e6)
+        self._schedule()  # a fault may change what is due next
+        return answer
+
     # -- the schedule ---------------------------------------------------------------------------------------
 
     def _fire(self) -> None:
@@ -145,11 +154,120 @@ class MemoryLink:
         self.air.loop.call_soon(self.air.gone, self.node_id, self.instance)
 
 
+_OWNER: contextvars.ContextVar[RunningRobot | None] = contextvars.ContextVar("model_robot", default=None)
+"""The robot whose code is running: every task created meanwhile belongs to it (``RunningRobot.tasks``)."""
+
+
+def _owned_task_factory(
+    loop: asyncio.AbstractEventLoop, coro: Coroutine[Any, Any, Any], context: contextvars.Context | None = None
+) -> asyncio.Task[Any]:
+    """asyncio's own tasks, each noted by the robot that created it (a task inherits its creator's context), so
+    that a robot can be stopped or killed as a whole, as the end of its process would end all its tasks."""
+    task = asyncio.Task(coro, loop=loop, context=context)
+    owner = context.get(_OWNER) if context is not None else _OWNER.get()
+    if owner is not None:
+        owner.adopt(task)
+    return task
+
+
+@dataclass
+class RunningRobot:
+    """A ``Robot`` running on a ``MemoryAir``: the object a robot process runs, and every task it started."""
+
+    robot: Robot
+    task: asyncio.Task[None] | None = None
+    tasks: set[asyncio.Task[Any]] = field(default_factory=set)
+    """Every live task the robot's code created (its managers' loops, rounds, rosters, handlers)."""
+    gone: bool = False
+    """Stopped or killed: it takes no more commands, and a task it would still start is cancelled at once."""
+
+    def adopt(self, task: asyncio.Task[Any]) -> None:
+        """``task`` was created by this robot's code."""
+        if self.gone:
+            task.cancel()  # a dead robot's leftover timer starts nothing
+            return
+        self.tasks.add(task)
+        task.add_done_callback(self.tasks.discard)
+
+    async def command(self, cmd: str, **args: Any) -> dict[str, Any]:
+        """One control command, as the robot process's control queryable would carry it out (the tasks it
+        starts, such as an organized swarm's rosters, are the robot's). HubUnavailable once it is gone."""
+        if self.gone:
+            raise HubUnavailable(f"robot {self.robot.config.robot_id} is gone")
+        token = _OWNER.set(self)
+        try:
+            return await self.robot.handle({"cmd": cmd, **args})
+        finally:
+            _OWNER.reset(token)
+
+    async def stop(self) -> None:
+        """A clean stop, as on SIGTERM: the robot's loops end, its record gets its last event, its radio
+        detaches; then whatever else it had started ends, as at the end of its process."""
+        self.robot.stopping.set()
+        try:
+            if self.task is not None:
+                await self.task
+            await self.robot.close()
+        finally:
+            self._end()
+
+    async def kill(self) -> None:
+        """As SIGKILL: every task of the robot ends at once, with no last event and no detach; the environment
+        forgets the node as the hub does when a process's liveliness ends."""
+        self._end()
+        await self.robot.rf.radio.close(detach=False)
+        if self.robot.log.sink is not None:
+            self.robot.log.sink.close()
+        await asyncio.sleep(0)  # the cancelled tasks unwind now, not at some later step of the caller
+
+    def _end(self) -> None:
+        self.gone = True
+        for task in list(self.tasks):
+            task.cancel()
+
+
+async def start_robot(config: RobotConfig, air: MemoryAir) -> RunningRobot:
+    """A real ``Robot`` with ``config``, attached to ``air`` through memory and running (stop or kill it)."""
+    loop = asyncio.get_running_loop()
+    if loop.get_task_factory() is None:
+        loop.set_task_factory(_owned_task_factory)  # type: ignore[arg-type]
+    radio = await RadioClient.connect(config.identity(), world=config.world, link=air.link(), timeout=5.0)
+    running = RunningRobot(Robot(config, radio))
+    token = _OWNER.set(running)
+    try:
+        running.task = loop.create_task(running.robot.run())
+    finally:
+        _OWNER.reset(token)
+    return running
+
+
+def start_user(config: UserConfig, air: MemoryAir, log: EventLog) -> asyncio.Task[int]:
+    """The user process's coroutine (person, belt and watch) on ``air``; the task ends when the walk is over."""
+    return asyncio.get_running_loop().create_task(run_user(config, log, link=air.link()))
+
+
+def robot_config_of(argv: list[str]) -> RobotConfig:
+    """The robot a ``petswarm robot`` command line describes."""
+    from cli.main import build_parser, robot_config
+
+    return robot_config(build_parser().parse_args(argv))
+
+
+async def cancel_leftovers(loop: asyncio.AbstractEventLoop) -> None:
+    """Cancel every task still pending and let them unwind, as ``asyncio.run`` does before it closes its loop
+    (a closed loop with pending tasks warns "Task was destroyed but it is pending")."""
+    current = asyncio.current_task()
+    leftovers = [t for t in asyncio.all_tasks(loop) if t is not current]
+    for task in leftovers:
+        task.cancel()
+    await asyncio.gather(*leftovers, return_exceptions=True)
+
+
 @dataclass
 class ModelControl:
     """``RunControl`` in model time: commands are calls on the robot objects."""
 
-    robots: dict[int, Robot] = field(default_factory=dict)
+    robots: dict[int, RunningRobot] = field(default_factory=dict)
 
     async def command(self, robot: int, cmd: str, timeout: float = 5.0, **args: Any) -> dict[str, Any]:
         """One control command, as a robot process's control queryable would carry it out."""
@@ -157,7 +275,7 @@ class ModelControl:
         if target is None:
             raise HubUnavailable(f"no robot {robot} in this model run")
         async with asyncio.timeout(timeout):
-            return await target.handle({"cmd": cmd, **args})
+            return await target.command(cmd, **args)
 
     async def sleep(self, seconds: float) -> None:
         """Model time goes on."""
@@ -191,6 +309,7 @@ def execute(opts: RunOptions, scenario: Scenario | None) -> dict[str, Any]:
         summary = loop.run_until_complete(_run(opts, scenario, world, record))
     finally:
         model_time_s = loop.time()
+        loop.run_until_complete(cancel_leftovers(loop))
         loop.close()
         summary["clock"] = "model"
         summary["model_time_s"] = round(model_time_s, 6)
@@ -210,7 +329,8 @@ def execute(opts: RunOptions, scenario: Scenario | None) -> dict[str, Any]:
 
 
 async def _run(opts: RunOptions, scenario: Scenario | None, world: str, record: RunRecord) -> dict[str, Any]:
-    air = MemoryAir(_environment(opts, scenario), opts.seed, record, world_log=scenario is not None)
+    world_log = record.path / "world.jsonl" if scenario is not None else None
+    air = MemoryAir(_environment(opts, scenario), opts.seed, pcap_path=record.path / "air.pcap", world_log=world_log)
     ctl = ModelControl()
     async with AsyncExitStack() as stack:
         stack.callback(air.env.close)
@@ -245,27 +365,17 @@ def _robot_argvs(opts: RunOptions, scenario: Scenario | None, world: str, record
     return {rid: scenario_robot_argv(opts, scenario, rid, ENDPOINT, world, record) for rid in range(1, count + 1)}
 
 
-async def _start_robot(argv: list[str], air: MemoryAir, stack: AsyncExitStack) -> Robot:
-    """The robot a ``petswarm robot`` command line describes, attached through memory and running."""
-    from cli.main import build_parser, robot_config
-
-    config = robot_config(build_parser().parse_args(argv))
-    radio = await RadioClient.connect(config.identity(), world=config.world, link=air.link(), timeout=5.0)
-    robot = Robot(config, radio)
-    task = asyncio.get_running_loop().create_task(robot.run())
-
-    async def stop() -> None:
-        robot.stopping.set()
-        await task
-        await robot.close()
-
-    stack.push_async_callback(stop)
-    return robot
+async def _start_robot(argv: list[str], air: MemoryAir, stack: AsyncExitStack) -> RunningRobot:
+    """The robot a ``petswarm robot`` command line describes, attached through memory and running; stopped
+    when ``stack`` closes."""
+    running = await start_robot(robot_config_of(argv), air)
+    stack.push_async_callback(running.stop)
+    return running
 
 
 async def _ping_and_organize(opts: RunOptions, air: MemoryAir, ctl: ModelControl, world: str) -> dict[str, Any]:
     timeline = FaultTimeline(list(opts.faults))
-    chaos = _chaos(air)
+    chaos = air.chaos
     start = asyncio.get_running_loop().time()
     for second in range(1, int(opts.duration) + 1):
         timeline.apply_due(chaos, float(second - 1))
@@ -291,10 +401,10 @@ async def _drive(
             scenario.user, ENDPOINT, world, scenario.duration_s, opts.seed, beacon=scenario.surround_enabled
         )
         sink = open(record.events_of(scenario.user.node_id), "a")  # noqa: SIM115 (closed below)
-        user_task = asyncio.get_running_loop().create_task(run_user(config, EventLog(sink=sink), link=air.link()))
+        user_task = start_user(config, air, EventLog(sink=sink))
         user_task.add_done_callback(lambda _task: sink.close())
     timeline = FaultTimeline(list(scenario.faults) + list(opts.faults))
-    chaos = _chaos(air)
+    chaos = air.chaos
     loop = asyncio.get_running_loop()
     start = loop.time()
     while (elapsed := loop.time() - start) < scenario.duration_s:
@@ -320,15 +430,6 @@ def _scenario_options(opts: RunOptions, scenario: Scenario) -> RunOptions:
 async def _summary(opts: RunOptions, air: MemoryAir, ctl: ModelControl, world: str) -> dict[str, Any]:
     stats = {"world": world, **air.env.stats(air.now_us())}
     return summarise(stats, await statuses(ctl, opts.robots), opts, world, ENDPOINT)
-
-
-def _chaos(air: MemoryAir) -> Callable[[dict[str, Any]], dict[str, Any]]:
-    def request(body: dict[str, Any]) -> dict[str, Any]:
-        answer = air.env.chaos_request(body, air.now_us(), MODEL_EPOCH_S + air.now_us() / 1e6)
-        air._schedule()  # a fault may change what is due next
-        return answer
-
-    return request
 
 
 def _report(air: MemoryAir, what: str) -> None:
