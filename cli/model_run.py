@@ -137,6 +137,7 @@ class MemoryLink:
         self.air = air
         self.node_id = ""
         self.instance = ""
+        self.closed = False
 
     def open(
         self, node_id: str, instance: str, on_down: Callable[[bytes], None], on_hub: Callable[[bool], None]
@@ -146,11 +147,14 @@ class MemoryLink:
         self.air.opened(node_id, on_down)
 
     def put(self, data: bytes) -> None:
-        """One message up, delivered after whatever is already due at this instant."""
-        self.air.loop.call_soon(self.air.up, self.node_id, data)
+        """One message up, delivered after whatever is already due at this instant; nothing once closed (a node
+        that has gone sends nothing more, whatever its leftover tasks try)."""
+        if not self.closed:
+            self.air.loop.call_soon(self.air.up, self.node_id, data)
 
     async def close(self) -> None:
         """The node goes: the environment detaches it once its last messages are in."""
+        self.closed = True
         self.air.loop.call_soon(self.air.gone, self.node_id, self.instance)
 
 
@@ -216,8 +220,9 @@ class RunningRobot:
         forgets the node as the hub does when a process's liveliness ends."""
         self._end()
         await self.robot.rf.radio.close(detach=False)
-        if self.robot.log.sink is not None:
-            self.robot.log.sink.close()
+        sink, self.robot.log.sink = self.robot.log.sink, None
+        if sink is not None:
+            sink.close()
         await asyncio.sleep(0)  # the cancelled tasks unwind now, not at some later step of the caller
 
     def _end(self) -> None:
