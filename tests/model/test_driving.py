@@ -81,6 +81,19 @@ def test_leading_the_robot_drives_an_arc_when_the_user_turns(tmp_path: Path) -> 
     assert [e["to"] for e in states][:2] == ["command-waiting", "leading"], states
 
 
+def _bodies_at(record: Path, t: float) -> dict[str, dict[str, Any]]:
+    """Every body of the first world tick at or after model time ``t`` (events' ``mono`` is the same clock)."""
+    tick = next(tick for tick in read_world(record / "world.jsonl") if tick["t_us"] / 1e6 >= t)
+    return {b["id"]: b for b in tick["bodies"]}
+
+
+def _in_frame(master: dict[str, Any], point: list[float]) -> tuple[float, float]:
+    """``point`` (world) in the frame of the master's true pose: x ahead, y to its left."""
+    dx, dy = point[0] - master["x"], point[1] - master["y"]
+    c, s = math.cos(master["yaw"]), math.sin(master["yaw"])
+    return (c * dx + s * dy, -s * dx + c * dy)
+
+
 def _turned_round_and_led_back(record: Path) -> None:
     """Every robot turned round, and the swarm then led the user back south, ahead of him."""
     for rid in (1, 2, 3):
@@ -110,6 +123,22 @@ def test_turn_about_switches_following_to_leading_with_the_master_per_table_3(tm
         slave = record_events(record, f"robot-{rid}")
         assert not any(e["kind"] == "handover" for e in slave), rid
         assert [e["to"] for e in slave if e["kind"] == "state"] == ["organizing", "slave-driving", "waiting"], rid
+    # the slots in the master's frame, just before the request and once every robot has turned round (the user
+    # stands still meanwhile): from behind the master to ahead of it, at the same depth and side
+    before, after = _bodies_at(record, change["mono"] - 0.1), _bodies_at(record, change["mono"] + 5.0)
+    [done] = [e for e in events if e["kind"] == "turn_about_done"]
+    assert done["mono"] < change["mono"] + 5.0
+    assert all(math.sin(after[f"robot-{rid}"]["yaw"]) < -0.9 for rid in (1, 2, 3))  # all facing south by then
+    for rid in (2, 3):
+        joined = next(e for e in record_events(record, f"robot-{rid}") if e.get("to") == "slave-driving")
+        depth = 0.6 * joined["number"]  # a column 0.6 m apart, in member order
+        slave_before, slave_after = before[f"robot-{rid}"], after[f"robot-{rid}"]
+        assert slave_before["role"] == slave_after["role"] == "slave"
+        (xb, yb), (xa, ya) = (
+            _in_frame(b["robot-1"], s["reference"]) for b, s in ((before, slave_before), (after, slave_after))
+        )
+        assert xb == pytest.approx(-depth, abs=0.01) and xa == pytest.approx(depth, abs=0.01), (rid, xb, xa)
+        assert ya == pytest.approx(yb, abs=0.01)
     _turned_round_and_led_back(record)
 
 
@@ -137,6 +166,18 @@ def test_turn_about_with_a_master_change_hands_the_master_role_to_the_farthest_r
     # the third robot followed the handover as a slave of the new master
     third = [e for e in record_events(record, f"robot-{other}") if e["kind"] == "handover"]
     assert third and third[0]["to"] == farthest, third
+    # every robot kept its place: once all have turned round (the user stands still meanwhile), each slave's
+    # reference in the world is where it stood before, robot 1's own place or the other's slot; off by at most
+    # the new master's heading error (a turn-about ends within 10 degrees) over the column's 1.2 m: 0.3 m
+    before, after = _bodies_at(record, change["mono"] - 0.1), _bodies_at(record, change["mono"] + 5.0)
+    assert after[f"robot-{farthest}"]["role"] == "master"
+    places = {1: [before["robot-1"]["x"], before["robot-1"]["y"]], other: before[f"robot-{other}"]["reference"]}
+    for rid, place in places.items():
+        slave = after[f"robot-{rid}"]
+        assert slave["role"] == "slave", rid
+        assert math.dist(slave["reference"], place) < 0.3, (rid, slave["reference"], place)
+        # the new master leads (farthest from the user): the others follow it, between it and the user
+        assert _in_frame(after[f"robot-{farthest}"], slave["reference"])[0] < -0.3
     # the belt re-paired: the new master woke it with its own pattern and tracked the user over LF
     assert any(e["kind"] == "repaired" and e["to"] == f"robot-{farthest}" for e in record_events(record, "user"))
     assert any(e["kind"] == "owner_tracked" for e in new)
