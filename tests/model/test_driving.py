@@ -94,6 +94,55 @@ def _in_frame(master: dict[str, Any], point: list[float]) -> tuple[float, float]
     return (c * dx + s * dy, -s * dx + c * dy)
 
 
+def _places(bodies: dict[str, dict[str, Any]], master: int, robots: tuple[int, ...]) -> dict[int, list[float]]:
+    """Where each robot belongs in the formation: the master's own position, each slave's reference."""
+    return {
+        rid: [bodies[f"robot-{rid}"]["x"], bodies[f"robot-{rid}"]["y"]]
+        if rid == master
+        else bodies[f"robot-{rid}"]["reference"]
+        for rid in robots
+    }
+
+
+KEPT_PLACE_M = 0.3
+"""Table 3's Change column keeps every robot's place relative to the new master; off by at most the new master's
+heading error (a turn-about ends within 10 degrees of its target) over the column's 1.2 m."""
+
+
+def _kept_places(record: Path, at: float, old_master: int, new_master: int, robots: tuple[int, ...]) -> None:
+    """Change column: from just before the request at ``at`` to 5 s later (every robot has turned round by then),
+    each slave's reference relative to the new master is where it stood relative to it before."""
+    before, after = _bodies_at(record, at - 0.1), _bodies_at(record, at + 5.0)
+    assert after[f"robot-{new_master}"]["role"] == "master"
+    places = _places(before, old_master, robots)
+    anchor_before, anchor_after = places[new_master], [after[f"robot-{new_master}"][k] for k in ("x", "y")]
+    for rid in robots:
+        if rid == new_master:
+            continue
+        slave = after[f"robot-{rid}"]
+        assert slave["role"] == "slave", rid
+        was = [places[rid][k] - anchor_before[k] for k in (0, 1)]
+        now = [slave["reference"][k] - anchor_after[k] for k in (0, 1)]
+        assert math.dist(was, now) < KEPT_PLACE_M, (rid, was, now)
+
+
+def _mirrored(record: Path, at: float, master: int, slaves: tuple[int, ...]) -> None:
+    """No-change column: the same master; from just before the request at ``at`` to 5 s later (every robot has
+    turned round), each slave's slot in the master's frame goes to its other side: x -> -x, y kept."""
+    before, after = _bodies_at(record, at - 0.1), _bodies_at(record, at + 5.0)
+    assert after[f"robot-{master}"]["role"] == "master"
+    for rid in slaves:
+        joined = next(e for e in record_events(record, f"robot-{rid}") if e.get("to") == "slave-driving")
+        depth = 0.6 * joined["number"]  # a column 0.6 m apart, in member order
+        slave_before, slave_after = before[f"robot-{rid}"], after[f"robot-{rid}"]
+        assert slave_before["role"] == slave_after["role"] == "slave"
+        xb, yb = _in_frame(before[f"robot-{master}"], slave_before["reference"])
+        xa, ya = _in_frame(after[f"robot-{master}"], slave_after["reference"])
+        assert abs(xb) == pytest.approx(depth, abs=0.01) and xa == pytest.approx(-xb, abs=0.01), (rid, xb, xa)
+        assert ya == pytest.approx(yb, abs=0.01)
+    assert all(math.sin(after[f"robot-{rid}"]["yaw"]) < -0.9 for rid in (master, *slaves))  # facing south
+
+
 def _turned_round_and_led_back(record: Path) -> None:
     """Every robot turned round, and the swarm then led the user back south, ahead of him."""
     for rid in (1, 2, 3):
@@ -124,21 +173,12 @@ def test_turn_about_switches_following_to_leading_with_the_master_per_table_3(tm
         assert not any(e["kind"] == "handover" for e in slave), rid
         assert [e["to"] for e in slave if e["kind"] == "state"] == ["organizing", "slave-driving", "waiting"], rid
     # the slots in the master's frame, just before the request and once every robot has turned round (the user
-    # stands still meanwhile): from behind the master to ahead of it, at the same depth and side
-    before, after = _bodies_at(record, change["mono"] - 0.1), _bodies_at(record, change["mono"] + 5.0)
+    # stands still meanwhile): from behind the master (x < 0) to ahead of it, at the same depth and side
     [done] = [e for e in events if e["kind"] == "turn_about_done"]
     assert done["mono"] < change["mono"] + 5.0
-    assert all(math.sin(after[f"robot-{rid}"]["yaw"]) < -0.9 for rid in (1, 2, 3))  # all facing south by then
-    for rid in (2, 3):
-        joined = next(e for e in record_events(record, f"robot-{rid}") if e.get("to") == "slave-driving")
-        depth = 0.6 * joined["number"]  # a column 0.6 m apart, in member order
-        slave_before, slave_after = before[f"robot-{rid}"], after[f"robot-{rid}"]
-        assert slave_before["role"] == slave_after["role"] == "slave"
-        (xb, yb), (xa, ya) = (
-            _in_frame(b["robot-1"], s["reference"]) for b, s in ((before, slave_before), (after, slave_after))
-        )
-        assert xb == pytest.approx(-depth, abs=0.01) and xa == pytest.approx(depth, abs=0.01), (rid, xb, xa)
-        assert ya == pytest.approx(yb, abs=0.01)
+    _mirrored(record, change["mono"], 1, (2, 3))
+    after = _bodies_at(record, change["mono"] + 5.0)
+    assert all(_in_frame(after["robot-1"], after[f"robot-{r}"]["reference"])[0] > 0.3 for r in (2, 3))  # now ahead
     _turned_round_and_led_back(record)
 
 
@@ -166,18 +206,11 @@ def test_turn_about_with_a_master_change_hands_the_master_role_to_the_farthest_r
     # the third robot followed the handover as a slave of the new master
     third = [e for e in record_events(record, f"robot-{other}") if e["kind"] == "handover"]
     assert third and third[0]["to"] == farthest, third
-    # every robot kept its place: once all have turned round (the user stands still meanwhile), each slave's
-    # reference in the world is where it stood before, robot 1's own place or the other's slot; off by at most
-    # the new master's heading error (a turn-about ends within 10 degrees) over the column's 1.2 m: 0.3 m
-    before, after = _bodies_at(record, change["mono"] - 0.1), _bodies_at(record, change["mono"] + 5.0)
-    assert after[f"robot-{farthest}"]["role"] == "master"
-    places = {1: [before["robot-1"]["x"], before["robot-1"]["y"]], other: before[f"robot-{other}"]["reference"]}
-    for rid, place in places.items():
-        slave = after[f"robot-{rid}"]
-        assert slave["role"] == "slave", rid
-        assert math.dist(slave["reference"], place) < 0.3, (rid, slave["reference"], place)
-        # the new master leads (farthest from the user): the others follow it, between it and the user
-        assert _in_frame(after[f"robot-{farthest}"], slave["reference"])[0] < -0.3
+    # every robot kept its place relative to the new master; it leads (farthest from the user), the others
+    # follow it, between it and the user
+    _kept_places(record, change["mono"], 1, farthest, (1, 2, 3))
+    after = _bodies_at(record, change["mono"] + 5.0)
+    assert all(_in_frame(after[f"robot-{farthest}"], after[f"robot-{r}"]["reference"])[0] < -0.3 for r in (1, other))
     # the belt re-paired: the new master woke it with its own pattern and tracked the user over LF
     assert any(e["kind"] == "repaired" and e["to"] == f"robot-{farthest}" for e in record_events(record, "user"))
     assert any(e["kind"] == "owner_tracked" for e in new)
@@ -192,6 +225,72 @@ def test_turn_about_with_a_master_change_hands_the_master_role_to_the_farthest_r
         last = [e for e in record_events(record, f"robot-{rid}") if e["kind"] == "state"][-1]
         assert (last["to"], last.get("reason")) == ("waiting", "dispersed"), rid
     assert [e for e in new if e["kind"] == "state"][-1]["to"] == "leading"
+
+
+LEADING_TO_FOLLOWING = """
+name = "lead-follow"
+description = "a leading swarm of 3; the user stops, asks for following mode and turns about, walks back"
+duration_s = 27
+[user]
+owner = 1
+start = [0.0, 0.0, 90.0]
+walk_at = 11
+path = [
+  { walk = 2.0, speed = 0.6 },
+  { stop = 1.5 },
+  { turn = 180, rate = 90 },
+  { stop = 3.0 },
+  { walk = 2.0, speed = 0.6 },
+  { stop = 2.0 },
+]
+watch = [
+  { at = 5.0, request = "lead" },
+  { at = 7.0, request = "organize", robots = 2, shape = "column", spacing = 0.6 },
+  { at = 15.0, request = "mode", mode = "following", change_master = CHANGE },
+  { at = 26.0, request = "disperse" },
+]
+[robots]
+count = 3
+positions = [[0.0, 0.8, 90.0], [0.8, 0.3, 90.0], [-0.8, 0.3, 90.0]]
+"""
+
+
+@pytest.mark.timeout(300)
+@pytest.mark.parametrize("change_master", [True, False], ids=["change", "no-change"])
+def test_leading_to_following_on_a_turn_about_per_table_3(tmp_path: Path, change_master: bool) -> None:
+    """Table 3, leading -> following. Change: the robot closest to the user becomes the master, every robot keeps
+    its place. No change: the master (the leading robot, farthest from the user) stays, the slots are mirrored.
+    Either way the swarm then follows the user back south."""
+    scenario = tmp_path / "lead-follow.toml"
+    scenario.write_text(LEADING_TO_FOLLOWING.replace("CHANGE", str(change_master).lower()))
+    record = tmp_path / "run"
+    summary = _run_file(scenario, record)
+    assert summary["driving"]["collisions"] == 0
+    [change] = [e for e in record_events(record, "robot-1") if e["kind"] == "mode_change"]
+    assert (change["frm"], change["to"], change["change_master_requested"]) == ("leading", "following", change_master)
+    # robot 1, the user's robot, leads the column: the farthest from the user as it estimates
+    assert max(change["distances"], key=change["distances"].get) == "1"
+    closest = int(min(change["distances"], key=change["distances"].get))
+    if change_master:
+        assert change["applied"] == "change" and closest != 1
+        master = closest
+        taken = next(e for e in record_events(record, f"robot-{master}") if e.get("cause") == "handover")
+        assert (taken["frm"], taken["to"]) == ("slave-driving", "master-driving")
+        _kept_places(record, change["mono"], 1, master, (1, 2, 3))
+        assert any(e["kind"] == "repaired" and e["to"] == f"robot-{master}" for e in record_events(record, "user"))
+    else:
+        assert change["applied"] == "no-change" and change["table3_master"] == 0
+        master = 1
+        _mirrored(record, change["mono"], 1, (2, 3))
+    # the swarm followed the user back south: everyone moved south and stays behind (north of) him, the master
+    # still the one Table 3 chose
+    walked_at, end = _bodies_at(record, change["mono"] + 5.0), _bodies_at(record, 25.9)
+    user = end["user"]
+    assert user["y"] < walked_at["user"]["y"] - 1.5
+    for rid in (1, 2, 3):
+        robot = end[f"robot-{rid}"]
+        assert robot["y"] < walked_at[f"robot-{rid}"]["y"] - 1.0 and robot["y"] > user["y"] + 0.5, rid
+        assert robot["role"] == ("master" if rid == master else "slave"), rid
 
 
 REMOTE = """
