@@ -9,6 +9,7 @@ tests/process/test_driving.py with its bounds; the model-time runs are the same 
 
 from __future__ import annotations
 
+import functools
 import math
 import tomllib
 from pathlib import Path
@@ -32,12 +33,18 @@ def _run(name: str, record: Path, seed: int) -> dict[str, Any]:
     return summary
 
 
+@functools.lru_cache(maxsize=1)
+def _world(record: Path) -> list[dict[str, Any]]:
+    """The run's ground truth, parsed once per run (a 48 s run's log is some 2400 ticks; the checks read it often)."""
+    return read_world(record / "world.jsonl")
+
+
 def _track(record: Path, body: str) -> list[dict[str, Any]]:
-    return [b for tick in read_world(record / "world.jsonl") for b in tick["bodies"] if b["id"] == body]
+    return [b for tick in _world(record) for b in tick["bodies"] if b["id"] == body]
 
 
 def _timed(record: Path, body: str) -> list[tuple[float, dict[str, Any]]]:
-    return [(t["t_us"] / 1e6, b) for t in read_world(record / "world.jsonl") for b in t["bodies"] if b["id"] == body]
+    return [(t["t_us"] / 1e6, b) for t in _world(record) for b in t["bodies"] if b["id"] == body]
 
 
 @pytest.mark.timeout(300)
@@ -83,7 +90,7 @@ def test_leading_the_robot_drives_an_arc_when_the_user_turns(tmp_path: Path) -> 
 
 def _bodies_at(record: Path, t: float) -> dict[str, dict[str, Any]]:
     """Every body of the first world tick at or after model time ``t`` (events' ``mono`` is the same clock)."""
-    tick = next(tick for tick in read_world(record / "world.jsonl") if tick["t_us"] / 1e6 >= t)
+    tick = next(tick for tick in _world(record) if tick["t_us"] / 1e6 >= t)
     return {b["id"]: b for b in tick["bodies"]}
 
 
