@@ -14,6 +14,7 @@ from __future__ import annotations
 import asyncio
 import contextvars
 import time
+import weakref
 from collections.abc import Callable, Coroutine
 from contextlib import AsyncExitStack
 from dataclasses import dataclass, field, replace
@@ -174,6 +175,21 @@ def _owned_task_factory(
     return task
 
 
+def _own_timers(loop: asyncio.AbstractEventLoop) -> None:
+    """Make every timer the running robot's code sets (``call_later``, ``call_at``; a sleep's too) its own, as
+    ``_owned_task_factory`` does for tasks: a killed robot's pending timeout must not fire into it."""
+    plain_call_at = loop.call_at
+
+    def call_at(when: float, callback: Callable[..., Any], *args: Any, context: Any = None) -> asyncio.TimerHandle:
+        handle = plain_call_at(when, callback, *args, context=context)
+        owner = context.get(_OWNER) if context is not None else _OWNER.get()
+        if owner is not None:
+            owner.timers.add(handle)
+        return handle
+
+    loop.call_at = call_at  # type: ignore[method-assign]
+
+
 @dataclass
 class RunningRobot:
     """A ``Robot`` running on a ``MemoryAir``: the object a robot process runs, and every task it started."""
@@ -182,6 +198,8 @@ class RunningRobot:
     task: asyncio.Task[None] | None = None
     tasks: set[asyncio.Task[Any]] = field(default_factory=set)
     """Every live task the robot's code created (its managers' loops, rounds, rosters, handlers)."""
+    timers: weakref.WeakSet[asyncio.TimerHandle] = field(default_factory=weakref.WeakSet)
+    """Its pending timers (a fired one is dropped with the loop's last reference to it)."""
     gone: bool = False
     """Stopped or killed: it takes no more commands, and a task it would still start is cancelled at once."""
 
@@ -227,6 +245,8 @@ class RunningRobot:
 
     def _end(self) -> None:
         self.gone = True
+        for timer in list(self.timers):
+            timer.cancel()
         for task in list(self.tasks):
             task.cancel()
 
@@ -236,6 +256,7 @@ async def start_robot(config: RobotConfig, air: MemoryAir) -> RunningRobot:
     loop = asyncio.get_running_loop()
     if loop.get_task_factory() is None:
         loop.set_task_factory(_owned_task_factory)  # type: ignore[arg-type]
+        _own_timers(loop)
     radio = await RadioClient.connect(config.identity(), world=config.world, link=air.link(), timeout=5.0)
     running = RunningRobot(Robot(config, radio))
     token = _OWNER.set(running)
