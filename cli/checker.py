@@ -20,7 +20,9 @@ from typing import Any
 
 from cli.records import read_events
 
-FINAL_STATES = {"waiting", "following", "leading", "remote-control"}
+FINAL_STATES = {"waiting", "following", "leading", "remote-control", "command-waiting"}
+"""Command-waiting too: a robot paired with its owner whose user cancelled the operation (a watch circle) rests
+there, with its user, outside any swarm."""
 
 
 def check_counters(nodes: dict[str, dict[str, int]]) -> list[str]:

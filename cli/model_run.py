@@ -13,11 +13,14 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextvars
 import functools
 import math
 import time
-from collections.abc import Callable
-from dataclasses import replace
+import weakref
+from collections.abc import Callable, Coroutine
+from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
 from cli.checker import check_record
@@ -37,13 +40,13 @@ from cli.run import (
 )
 from petswarm.clock import MODEL_EPOCH_S, ModelClockLoop
 from petswarm.control import RelayControl
-from petswarm.robot import Robot
+from petswarm.robot import Robot, RobotConfig
 from petswarm.scenario import Scenario
 from petswarm.sequence import EventLog
 from petswarm.user import UserConfig, run_user
-from radio_hub.coordinator import Coordinator
+from radio_hub.coordinator import MODEL_EPOCH_US, Coordinator
 from radio_hub.environment import EnvironmentConfig, environment_from_dict, load_config
-from radio_hub.interface import RadioClient, RadioIdentity
+from radio_hub.interface import HubUnavailable, RadioClient, RadioIdentity
 
 ENDPOINT = "memory"
 """What a model run records as its hub endpoint: there is no socket."""
@@ -58,13 +61,20 @@ class MemoryAir:
     messages settled, before model time moves (``radio_hub.coordinator`` gives the rules).
     """
 
-    def __init__(self, coordinator: Coordinator) -> None:
+    def __init__(
+        self, config: EnvironmentConfig, seed: int, *, pcap_path: Path | None = None, world_log: Path | None = None
+    ) -> None:
+        """``pcap_path`` and ``world_log``: where the air's frames and the world's ground truth go (a run's
+        record); None keeps them in memory only (tests)."""
         self.loop = asyncio.get_running_loop()
         if not isinstance(self.loop, ModelClockLoop):
             raise TypeError("MemoryAir runs on a ModelClockLoop")
-        self.coordinator = coordinator
-        self.env = coordinator.env
+        self.coordinator = Coordinator(
+            config, seed, wall_epoch_us=MODEL_EPOCH_US, pcap_path=pcap_path, world_log=world_log
+        )
+        self.env = self.coordinator.env
         self._nodes: dict[str, Callable[[bytes], None]] = {}
+        self._settled: list[asyncio.Future[None]] = []
         self._wake: asyncio.TimerHandle | None = None
         self._wake_us = 0
         self.loop.on_quiescent = self.quiescent
@@ -91,6 +101,13 @@ class MemoryAir:
         self._nodes.pop(node_id, None)
         self.coordinator.leave(node_id, instance)
 
+    def chaos(self, request: dict[str, Any]) -> dict[str, Any]:
+        """A chaos request (``{"op": "add", "fault": {...}}``, ``{"op": "clear"}``...) now, as the hub's chaos
+        queryable takes it (tests; a run's faults go through the relay, held like every node message)."""
+        answer = self.env.chaos_request(request, self.now_us(), MODEL_EPOCH_S + self.now_us() / 1e6)
+        self._schedule()  # a fault may change what is due next
+        return answer
+
     def quiescent(self) -> bool:
         """Nothing is ready: release what is held for nodes, else settle what nodes sent; True when something
         became ready."""
@@ -107,7 +124,16 @@ class MemoryAir:
         if self.coordinator.settle(self.now_us()):
             self._schedule()
             return self.quiescent()
-        return False
+        waiting, self._settled = self._settled, []
+        for future in waiting:
+            future.set_result(None)
+        return bool(waiting)
+
+    async def settled(self) -> None:
+        """Until every message of this instant, held both ways, has been handled (no model time passes)."""
+        future: asyncio.Future[None] = self.loop.create_future()
+        self._settled.append(future)
+        await future
 
     def _fire(self) -> None:
         self._wake = None
@@ -132,6 +158,7 @@ class MemoryLink:
         self.air = air
         self.node_id = ""
         self.instance = ""
+        self.closed = False
 
     def open(
         self, node_id: str, instance: str, on_down: Callable[[bytes], None], on_hub: Callable[[bool], None]
@@ -141,12 +168,147 @@ class MemoryLink:
         self.air.opened(node_id, on_down)
 
     def put(self, data: bytes) -> None:
-        """One message up, held until every node is idle."""
-        self.air.up(self.node_id, data)
+        """One message up, held until every node is idle; nothing once closed (a node that has gone sends
+        nothing more, whatever its leftover tasks try)."""
+        if not self.closed:
+            self.air.up(self.node_id, data)
 
     async def close(self) -> None:
         """The node goes."""
-        self.air.gone(self.node_id, self.instance)
+        if not self.closed:
+            self.closed = True
+            self.air.gone(self.node_id, self.instance)
+
+
+_OWNER: contextvars.ContextVar[RunningRobot | None] = contextvars.ContextVar("model_robot", default=None)
+"""The robot whose code is running: every task created meanwhile belongs to it (``RunningRobot.tasks``)."""
+
+
+def _owned_task_factory(
+    loop: asyncio.AbstractEventLoop, coro: Coroutine[Any, Any, Any], context: contextvars.Context | None = None
+) -> asyncio.Task[Any]:
+    """asyncio's own tasks, each noted by the robot that created it (a task inherits its creator's context), so
+    that a robot can be stopped or killed as a whole, as the end of its process would end all its tasks."""
+    task = asyncio.Task(coro, loop=loop, context=context)
+    owner = context.get(_OWNER) if context is not None else _OWNER.get()
+    if owner is not None:
+        owner.adopt(task)
+    return task
+
+
+def _own_timers(loop: asyncio.AbstractEventLoop) -> None:
+    """Make every timer the running robot's code sets (``call_later``, ``call_at``; a sleep's too) its own, as
+    ``_owned_task_factory`` does for tasks: a killed robot's pending timeout must not fire into it."""
+    plain_call_at = loop.call_at
+
+    def call_at(when: float, callback: Callable[..., Any], *args: Any, context: Any = None) -> asyncio.TimerHandle:
+        handle = plain_call_at(when, callback, *args, context=context)
+        owner = context.get(_OWNER) if context is not None else _OWNER.get()
+        if owner is not None:
+            owner.timers.add(handle)
+        return handle
+
+    loop.call_at = call_at  # type: ignore[method-assign]
+
+
+@dataclass
+class RunningRobot:
+    """A ``Robot`` running on a ``MemoryAir``: the object a robot process runs, and every task it started."""
+
+    robot: Robot
+    air: MemoryAir
+    task: asyncio.Task[None] | None = None
+    tasks: set[asyncio.Task[Any]] = field(default_factory=set)
+    """Every live task the robot's code created (its managers' loops, rounds, rosters, handlers)."""
+    timers: weakref.WeakSet[asyncio.TimerHandle] = field(default_factory=weakref.WeakSet)
+    """Its pending timers (a fired one is dropped with the loop's last reference to it)."""
+    gone: bool = False
+    """Stopped or killed: it takes no more commands, and a task it would still start is cancelled at once."""
+
+    def adopt(self, task: asyncio.Task[Any]) -> None:
+        """``task`` was created by this robot's code."""
+        if self.gone:
+            task.cancel()  # a dead robot's leftover timer starts nothing
+            return
+        self.tasks.add(task)
+        task.add_done_callback(self.tasks.discard)
+
+    async def command(self, cmd: str, **args: Any) -> dict[str, Any]:
+        """One control command, as the robot process's control queryable would carry it out (the tasks it
+        starts, such as an organized swarm's rosters, are the robot's). HubUnavailable once it is gone."""
+        if self.gone:
+            raise HubUnavailable(f"robot {self.robot.config.robot_id} is gone")
+        token = _OWNER.set(self)
+        try:
+            return await self.robot.handle({"cmd": cmd, **args})
+        finally:
+            _OWNER.reset(token)
+
+    async def stop(self) -> None:
+        """A clean stop, as on SIGTERM: the robot's loops end, its record gets its last event, its radio
+        detaches; then whatever else it had started ends, as at the end of its process."""
+        self.robot.stopping.set()
+        try:
+            if self.task is not None:
+                await self.task
+            await self.robot.close()
+        finally:
+            self._end()
+
+    async def kill(self) -> None:
+        """As SIGKILL: every task of the robot ends at once, with no last event and no detach; the environment
+        forgets the node as the hub does when a process's liveliness ends."""
+        self._end()
+        await self.robot.rf.radio.close(detach=False)
+        sink, self.robot.log.sink = self.robot.log.sink, None
+        if sink is not None:
+            sink.close()
+        await self.air.settled()  # the cancelled tasks unwind and the environment forgets the node, now
+
+    def _end(self) -> None:
+        self.gone = True
+        for timer in list(self.timers):
+            timer.cancel()
+        for task in list(self.tasks):
+            task.cancel()
+
+
+async def start_robot(config: RobotConfig, air: MemoryAir) -> RunningRobot:
+    """A real ``Robot`` with ``config``, attached to ``air`` through memory and running (stop or kill it)."""
+    loop = asyncio.get_running_loop()
+    if loop.get_task_factory() is None:
+        loop.set_task_factory(_owned_task_factory)  # type: ignore[arg-type]
+        _own_timers(loop)
+    radio = await RadioClient.connect(config.identity(), world=config.world, link=air.link(), timeout=5.0)
+    running = RunningRobot(Robot(config, radio), air)
+    token = _OWNER.set(running)
+    try:
+        running.task = loop.create_task(running.robot.run())
+    finally:
+        _OWNER.reset(token)
+    return running
+
+
+def start_user(config: UserConfig, air: MemoryAir, log: EventLog) -> asyncio.Task[int]:
+    """The user process's coroutine (person, belt and watch) on ``air``; the task ends when the walk is over."""
+    return asyncio.get_running_loop().create_task(run_user(config, log, link=air.link()))
+
+
+def robot_config_of(argv: list[str]) -> RobotConfig:
+    """The robot a ``petswarm robot`` command line describes."""
+    from cli.main import robot_config
+
+    return robot_config(_parser().parse_args(argv))
+
+
+async def cancel_leftovers(loop: asyncio.AbstractEventLoop) -> None:
+    """Cancel every task still pending and let them unwind, as ``asyncio.run`` does before it closes its loop
+    (a closed loop with pending tasks warns "Task was destroyed but it is pending")."""
+    current = asyncio.current_task()
+    leftovers = [t for t in asyncio.all_tasks(loop) if t is not current]
+    for task in leftovers:
+        task.cancel()
+    await asyncio.gather(*leftovers, return_exceptions=True)
 
 
 def run_model(opts: RunOptions, scenario: Scenario | None) -> int:
@@ -197,14 +359,8 @@ def execute(opts: RunOptions, scenario: Scenario | None) -> dict[str, Any]:
 
 
 async def _run(opts: RunOptions, scenario: Scenario | None, world: str, record: RunRecord) -> dict[str, Any]:
-    coordinator = Coordinator(
-        _environment(opts, scenario),
-        opts.seed,
-        wall_epoch_us=round(MODEL_EPOCH_S * 1e6),
-        pcap_path=record.path / "air.pcap",
-        world_log=record.path / "world.jsonl" if scenario is not None else None,
-    )
-    air = MemoryAir(coordinator)
+    world_log = record.path / "world.jsonl" if scenario is not None else None
+    air = MemoryAir(_environment(opts, scenario), opts.seed, pcap_path=record.path / "air.pcap", world_log=world_log)
     try:
         # every node starts at model time 0 and attaches in the same round, as lockstep processes do
         argvs = robot_argvs(opts, scenario, world, record)
@@ -218,8 +374,9 @@ async def _run(opts: RunOptions, scenario: Scenario | None, world: str, record: 
             await user
         await asyncio.gather(*robots)
         await radio.close()
+        await cancel_leftovers(asyncio.get_running_loop())
     finally:
-        coordinator.close()
+        air.coordinator.close()
     return summary
 
 
@@ -248,15 +405,13 @@ def robot_argvs(
 
 async def _run_robot(argv: list[str], air: MemoryAir) -> None:
     """The robot a ``petswarm robot`` command line describes, attached through memory, until told to stop."""
-    from cli.main import robot_config
-
-    config = robot_config(_parser().parse_args(argv))
-    radio = await RadioClient.connect(config.identity(), world=config.world, link=air.link(), timeout=5.0)
-    robot = Robot(config, radio)
+    running = await start_robot(robot_config_of(argv), air)
     try:
-        await robot.run()
+        assert running.task is not None
+        await running.task
+        await running.robot.close()
     finally:
-        await robot.close()
+        running._end()  # as at the end of its process: whatever it left pending ends with it
 
 
 @functools.cache

@@ -334,7 +334,8 @@ class NetworkFormation:
                 await self.rf.send(BROADCAST, msg, ack=False)
             except Exception as err:  # the members will learn it from the new master's rosters
                 self.log.record("error", where="handover_broadcast", error=f"{type(err).__name__}: {err}")
-            self._follow_handover(swarm, msg, retries=step.retries)
+            if not swarm.number:  # the new master's roster may have come while the broadcast was on the air
+                self._follow_handover(swarm, msg, retries=step.retries)
             return True
 
     def _follow_handover(self, swarm: Swarm, msg: m.MasterHandover | None, **detail: Any) -> None:

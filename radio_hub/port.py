@@ -479,6 +479,8 @@ class RadioClient:
         finally:
             self._pending.pop(token, None)
             self._pending_types.pop(token, None)
+            if fut.done() and not fut.cancelled():
+                fut.exception()  # a caller cancelled as the radio closed: its error is seen, never warned about
 
     def _on_down(self, data: bytes) -> None:
         try:

@@ -12,7 +12,7 @@ import pytest
 
 from radio_hub.interface import query_hub
 
-from . import test_relative_location as rl
+from . import swarm_of_four as rl
 from .conftest import LOSSLESS
 
 pytestmark = pytest.mark.process

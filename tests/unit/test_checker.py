@@ -47,6 +47,11 @@ def test_incomplete_unordered_and_broken_event_streams_are_caught():
     assert any("ends in slave-driving" in p for p in stuck)
 
 
+def test_a_robot_whose_user_cancelled_ends_validly_in_command_waiting():
+    cancelled = _events("waiting", "command-waiting", "remote-control", "command-waiting")
+    assert check_events("r", cancelled, finished=True) == []
+
+
 def test_ir_overlap_is_a_violation(tmp_path):
     assert check_ir({"overlap_episodes": 2})
     _write(tmp_path, {"robot-1": GOOD_NODE}, {"robot-1": _events("waiting")}, ir={"overlap_episodes": 1})
