@@ -53,7 +53,11 @@ def run_lockstep(opts: RunOptions, scenario: Scenario | None) -> int:
         finally:
             clock["model_time_s"] = loop.time()
             loop.close()
-        summary["hub_process"] = query_hub(ctx.session, ctx.keys.stats, timeout=10.0).get("process")
+        hub = query_hub(ctx.session, ctx.keys.stats, timeout=10.0)
+        summary["hub_process"] = hub.get("process")
+        summary["gone"] = hub.get("lockstep", {}).get("dead", [])
+        for gone in summary["gone"]:
+            progress(f"{gone['node']} was taken as gone at model time {gone['model_time_s']:.3f} s: {gone['why']}")
         return summary
 
     def after_stop(summary: dict[str, Any], record: RunRecord) -> None:
