@@ -239,8 +239,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument(
         "--ping-interval",
         type=bounded(float, 0.01, 60),
-        default=0.5,
-        help="seconds between each robot's broadcast pings (default 0.5)",
+        default=None,
+        help="seconds between each robot's broadcast pings (default 0.5, and 0.05 s per robot beyond 10, so the "
+        "pongs of a large run stay within what the 250 kbit/s channel carries)",
     )
     run.add_argument("--world", help="key prefix of the run (default: derived from pid and seed)")
     run.add_argument("--config", help="hub medium config file (see petswarm hub --help)")
@@ -540,14 +541,14 @@ def robot_config(args: argparse.Namespace) -> RobotConfig:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from cli.run import RunOptions, run
+    from cli.run import RunOptions, default_ping_interval, run
 
     chosen_seed = args.seed if args.seed is not None else int.from_bytes(os.urandom(4), "big")
     opts = RunOptions(
         robots=args.robots,
         seed=chosen_seed,
         duration=args.duration,
-        ping_interval=args.ping_interval,
+        ping_interval=args.ping_interval or default_ping_interval(args.robots),
         world=args.world,
         config=args.config,
         pcap=args.pcap,
