@@ -198,7 +198,8 @@ def test_the_hub_restarts_every_robot_reattaches_and_a_swarm_forms_again(stack: 
     stack.compose("restart", "hub", timeout=60)
     wait_for("the hub healthy again", lambda: _health(hub) == "healthy", 60)
     wait_for("every robot attached to the new hub", lambda: _attached(stack) == set(range(1, ROBOTS + 1)), 30)
-    master = _robot(stack, 1)
+    settled = ("master-driving", "following", "waiting")  # the swarm went on, or it is over for robot 1
+    master = wait_for("robot 1 settled after the outage", lambda: (m := _robot(stack, 1))["state"] in settled and m, 20)
     if master["state"] == "master-driving":  # the swarm outlived the outage: end it, as the user would
         stack.petswarm("swarm", "disperse", "--master", "1")
     user = ["--user", "1"] if _robot(stack, 1)["state"] == "waiting" else []  # robot 1 still follows user 1
