@@ -36,7 +36,7 @@ from radio_hub.environment import (
 )
 from radio_hub.keys import Keys
 from radio_hub.light import IrConfig
-from radio_hub.zenoh_link import reliable_publisher, session_config
+from radio_hub.zenoh_link import declare_hub_keys, reliable_publisher, reply, session_config
 
 __all__ = ["Environment", "EnvironmentConfig", "RadioHub", "environment_from_dict", "load_config", "ready_line"]
 
@@ -136,20 +136,8 @@ class RadioHub:
         """Open the router session and declare the hub's keys. Raises zenoh.ZError if it cannot listen."""
         session = zenoh.open(session_config("router", self.endpoint))
         self._session = session
-        put = self._inbox.put
-        keys = self.keys
-        self._decls = [
-            session.declare_subscriber(keys.up_all, lambda s: put(("up", str(s.key_expr), s.payload.to_bytes()))),
-            session.liveliness().declare_subscriber(
-                keys.alive_all, lambda s: put(("alive", str(s.key_expr), s.kind)), history=True
-            ),
-            session.declare_queryable(keys.stats, lambda q: put(("stats", q))),
-            session.declare_queryable(keys.air, lambda q: put(("air", q))),
-            session.declare_queryable(keys.chaos, lambda q: put(("chaos", q))),
-            session.declare_queryable(keys.world_query, lambda q: put(("world", q))),
-            session.liveliness().declare_token(keys.hub_alive),
-        ]
-        self._downlink.world_pub = session.declare_publisher(keys.world_state)
+        self._decls = declare_hub_keys(session, self.keys, self._inbox.put)
+        self._downlink.world_pub = session.declare_publisher(self.keys.world_state)
         self._decls.append(self._downlink.world_pub)
         self._downlink.session = session
         self._t0_ns = time.perf_counter_ns()
@@ -200,25 +188,19 @@ class RadioHub:
             if item[2] == zenoh.SampleKind.DELETE:
                 self.env.node_gone(node_id, instance, self.now_us())
         elif kind == "stats":
-            self._reply(item[1], self.stats())
+            reply(item[1], self.stats())
         elif kind == "air":
-            self._reply(item[1], self.env.air())
+            reply(item[1], self.env.air())
         elif kind == "chaos":
             query = item[1]
             try:
                 request = msgpack.unpackb(query.payload.to_bytes(), raw=False) if query.payload else {}
             except Exception as err:  # a bad request must not hurt the hub
-                self._reply(query, {"error": f"{type(err).__name__}: {err}"})
+                reply(query, {"error": f"{type(err).__name__}: {err}"})
                 return
-            self._reply(query, self.env.chaos_request(request, self.now_us(), time.time()))
+            reply(query, self.env.chaos_request(request, self.now_us(), time.time()))
         elif kind == "world":
-            self._reply(item[1], self.env.world_state(self.now_us()))
-
-    def _reply(self, query: zenoh.Query, body: dict[str, Any]) -> None:
-        try:
-            query.reply(query.key_expr, msgpack.packb(body, use_bin_type=True))
-        finally:
-            query.drop()
+            reply(item[1], self.env.world_state(self.now_us()))
 
     def stats(self) -> dict[str, Any]:
         """The environment's counters, with this hub's world name and model clock."""

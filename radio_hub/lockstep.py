@@ -40,7 +40,7 @@ from radio_hub.coordinator import MODEL_EPOCH_US, Coordinator
 from radio_hub.environment import EnvironmentConfig, process_usage
 from radio_hub.keys import Keys
 from radio_hub.port import HubUnavailable
-from radio_hub.zenoh_link import ZenohLink, reliable_publisher, session_config
+from radio_hub.zenoh_link import ZenohLink, declare_hub_keys, reliable_publisher, reply, session_config
 
 DEAD_AFTER_S = 10.0
 """Wall seconds the hub waits for a granted node's idle before it takes the node as gone."""
@@ -191,19 +191,8 @@ class LockstepHub:
         """Open the router session and declare the hub's keys. Raises zenoh.ZError if it cannot listen."""
         session = zenoh.open(session_config("router", self.endpoint))
         self._session = session
-        put = self._inbox.put
-        keys = self.keys
-        self._decls = [
-            session.declare_subscriber(keys.up_all, lambda s: put(("up", str(s.key_expr), s.payload.to_bytes()))),
-            session.liveliness().declare_subscriber(
-                keys.alive_all, lambda s: put(("alive", str(s.key_expr), s.kind)), history=True
-            ),
-            session.declare_queryable(keys.stats, lambda q: put(("stats", q))),
-            session.declare_queryable(keys.air, lambda q: put(("air", q))),
-            session.declare_queryable(keys.world_query, lambda q: put(("world", q))),
-            session.liveliness().declare_token(keys.hub_alive),
-        ]
-        self._world_pub = session.declare_publisher(keys.world_state)
+        self._decls = declare_hub_keys(session, self.keys, self._inbox.put, chaos=False)
+        self._world_pub = session.declare_publisher(self.keys.world_state)
         self._decls.append(self._world_pub)
 
     def stop(self) -> None:
@@ -261,11 +250,11 @@ class LockstepHub:
                 else:  # it may be leaving cleanly: its last messages and Detach may still be on the way
                     node.dying_since = time.monotonic()
         elif kind == "stats":
-            self._reply(item[1], self.stats())
+            reply(item[1], self.stats())
         elif kind == "air":
-            self._reply(item[1], self.env.air())
+            reply(item[1], self.env.air())
         elif kind == "world":
-            self._reply(item[1], self.env.world_state())
+            reply(item[1], self.env.world_state())
 
     def _on_up(self, node_id: str, data: bytes) -> None:
         try:
@@ -361,9 +350,3 @@ class LockstepHub:
         if self._world_pub is not None:
             with contextlib.suppress(zenoh.ZError):
                 self._world_pub.put(msgpack.packb(state, use_bin_type=True))
-
-    def _reply(self, query: zenoh.Query, body: dict[str, Any]) -> None:
-        try:
-            query.reply(query.key_expr, msgpack.packb(body, use_bin_type=True))
-        finally:
-            query.drop()

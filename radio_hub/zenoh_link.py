@@ -69,6 +69,35 @@ def query_hub(session: zenoh.Session, key: str, timeout: float = 2.0, payload: b
     raise HubUnavailable(f"no hub answered {key} within {timeout} s")
 
 
+def declare_hub_keys(
+    session: zenoh.Session, keys: Keys, put: Callable[[tuple[Any, ...]], None], *, chaos: bool = True
+) -> list[Any]:
+    """What a hub shell serves on its router session, every callback a hand-off to ``put`` (its inbox): nodes'
+    messages (``("up", key, bytes)``), their liveliness (``("alive", key, kind)``), the queryables (``("stats",
+    query)``...; the chaos queryable only with ``chaos``) and the hub's own liveliness token."""
+    decls = [
+        session.declare_subscriber(keys.up_all, lambda s: put(("up", str(s.key_expr), s.payload.to_bytes()))),
+        session.liveliness().declare_subscriber(
+            keys.alive_all, lambda s: put(("alive", str(s.key_expr), s.kind)), history=True
+        ),
+        session.declare_queryable(keys.stats, lambda q: put(("stats", q))),
+        session.declare_queryable(keys.air, lambda q: put(("air", q))),
+        session.declare_queryable(keys.world_query, lambda q: put(("world", q))),
+        session.liveliness().declare_token(keys.hub_alive),
+    ]
+    if chaos:
+        decls.append(session.declare_queryable(keys.chaos, lambda q: put(("chaos", q))))
+    return decls
+
+
+def reply(query: zenoh.Query, body: dict[str, Any]) -> None:
+    """Answer a query with a msgpack map, and let it go."""
+    try:
+        query.reply(query.key_expr, msgpack.packb(body, use_bin_type=True))
+    finally:
+        query.drop()
+
+
 class ZenohLink:
     """A node's port to the hub over a zenoh client session."""
 
