@@ -158,10 +158,10 @@ def test_a_swarm_of_three_organized_through_compose_exec_and_a_fault_in_the_air(
     SWARM["members"] = sorted(answer["members"])
     FIGURES["organize_ms"] = answer["organize_time_s"] * 1000
     assert _robot(stack, 1)["state"] == "master-driving"
-    status = json.loads(stack.petswarm("swarm", "status", "--robot", str(SWARM["members"][0])).stdout)
+    status = json.loads(stack.petswarm("swarm", "status", "--robot", str(SWARM["members"][0]), "--json").stdout)
     assert status["state"] == "slave-driving", status["state"]
     stack.petswarm("chaos", "loss", "--p", "0.3")
-    faults = json.loads(stack.petswarm("chaos", "list").stdout)
+    faults = json.loads(stack.petswarm("chaos", "list", "--json").stdout)["faults"]
     assert [f["kind"] for f in faults] == ["loss"], faults
 
     def lost_to_chaos() -> int:
