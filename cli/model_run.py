@@ -28,6 +28,7 @@ from cli.digest import record_digest
 from cli.metrics import driving_metrics, read_world
 from cli.records import RunRecord
 from cli.run import (
+    HEARING_PROBLEMS,
     FaultTimeline,
     RunOptions,
     _print,
@@ -500,7 +501,7 @@ async def _follow_scenario(
             progress(f"t={next_report:5.1f}/{scenario.duration_s:g}s")
             next_report += 5.0
     summary = await _summary(opts, ctl, world)
-    summary["problems"] = [p for p in summary["problems"] if "heard every other" not in p]  # no ping phase here
+    summary["problems"] = [p for p in summary["problems"] if p not in HEARING_PROBLEMS]  # no ping phase here
     summary.update(scenario=scenario.name, faults=faults.applied, duration_s=scenario.duration_s)
     summary["ok"] = not summary["problems"]
     return summary

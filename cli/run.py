@@ -64,6 +64,8 @@ ALL_PAIRS_UP_TO = 10
 pongs a ping round asks for outgrow the 250 kbit/s channel (collisions and channel-access failures are the
 model working, not a fault), so a run asks that every robot heard some other one and reports the fraction of
 pairs heard (``pairs_heard_fraction``)."""
+HEARING_PROBLEMS = ("not every robot heard every other robot", "a robot heard no other robot")
+"""What the ping phase can find wrong; a scenario run has no ping phase and leaves them out."""
 STATS_TIMEOUT_S = 10.0
 """How long supervision waits for the hub's stats: a hub busy with 50 robots answers late, not never."""
 
@@ -455,9 +457,9 @@ def summarise(
     all_pairs = all(set(n["heard_from"]) >= everyone - {rid} for rid, n in enumerate(nodes.values(), 1))
     pairs = sum(len(set(n["heard_from"]) - {rid}) for rid, n in enumerate(nodes.values(), 1))
     if opts.robots > 1 and not all_pairs and opts.robots <= ALL_PAIRS_UP_TO:
-        problems.append("not every robot heard every other robot")
+        problems.append(HEARING_PROBLEMS[0])
     elif opts.robots > ALL_PAIRS_UP_TO and any(not n["heard_from"] for n in nodes.values()):
-        problems.append("a robot heard no other robot")
+        problems.append(HEARING_PROBLEMS[1])
     gaps = stats["hub"]["transport_gaps"] + sum(n["transport_gaps"] for n in nodes.values())
     if gaps:
         problems.append(f"the transport lost {gaps} messages (robots to hub and hub to robots)")

@@ -21,6 +21,7 @@ from cli.metrics import driving_metrics, read_world
 from cli.processes import Supervisor
 from cli.records import RunRecord
 from cli.run import (
+    HEARING_PROBLEMS,
     FaultTimeline,
     RunContext,
     RunOptions,
@@ -62,7 +63,7 @@ def _drive(ctx: RunContext, scenario: Scenario) -> dict[str, Any]:
     timeline = FaultTimeline(list(scenario.faults) + list(opts.faults))
     _follow(ctx.sup, ctx.session, ctx.keys, scenario.duration_s, timeline)
     summary = _summarise(ctx.session, ctx.keys, opts, world, endpoint)
-    summary["problems"] = [p for p in summary["problems"] if "heard every other" not in p]  # no ping phase here
+    summary["problems"] = [p for p in summary["problems"] if p not in HEARING_PROBLEMS]  # no ping phase here
     summary.update(scenario=scenario.name, faults=timeline.applied, duration_s=scenario.duration_s)
     summary["ok"] = not summary["problems"]
     return summary
