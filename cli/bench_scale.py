@@ -127,6 +127,7 @@ def _num(value: float | None) -> str:
 def plot(results: dict[str, Any], path: Path) -> None:
     """Wall seconds per model second against robots, per clock, and robot process memory in lockstep."""
     import matplotlib
+    import matplotlib.ticker
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -139,6 +140,9 @@ def plot(results: dict[str, Any], path: Path) -> None:
             speed.plot(*zip(*points, strict=True), style, label=f"--clock {clock}")
     speed.set_xscale("log")
     speed.set_yscale("log")
+    for axis in (speed.xaxis, speed.yaxis):  # plain numbers on log axes, not 5x10^0
+        axis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+        axis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     speed.axhline(1.0, color="grey", lw=0.8, ls="--")
     speed.set_xlabel("robots")
     speed.set_ylabel("wall seconds per model second")
@@ -149,6 +153,9 @@ def plot(results: dict[str, Any], path: Path) -> None:
     points = [(n, v) for n, v in points if v is not None]
     if points:
         memory.plot(*zip(*points, strict=True), "s-")
+    memory.axhline(50.0, color="grey", lw=0.8, ls="--", label="target 50 MB")
+    memory.set_ylim(0, None)
+    memory.legend()
     memory.set_xlabel("robots")
     memory.set_ylabel("MB")
     memory.set_title("peak RSS of a robot process (lockstep)")
