@@ -67,7 +67,9 @@ def bench_scale(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     save(results, out, "bench_scale", plot)
     emit(table(results), results, args.json)
-    return 0 if all(r.get("digests_equal", True) and r["model"]["ok"] for r in rows) else 1
+    # what the bench vouches for is that lockstep and model time run the same run; a run's own pass criterion
+    # (say, every robot heard some other one within a short duration) is shown, not judged here
+    return 0 if all(r.get("digests_equal", True) for r in rows) else 1
 
 
 def _run(count: int, clock: str, args: argparse.Namespace, record: Path) -> dict[str, Any]:
