@@ -26,9 +26,7 @@ from radio_hub.lockstep import LockstepLink
 def run_lockstep(opts: RunOptions, scenario: Scenario | None) -> int:
     """The run in lockstep time; returns the exit code."""
     if scenario is not None:
-        from dataclasses import replace
-
-        opts = replace(opts, robots=scenario.robot_count, duration=scenario.duration_s)
+        opts = opts.for_scenario(scenario)
     nodes = opts.robots + 1 + (1 if scenario is not None and scenario.user is not None else 0)
     started = time.perf_counter()
     clock: dict[str, float] = {}

@@ -19,7 +19,7 @@ import math
 import time
 import weakref
 from collections.abc import Callable, Coroutine
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -330,7 +330,7 @@ def run_model(opts: RunOptions, scenario: Scenario | None) -> int:
 def execute(opts: RunOptions, scenario: Scenario | None) -> dict[str, Any]:
     """Run in model time and leave the record (``summary.json`` too, also when interrupted); the summary."""
     if scenario is not None:
-        opts = replace(opts, robots=scenario.robot_count, duration=scenario.duration_s)
+        opts = opts.for_scenario(scenario)
     world = opts.world or f"model-{opts.seed}"
     record = RunRecord.create(opts, world, ENDPOINT)
     progress(f"world {world}, seed {opts.seed}, model time, record in {record.path}")
@@ -432,7 +432,7 @@ def _start_user(
         scenario.user, ENDPOINT, world, scenario.duration_s, opts.seed, beacon=scenario.surround_enabled
     )
     sink = open(record.events_of(scenario.user.node_id), "a")  # noqa: SIM115 (closed when the user is done)
-    task = asyncio.get_running_loop().create_task(run_user(config, EventLog(sink=sink), link=air.link()))
+    task = start_user(config, air, EventLog(sink=sink))
     task.add_done_callback(lambda _task: sink.close())
     return task
 

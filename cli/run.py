@@ -9,7 +9,7 @@ import signal
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Protocol
 
 import msgpack
@@ -51,7 +51,12 @@ class RunOptions:
     """Chaos requests with ``at`` (seconds into the traffic phase); those later than the phase act just
     before the swarm is organized. ``{"at": 1, "kind": "loss", "p": 0.3}``, ``{"at": 2, "clear": true}``."""
     clock: str = "wall"
-    """``wall``: processes over zenoh in real time; ``model``: one process on model time (``cli.model_run``)."""
+    """``wall``: processes over zenoh in real time; ``model``: one process on model time (``cli.model_run``);
+    ``lockstep``: processes on model time the hub owns (``cli.lockstep_run``)."""
+
+    def for_scenario(self, scenario: Any) -> RunOptions:
+        """These options with the scenario's robot count and duration (what its record's manifest shows)."""
+        return replace(self, robots=scenario.robot_count, duration=scenario.duration_s)
 
 
 def progress(text: str) -> None:

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import replace
 from typing import Any
 
 import zenoh
@@ -38,7 +37,7 @@ from radio_hub.interface import Keys
 
 def run_scenario(opts: RunOptions, scenario: Scenario) -> int:
     """Run the scenario; returns the exit code (1 when a process failed or an invariant broke)."""
-    opts = replace(opts, robots=scenario.robot_count, duration=scenario.duration_s)
+    opts = opts.for_scenario(scenario)
     progress(f"scenario {scenario.name}: {scenario.robot_count} robots, {scenario.duration_s:g} s")
 
     def hub_extra(record: RunRecord) -> list[str]:

@@ -17,7 +17,6 @@ import ctypes
 import json
 import os
 import queue
-import sys
 import threading
 import time
 from pathlib import Path
@@ -36,7 +35,7 @@ from radio_hub.environment import (
 )
 from radio_hub.keys import Keys
 from radio_hub.light import IrConfig
-from radio_hub.zenoh_link import declare_hub_keys, reliable_publisher, reply, session_config
+from radio_hub.zenoh_link import HubDownlink, declare_hub_keys, reply, session_config
 
 __all__ = ["Environment", "EnvironmentConfig", "RadioHub", "environment_from_dict", "load_config", "ready_line"]
 
@@ -45,38 +44,6 @@ _SPIN_US = 100
 """Sleep until this close to the next model event, then spin: deliveries land within a few us of model time."""
 
 _PR_SET_TIMERSLACK = 29
-
-
-class _ZenohDownlink:
-    """The environment's messages to nodes, on one reliable publisher per node."""
-
-    def __init__(self, keys: Keys) -> None:
-        self.keys = keys
-        self.session: zenoh.Session | None = None
-        self.world_pub: zenoh.Publisher | None = None
-        self._pubs: dict[str, zenoh.Publisher] = {}
-
-    def send(self, node_id: str, data: bytes) -> None:
-        if self.session is None:
-            return
-        try:
-            pub = self._pubs.get(node_id)
-            if pub is None:
-                pub = self._pubs[node_id] = reliable_publisher(self.session, self.keys.down(node_id))
-            pub.put(data)
-        except zenoh.ZError as err:
-            print(f"hub: cannot reach {node_id}: {err}", file=sys.stderr)
-
-    def forget(self, node_id: str) -> None:
-        pub = self._pubs.pop(node_id, None)
-        if pub is not None:
-            with contextlib.suppress(zenoh.ZError):
-                pub.undeclare()
-
-    def publish_world(self, state: dict[str, Any]) -> None:
-        if self.world_pub is not None:
-            with contextlib.suppress(zenoh.ZError):
-                self.world_pub.put(msgpack.packb(state, use_bin_type=True))
 
 
 class RadioHub:
@@ -103,7 +70,7 @@ class RadioHub:
         self.endpoint = endpoint
         self.keys = Keys(world)
         self.seed = seed
-        self._downlink = _ZenohDownlink(self.keys)
+        self._downlink = HubDownlink(self.keys)
         self._t0_ns = time.perf_counter_ns()
         self.env = Environment(
             tables,

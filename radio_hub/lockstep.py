@@ -32,7 +32,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import msgpack
 import zenoh
 
 from radio_hub import wire
@@ -40,7 +39,7 @@ from radio_hub.coordinator import MODEL_EPOCH_US, Coordinator
 from radio_hub.environment import EnvironmentConfig, process_usage
 from radio_hub.keys import Keys
 from radio_hub.port import HubUnavailable
-from radio_hub.zenoh_link import ZenohLink, declare_hub_keys, reliable_publisher, reply, session_config
+from radio_hub.zenoh_link import HubDownlink, ZenohLink, declare_hub_keys, reliable_publisher, reply, session_config
 
 DEAD_AFTER_S = 10.0
 """Wall seconds the hub waits for a granted node's idle before it takes the node as gone."""
@@ -174,7 +173,8 @@ class LockstepHub:
             environment, seed, wall_epoch_us=MODEL_EPOCH_US, pcap_path=pcap_path, world_log=world_log
         )
         self.env = self.coordinator.env
-        self.coordinator.on_world = self._publish_world
+        self._downlink = HubDownlink(self.keys)
+        self.coordinator.on_world = self._downlink.publish_world
         self.nodes: dict[str, _Node] = {}
         self.dead: list[dict[str, Any]] = []
         self.rounds = 0
@@ -183,8 +183,6 @@ class LockstepHub:
         self._inbox: queue.SimpleQueue[tuple[Any, ...]] = queue.SimpleQueue()
         self._stop = threading.Event()
         self._session: zenoh.Session | None = None
-        self._pubs: dict[str, zenoh.Publisher] = {}
-        self._world_pub: zenoh.Publisher | None = None
         self._decls: list[Any] = []
 
     def open(self) -> None:
@@ -192,8 +190,9 @@ class LockstepHub:
         session = zenoh.open(session_config("router", self.endpoint))
         self._session = session
         self._decls = declare_hub_keys(session, self.keys, self._inbox.put, chaos=False)
-        self._world_pub = session.declare_publisher(self.keys.world_state)
-        self._decls.append(self._world_pub)
+        self._downlink.world_pub = session.declare_publisher(self.keys.world_state)
+        self._decls.append(self._downlink.world_pub)
+        self._downlink.session = session
 
     def stop(self) -> None:
         """Ask the job loop to end (safe from any thread or a signal handler)."""
@@ -203,10 +202,11 @@ class LockstepHub:
     def close(self) -> None:
         """Undeclare everything, close the session and the environment's files."""
         self.coordinator.close()
-        for decl in [*self._decls, *self._pubs.values()]:
+        self._downlink.close()
+        for decl in self._decls:
             with contextlib.suppress(zenoh.ZError):
                 decl.undeclare()
-        self._decls, self._pubs = [], {}
+        self._decls = []
         if self._session is not None:
             self._session.close()
             self._session = None
@@ -328,25 +328,7 @@ class LockstepHub:
             node.granted, node.idle, node.waiting_since = grant.n, False, wall
         for node_id, messages in self.coordinator.take_downs().items():
             for data in [*downs.pop(node_id, []), *messages]:
-                self._publish(node_id, data)
+                self._downlink.send(node_id, data)
         for node_id, messages in downs.items():  # messages for nodes not in the round (gone meanwhile)
             for data in messages:
-                self._publish(node_id, data)
-
-    # -- outputs -------------------------------------------------------------------------------------------
-
-    def _publish(self, node_id: str, data: bytes) -> None:
-        if self._session is None:
-            return
-        try:
-            pub = self._pubs.get(node_id)
-            if pub is None:
-                pub = self._pubs[node_id] = reliable_publisher(self._session, self.keys.down(node_id))
-            pub.put(data)
-        except zenoh.ZError as err:
-            print(f"hub: cannot reach {node_id}: {err}", file=sys.stderr)
-
-    def _publish_world(self, state: dict[str, Any]) -> None:
-        if self._world_pub is not None:
-            with contextlib.suppress(zenoh.ZError):
-                self._world_pub.put(msgpack.packb(state, use_bin_type=True))
+                self._downlink.send(node_id, data)

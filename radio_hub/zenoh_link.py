@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import re
+import sys
 from collections.abc import Callable
 from typing import Any
 
@@ -67,6 +68,45 @@ def query_hub(session: zenoh.Session, key: str, timeout: float = 2.0, payload: b
         if reply.ok is not None:
             return msgpack.unpackb(reply.ok.payload.to_bytes(), raw=False, strict_map_key=False)
     raise HubUnavailable(f"no hub answered {key} within {timeout} s")
+
+
+class HubDownlink:
+    """A hub shell's ``Downlink``: the environment's messages to nodes on one reliable publisher per node,
+    declared when first needed, and the world's state on ``world_pub``; nothing while ``session`` is None."""
+
+    def __init__(self, keys: Keys) -> None:
+        self.keys = keys
+        self.session: zenoh.Session | None = None
+        self.world_pub: zenoh.Publisher | None = None
+        self._pubs: dict[str, zenoh.Publisher] = {}
+
+    def send(self, node_id: str, data: bytes) -> None:
+        if self.session is None:
+            return
+        try:
+            pub = self._pubs.get(node_id)
+            if pub is None:
+                pub = self._pubs[node_id] = reliable_publisher(self.session, self.keys.down(node_id))
+            pub.put(data)
+        except zenoh.ZError as err:
+            print(f"hub: cannot reach {node_id}: {err}", file=sys.stderr)
+
+    def forget(self, node_id: str) -> None:
+        pub = self._pubs.pop(node_id, None)
+        if pub is not None:
+            with contextlib.suppress(zenoh.ZError):
+                pub.undeclare()
+
+    def publish_world(self, state: dict[str, Any]) -> None:
+        if self.world_pub is not None:
+            with contextlib.suppress(zenoh.ZError):
+                self.world_pub.put(msgpack.packb(state, use_bin_type=True))
+
+    def close(self) -> None:
+        """Undeclare every node's publisher and stop sending."""
+        for node_id in list(self._pubs):
+            self.forget(node_id)
+        self.session = None
 
 
 def declare_hub_keys(
