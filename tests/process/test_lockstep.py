@@ -39,3 +39,33 @@ def test_robot_processes_in_lockstep_do_exactly_what_the_model_time_run_does(tmp
     # the processes really were separate: each robot reports its own process's memory
     assert all(node["peak_rss_mb"] for node in lockstep["nodes"].values())
     assert (tmp_path / "lockstep" / "air.pcap").read_bytes() == (tmp_path / "model" / "air.pcap").read_bytes()
+
+
+FORMATION_MEDIAN_BOUND_M = 0.25
+"""The bound tests/model/test_driving.py asserts on the same scenario and seed in model time."""
+
+
+@pytest.mark.timeout(600)
+def test_a_following_swarm_of_robot_processes_keeps_its_formation_through_the_turn(tmp_path: Path) -> None:
+    """The following-turn scenario as a hub, four robot processes and a user process in lockstep: the driving
+    bounds that model time meets hold, because the run is the model-time run (same digest), not a late copy."""
+    scenario = str(ROOT / "scenarios" / "following-turn.toml")
+    model, lockstep = (_scenario(tmp_path, scenario, clock, seed=5) for clock in ("model", "lockstep"))
+    assert lockstep["ok"], lockstep["problems"]
+    assert lockstep["digest"] == model["digest"]
+    driving = lockstep["driving"]
+    assert driving["collisions"] == 0
+    assert driving["formation_error_all_m"]["median"] < FORMATION_MEDIAN_BOUND_M, driving["formation_error_all_m"]
+    assert set(driving["formation_error_m"]) == {"robot-2", "robot-3", "robot-4"}
+    assert 0.8 < driving["user_master_distance_m"]["median"] < 1.3
+    [reaction] = driving["reactions"]
+    assert all(s is not None for s in reaction["slaves_s"].values()), reaction
+    assert set(lockstep["exit_codes"]) == {"hub", "user", "robot-1", "robot-2", "robot-3", "robot-4"}  # processes
+    assert all(node["peak_rss_mb"] for node in lockstep["nodes"].values())
+
+
+def _scenario(tmp: Path, scenario: str, clock: str, seed: int) -> dict:
+    argv = [sys.executable, "-m", "cli", "run", scenario, "--seed", str(seed), "--clock", clock, "--json"]
+    done = subprocess.run([*argv, "--record", str(tmp / clock)], capture_output=True, text=True, timeout=580, cwd=ROOT)
+    assert done.stdout, done.stderr[-2000:]
+    return json.loads(done.stdout)
