@@ -301,6 +301,8 @@ class FormationCore:
             steps["notice"] = done.value
             members = tuple(a for a in chosen if a in steps["notice"].responses)
             done = yield from _each(_releases(session, set(chosen) - set(members)), done)
+        except GeneratorExit:  # the runtime dropped the procedure: nothing is carried out any more
+            raise
         except BaseException:
             yield from _each(self._abandon(session))
             raise
@@ -490,11 +492,13 @@ class FormationCore:
         step = Step(swarm.session, (m.Dispersed,), set(swarm.members), self._timing(slot, len(swarm.members)))
         try:
             result = yield from self._exchange(Exchange("disperse", step, requests))
-        finally:
-            # whatever happened on the air, this robot is no longer a master
-            self.swarm = None
-            restored = self.sequence.restore(session=swarm.session)
-            yield from _each([SwarmChanged(None), StopRoster(), restored])
+        except GeneratorExit:  # the runtime dropped the procedure: nothing is carried out any more
+            raise
+        except BaseException:
+            yield from _each(self._end_swarm(swarm)[1])  # whatever happened on the air
+            raise
+        restored, ending = self._end_swarm(swarm)
+        yield from _each(ending)
         done = yield ConfigurePan(self.config.waiting_pan)
         figures = {
             "session": swarm.session,
@@ -506,6 +510,12 @@ class FormationCore:
         }
         yield Record("dispersed", figures)
         return figures
+
+    def _end_swarm(self, swarm: Swarm) -> tuple[StateChange, list[Action]]:
+        """A dispersing master is a master no more: the way back to driving, and the actions that say so."""
+        self.swarm = None
+        restored = self.sequence.restore(session=swarm.session)
+        return restored, [SwarmChanged(None), StopRoster(), restored]
 
     def note_answers(self, answered: set[int], silent: set[int]) -> list[Action]:
         """Master side: who answered our IR start sign. A member silent for ``MEMBER_MISSES`` of our
