@@ -190,7 +190,12 @@ class MessageProcessingManager:
         when anyone may answer: then the step collects until the deadline, or until answers stop for
         ``quiet_s``, retrying only if nobody answered at all).
         """
-        step = Step(session, kinds, expected, timing)
+        return await self.run(name, Step(session, kinds, expected, timing), send)
+
+    async def run(self, name: str, step: Step, send: Callable[[set[int] | None], Awaitable[None]]) -> StepResult:
+        """Run a step made elsewhere (a sans-IO core's, ``formation_core.Exchange``): route answers to it, send
+        its requests with ``send(missing)``, wait out its windows on the loop's clock."""
+        session = step.session
         arrived = asyncio.Event()
         entry = (step, arrived)
         self._steps.append(entry)

@@ -1,8 +1,10 @@
 """Sequence manager: the robot's states (paper Fig. 4) and the record of every transition.
 
 Pure code: it keeps the state, refuses transitions the design does not allow, and records each one as
-a structured event with wall and monotonic timestamps. The asyncio procedures that cause transitions
-live in ``petswarm.formation``.
+a structured event with wall and monotonic timestamps. ``enter`` and ``restore`` change the state without
+recording: they return the ``StateChange``, which a sans-IO core (``petswarm.formation_core``) hands out as
+an action for its runtime to record; ``transition`` and ``restore_driving`` do both at once. ``EventLog`` is
+the one part that reads the clock: it is the runtime's sink, not part of any core.
 """
 
 from __future__ import annotations
@@ -90,6 +92,19 @@ class EventLog:
         return event
 
 
+@dataclass(frozen=True)
+class StateChange:
+    """One transition that happened, to be recorded as a ``state`` event."""
+
+    frm: RobotState
+    to: RobotState
+    detail: dict[str, Any] = field(default_factory=dict)
+
+    def fields(self) -> dict[str, Any]:
+        """The ``state`` event's fields."""
+        return {"frm": self.frm.label, "to": self.to.label, **self.detail}
+
+
 class SequenceManager:
     """The robot's state, its previous driving state (restored after a swarm), and its transitions."""
 
@@ -98,8 +113,8 @@ class SequenceManager:
         self.state = state
         self.previous_driving: RobotState | None = None
 
-    def transition(self, to: RobotState, **detail: Any) -> None:
-        """Move to ``to``; raises TransitionError when Fig. 4 has no such arrow."""
+    def enter(self, to: RobotState, **detail: Any) -> StateChange:
+        """Move to ``to`` without recording it; raises TransitionError when Fig. 4 has no such arrow."""
         if to not in _ALLOWED[self.state]:
             raise TransitionError(f"no transition from {self.state.label} to {to.label}")
         if self.state in DRIVING and to == RobotState.ORGANIZING:
@@ -108,14 +123,23 @@ class SequenceManager:
             # a slave or a waiting robot has no user of its own, so no driving state to go back to; kept, it
             # would make a later candidate (waiting -> organizing) look connected to its former user
             self.previous_driving = None
-        self.log.record("state", frm=self.state.label, to=to.label, **detail)
+        change = StateChange(self.state, to, detail)
         self.state = to
+        return change
+
+    def restore(self, **detail: Any) -> StateChange:
+        """Back to the driving state the robot had before it organized a swarm, without recording it."""
+        return self.enter(self.previous_driving or RobotState.FOLLOWING, **detail)
+
+    def transition(self, to: RobotState, **detail: Any) -> None:
+        """Move to ``to`` and record it; raises TransitionError when Fig. 4 has no such arrow."""
+        self.log.record("state", **self.enter(to, **detail).fields())
 
     def restore_driving(self, **detail: Any) -> RobotState:
-        """Back to the driving state the robot had before it organized a swarm."""
-        target = self.previous_driving or RobotState.FOLLOWING
-        self.transition(target, **detail)
-        return target
+        """Back to the driving state the robot had before it organized a swarm, recorded."""
+        change = self.restore(**detail)
+        self.log.record("state", **change.fields())
+        return change.to
 
     @property
     def user_connected(self) -> bool:
