@@ -19,9 +19,9 @@ from petswarm.driving_core import (
     CONTROL_PERIOD_S,
     LOST_AFTER_S,
     REMOTE_HOLD_S,
+    STATES,
     TRACK_PERIOD_S,
     WAKE_PERIOD_S,
-    STATES,
     BleSend,
     Disperse,
     Drive,
@@ -149,7 +149,7 @@ def test_the_cores_import_no_clock_no_event_loop_and_no_transport(module: str) -
 
 
 def test_a_waiting_robot_fires_a_wake_up_burst_every_3_s_and_takes_a_belt_within_1_m_as_owner() -> None:
-    core, formation, _ = make()
+    core, *_ = make()
     bursts = of(run_until(core, 6.0), LfBurst)
     assert [b.antenna for b in bursts] == ["left"] * 3  # at 0, 3 and 6 s
     assert [user_link.parse_lf_data(b.data)[2] for b in bursts] == [user_link.LF_WAKE] * 3
@@ -384,7 +384,8 @@ def test_the_new_master_takes_the_owner_and_announces_itself_on_its_first_fix() 
     actions = core.actions()
     assert core.owner == BELT and core.mode == Mode.LEADING
     assert of(actions, SetUser) == [SetUser(user_id(BELT))] and logs(actions, "turn_about")
-    assert core.kept is not None and core.kept[1] == pytest.approx((-1.2, 0.0))  # the old master: last, nearest the user
+    assert core.kept is not None
+    assert core.kept[1] == pytest.approx((-1.2, 0.0))  # the old master: last, nearest the user
     core.ble_message(BELT, lf_ahead(1.0), 1.2)
     assert logs(core.actions(), "owner_tracked")
 
@@ -454,7 +455,7 @@ def test_a_slave_ignores_other_robots_drive_states_and_stops_when_its_master_fal
 
 
 def test_telemetry_every_ten_control_steps_names_the_slave_slot() -> None:
-    core, fixes = slave_of()
+    core, _ = slave_of()
     core.drive_state(1, drive_state(), 0.01)
     actions = run_until(core, 0.5)
     [telemetry] = of(actions, Telemetry)
