@@ -46,6 +46,7 @@ from petswarm.driving_core import (
     Telemetry,
 )
 from petswarm.formation import FormationError, NetworkFormation
+from petswarm.formation_shapes import Mode
 from petswarm.motion import MotorCommand
 from petswarm.relative_location import RelativeLocationManager
 from petswarm.rf import Incoming, RfCommunicationManager
@@ -61,9 +62,9 @@ FORMATION_ERRORS = (FormationError, RadioError, HubUnavailable, TransitionError)
 async def sleep_until(when: float) -> None:
     """Sleep until the loop's clock reads ``when`` (not at all if it already does). ``call_at`` takes the
     deadline itself: ``asyncio.sleep(when - now)`` would add it back to ``now`` and may miss it by a rounding."""
-    loop = asyncio.get_running_loop()
-    if when <= loop.time():
+    if when <= clock.now():
         return
+    loop = asyncio.get_running_loop()
     woken = loop.create_future()
     handle = loop.call_at(when, _wake, woken)
     try:
@@ -114,7 +115,7 @@ class Driver:
         return self.core.owner
 
     @property
-    def mode(self) -> Any:
+    def mode(self) -> Mode:
         """Following or leading."""
         return self.core.mode
 
