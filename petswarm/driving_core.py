@@ -11,7 +11,9 @@ hand over) are actions whose outcomes come back as events (``organized``, ``disp
 Events:
 
 - ``ble_message(src, payload, now)``: a BLE message from the wearables (owner, LF distances, activity,
-  watch requests and gestures); malformed or refused ones are logged and dropped;
+  watch requests and gestures); malformed or refused ones are logged and dropped. The owner's, decoded,
+  go on to ``lf_sample(d_left, d_right, now)``, ``user_request(body, now)`` and ``gesture(gesture, now)``,
+  which a test may also call directly;
 - ``sensors_sample(sensors, now)``: the robot's own AHRS, odometry and ultrasonic ring;
 - ``drive_state(sender, message, now)``: a ``DriveState`` heard on the swarm's PAN;
 - ``handover(old_chain, message, now)``: the formation moved the master's role;
@@ -408,11 +410,11 @@ class DriverCore:
         elif src != self.owner:
             self._record("ble_ignored", src=src, message=kind)  # only the owner's wearables count
         elif kind == "lf":
-            self._on_lf(float(body["dl"]), float(body["dr"]), now)
+            self.lf_sample(float(body["dl"]), float(body["dr"]), now)
         elif kind == "activity":
             self.activity = Activity.from_dict({k: v for k, v in body.items() if k not in ("k", "t")})
         elif kind == "request":
-            self._on_request(body, now)
+            self.user_request(body, now)
 
     def _on_owner(self, src: str, distance: float) -> None:
         if self.owner is not None or self.sequence.state != RobotState.WAITING or distance > self.lf.wake_range_m:
@@ -422,7 +424,8 @@ class DriverCore:
         self.sequence.transition(RobotState.COMMAND_WAITING, owner=src, distance=round(distance, 3))
         self._tell_owner()
 
-    def _on_lf(self, d_left: float, d_right: float, now: float) -> None:
+    def lf_sample(self, d_left: float, d_right: float, now: float) -> None:
+        """The owner's belt measured the two antennas' last bursts at these distances (m)."""
         fix = locate(d_left, d_right, self.lf, behind=self._user_behind())
         if fix is None:
             self.counters["lf_rejected"] += 1
@@ -446,7 +449,9 @@ class DriverCore:
             return True
         return state == RobotState.MASTER_DRIVING and self.mode == Mode.LEADING
 
-    def _on_request(self, body: dict[str, Any], now: float) -> None:
+    def user_request(self, body: dict[str, Any], now: float) -> None:
+        """A request from the owner's watch (``user_link``'s ``request`` map). Raises ``TransitionError``,
+        ``ValueError`` or ``KeyError`` on one that Fig. 4 or the protocol refuses (``ble_message`` logs those)."""
         request = body["request"]
         self._record("watch_request", **{k: v for k, v in body.items() if k != "k"})
         state = self.sequence.state
@@ -459,7 +464,7 @@ class DriverCore:
             back, self.exception_from = self.exception_from, None
             self.sequence.transition(back, cause="return")
         elif request == "gesture":
-            self._on_gesture(Gesture(body["gesture"]), now)
+            self.gesture(Gesture(body["gesture"]), now)
         elif request == "organize":
             self.shape = str(body.get("shape", self.shape))
             self.spacing = float(body.get("spacing", self.spacing))
@@ -485,7 +490,8 @@ class DriverCore:
         if state != target:
             self.sequence.transition(target, cause="watch")
 
-    def _on_gesture(self, gesture: Gesture, now: float) -> None:
+    def gesture(self, gesture: Gesture, now: float) -> None:
+        """A watch gesture: in remote control it moves the robot for ``REMOTE_HOLD_S``; a circle cancels."""
         if gesture == Gesture.CIRCLE:
             if self.sequence.state in (RobotState.FOLLOWING, RobotState.LEADING, RobotState.REMOTE_CONTROL):
                 self.sequence.transition(RobotState.COMMAND_WAITING, cause="cancel")

@@ -37,7 +37,7 @@ from petswarm.driving_core import (
 )
 from petswarm.formation_shapes import Mode
 from petswarm.motion import MotorCommand
-from petswarm.sequence import EventLog, RobotState, SequenceManager
+from petswarm.sequence import EventLog, RobotState, SequenceManager, TransitionError
 from radio_hub.interface import BROADCAST, OwnSensors
 
 BELT = "user-1"
@@ -174,6 +174,16 @@ def test_malformed_or_refused_ble_messages_are_logged_and_dropped() -> None:
     refused = logs(core.actions(), "ble_refused")
     assert [r["error"].split(":")[0] for r in refused] == ["ValueError", "ValueError"]
     assert core.sequence.state == RobotState.FOLLOWING
+
+
+def test_a_request_fig4_refuses_raises_when_called_directly_and_is_logged_when_it_comes_over_ble() -> None:
+    core, *_ = make(RobotState.SLAVE_DRIVING, robot_id=2)
+    core.owner = BELT  # a slave has no owner of its own; a stale one must not move it out of the swarm
+    with pytest.raises(TransitionError):
+        core.user_request({"request": "follow"}, 1.0)
+    core.ble_message(BELT, ble("request", request="lead"), 1.1)
+    [refused] = logs(core.actions(), "ble_refused")
+    assert refused["error"].startswith("TransitionError") and core.sequence.state == RobotState.SLAVE_DRIVING
 
 
 def test_tracking_fires_both_antennas_5_ms_apart_every_350_ms() -> None:
