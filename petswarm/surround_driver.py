@@ -1,10 +1,11 @@
-"""The surround formation in the robot process: the asyncio shell over ``surround_pilot.SurroundPilot``.
+"""The surround formation in the robot process: the thin asyncio runtime over ``surround_core.SurroundCore``.
 
 The robot senses only through the hub: its IR module in ``beacon`` mode demodulates every other beacon
 (robots and the human's) separately, 20 sweeps a second, each at its channel's AGC gain; its ultrasonic
 ring and wheel odometry come with its own-body sensors at 25 Hz. No radio message is involved: the paper's
-swarm needs none. On every body-sensor sample the pilot steps (see its module for why) and the command goes
-to the hub's motors.
+swarm needs none. The core decides (beacon mode, then on every body-sensor sample the pilot's step and its
+command); this shell wakes on each sample, hands the core the radio's latest sample and beacon sweep with
+``clock.now()``, and carries out what it asks: the IR mode request, the motors, the record, the telemetry.
 """
 
 from __future__ import annotations
@@ -13,13 +14,15 @@ import asyncio
 from typing import Any
 
 from petswarm import clock
+from petswarm.driving import sleep_until
+from petswarm.driving_core import Drive, Log, Telemetry
 from petswarm.relative_location import IrModuleManager
 from petswarm.sequence import EventLog
-from petswarm.surround_pilot import SurroundDriverConfig, SurroundPilot
+from petswarm.surround_core import TELEMETRY_EVERY, SetIrMode, SurroundAction, SurroundCore
+from petswarm.surround_pilot import SurroundDriverConfig
 from radio_hub.interface import HubUnavailable, RadioClient, RadioError
 
-TELEMETRY_EVERY = 12
-"""Control steps between telemetry messages (about 2 Hz, as the swarm driver's)."""
+__all__ = ["TELEMETRY_EVERY", "SurroundDriver"]
 
 
 class SurroundDriver:
@@ -30,7 +33,8 @@ class SurroundDriver:
         self.ir = ir
         self.log = log
         self.config = config
-        self.pilot = SurroundPilot(config)
+        self.core = SurroundCore(config)
+        self.pilot = self.core.pilot
 
     def tasks(self) -> list[Any]:
         """The coroutines the robot runs in surround mode."""
@@ -42,40 +46,45 @@ class SurroundDriver:
         return {"engaged": pilot.engaged, "command": [round(float(v), 3) for v in pilot.command], **pilot.counters}
 
     async def _control_loop(self) -> None:
-        await self._beacon_mode()
+        self.core.start(clock.now())
+        while not self.core.beaconing:
+            await self._carry_out()
+            when = self.core.next_timer()
+            if when is not None:
+                await sleep_until(when)
+                self.core.handle_timer(clock.now())
         fresh = asyncio.Event()
         self.radio.on_sensors.append(lambda _sensors: fresh.set())
-        tick = 0
         while True:
             await fresh.wait()
             fresh.clear()
             sensors = self.radio.sensors
             if sensors is None:
                 continue
-            engaged = self.pilot.engaged
-            command = self.pilot.step(sensors, self.radio.beacons, clock.now())
-            if command is None:
-                continue
-            if not engaged:
-                self.log.record("surround_engaged", beacons=self.pilot.counters["beacons"])
-            self.radio.drive(command[0], command[1], 0.0)
-            tick += 1
-            if tick % TELEMETRY_EVERY == 0:
-                self._telemetry()
+            # read when the task runs, not when the sample came: a sweep of the same instant may be newer
+            self.core.sensors_sample(sensors, self.radio.beacons, clock.now())
+            await self._carry_out()
 
-    async def _beacon_mode(self) -> None:
-        while True:
+    async def _carry_out(self) -> None:
+        for action in self.core.actions():
+            await self._execute(action)
+
+    async def _execute(self, action: SurroundAction) -> None:
+        if isinstance(action, Drive):
+            self.radio.drive(action.command.vx, action.command.vy, action.command.omega)
+        elif isinstance(action, Log):
+            self.log.record(action.kind, **action.detail)
+        elif isinstance(action, Telemetry):
             try:
-                await self.ir.set_mode("beacon")
-                self.log.record("surround_start", human=self.config.human_id)
-                return
+                self.radio.telemetry(action.state, mode=action.mode)
+            except Exception as err:  # telemetry is for viewers: never let it stop the controller
+                self.log.record("error", where="telemetry", error=str(err))
+        elif isinstance(action, SetIrMode):
+            try:
+                await self.ir.set_mode(action.mode)
             except (HubUnavailable, RadioError) as err:  # a hub still starting or restarting: try again
-                self.log.record("error", where="surround_beacon_mode", error=str(err))
                 self.ir.mode = "idle"
-                await asyncio.sleep(0.5)
-
-    def _telemetry(self) -> None:
-        try:
-            self.radio.telemetry("surround", mode="surround")
-        except Exception as err:  # telemetry is for viewers: never let it stop the controller
-            self.log.record("error", where="telemetry", error=str(err))
+                self.core.ir_mode_failed(str(err), clock.now())
+            else:
+                self.core.ir_mode_set(clock.now())
+            await self._carry_out()

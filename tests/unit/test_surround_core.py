@@ -1,0 +1,83 @@
+"""The surround driver's sans-IO core (petswarm/surround_core.py) stepped by hand with an explicit ``now``."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from petswarm.driving_core import Drive, Log, Telemetry
+from petswarm.motion import MotorCommand
+from petswarm.surround_core import BEACON_RETRY_S, TELEMETRY_EVERY, SetIrMode, SurroundCore
+from petswarm.surround_pilot import SurroundDriverConfig
+from radio_hub.interface import BeaconSweep, OwnSensors
+
+NO_BEACONS = BeaconSweep(0, {}, {})
+
+
+def sample(t: float) -> OwnSensors:
+    angles = np.linspace(0.0, 2 * math.pi, 8, endpoint=False)
+    return OwnSensors(int(t * 1e6), np.full(8, math.nan), angles, 0.0, (0.0, 0.0, 0.0))
+
+
+class StubPilot:
+    """Stands in for the pure pilot (its own tests cover the law): sees the human from its second step on."""
+
+    def __init__(self) -> None:
+        self.engaged = False
+        self.counters = {"beacons": 2}
+        self.steps = 0
+
+    def step(self, sensors: OwnSensors, sweep: BeaconSweep, now_s: float) -> tuple[float, float] | None:
+        self.steps += 1
+        if self.steps < 2:
+            return None
+        self.engaged = True
+        return 0.2, -0.1
+
+
+def test_beacon_mode_is_asked_once_and_again_0_5_s_after_a_refusal() -> None:
+    core = SurroundCore(SurroundDriverConfig(human_id="user"))
+    core.start(0.0)
+    assert core.actions() == [SetIrMode("beacon")]
+    core.start(0.0)
+    assert core.actions() == []  # one request at a time
+    core.ir_mode_failed("hub away", 0.1)
+    assert core.actions() == [Log("error", {"where": "surround_beacon_mode", "error": "hub away"})]
+    assert core.next_timer() == 0.1 + BEACON_RETRY_S
+    core.handle_timer(0.5)
+    assert core.actions() == []
+    core.handle_timer(0.6)
+    assert core.actions() == [SetIrMode("beacon")] and core.next_timer() is None
+    core.ir_mode_set(0.62)
+    assert core.actions() == [Log("surround_start", {"human": "user"})] and core.beaconing
+
+
+def test_samples_before_beacon_mode_are_not_stepped_and_without_the_human_nothing_is_sent() -> None:
+    core = SurroundCore(SurroundDriverConfig())
+    core.sensors_sample(sample(0.04), NO_BEACONS, 0.04)
+    assert core.pilot.counters["steps"] == 0 and core.actions() == []
+    core.start(0.04)
+    core.ir_mode_set(0.05)
+    core.actions()
+    for k in range(1, 6):
+        core.sensors_sample(sample(0.05 + 0.04 * k), NO_BEACONS, 0.05 + 0.04 * k)
+    assert core.actions() == [] and not core.pilot.engaged  # holds still until it first sees its human
+
+
+def test_an_engaged_robot_drives_every_sample_records_engaging_once_and_tells_viewers_every_12_steps() -> None:
+    core = SurroundCore(SurroundDriverConfig())
+    core.pilot = StubPilot()  # type: ignore[assignment]
+    core.start(0.0)
+    core.ir_mode_set(0.0)
+    core.actions()
+    actions: list[Any] = []
+    for k in range(1, 2 + 2 * TELEMETRY_EVERY):
+        core.sensors_sample(sample(0.04 * k), NO_BEACONS, 0.04 * k)
+        actions += core.actions()
+    drives = [a for a in actions if isinstance(a, Drive)]
+    assert len(drives) == 2 * TELEMETRY_EVERY and set(drives) == {Drive(MotorCommand(0.2, -0.1, 0.0))}
+    assert [a for a in actions if isinstance(a, Log)] == [Log("surround_engaged", {"beacons": 2})]
+    assert [a for a in actions if isinstance(a, Telemetry)] == [Telemetry("surround", "", "", None, "surround")] * 2
+    assert isinstance(actions[-1], Telemetry)  # after the 24th step's command
