@@ -15,6 +15,11 @@ from cli.args import bounded, int_auto, position, robot_id, seed, surround_confi
 if TYPE_CHECKING:
     from petswarm.robot import RobotConfig
 
+MAX_PROCESS_ROBOTS = 200
+"""Robot processes one ``petswarm run`` starts (wall or lockstep clock): each is some 60 MB and a zenoh session."""
+MAX_MODEL_ROBOTS = 2000
+"""Robots of one ``--clock model`` run, all in one process."""
+
 EPILOG = """examples:
   petswarm run --robots 5 --duration 5          a hub and 5 robots pinging each other; prints a summary
   petswarm hub --listen tcp/127.0.0.1:7447      serve the emulated air (Ctrl-C stops it)
@@ -233,7 +238,12 @@ def build_parser() -> argparse.ArgumentParser:
         nargs="?",
         help="a scenario file (scenarios/*.toml): hub, robots and user end to end, with driving metrics",
     )
-    run.add_argument("--robots", type=bounded(int, 1, 200), default=5, help="number of robot processes (default 5)")
+    run.add_argument(
+        "--robots",
+        type=bounded(int, 1, MAX_MODEL_ROBOTS),
+        default=5,
+        help=f"number of robots (default 5; up to {MAX_PROCESS_ROBOTS} as processes, {MAX_MODEL_ROBOTS} in model time)",
+    )
     run.add_argument("--seed", type=seed, default=None, help="seed (default: random, and reported)")
     run.add_argument("--duration", type=bounded(float, 0.1, 86400), default=5.0, help="seconds of traffic (default 5)")
     run.add_argument(
@@ -542,6 +552,14 @@ def robot_config(args: argparse.Namespace) -> RobotConfig:
 
 def _run(args: argparse.Namespace) -> int:
     from cli.run import RunOptions, default_ping_interval, run
+
+    if args.clock != "model" and args.robots > MAX_PROCESS_ROBOTS:
+        print(
+            f"petswarm run: --robots {args.robots} is more robot processes than one run starts "
+            f"({MAX_PROCESS_ROBOTS}); use --clock model for up to {MAX_MODEL_ROBOTS} robots in one process",
+            file=sys.stderr,
+        )
+        return 2
 
     chosen_seed = args.seed if args.seed is not None else int.from_bytes(os.urandom(4), "big")
     opts = RunOptions(

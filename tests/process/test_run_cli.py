@@ -87,7 +87,9 @@ def test_ctrl_c_stops_every_process_of_the_run():
 
 def test_absurd_arguments_get_clear_errors():
     bad = subprocess.run(_petswarm("run", "--robots", "0"), capture_output=True, text=True, timeout=30)
-    assert bad.returncode == 2 and "outside 1..200" in bad.stderr
+    assert bad.returncode == 2 and "outside 1..2000" in bad.stderr
+    bad = subprocess.run(_petswarm("run", "--robots", "201"), capture_output=True, text=True, timeout=30)
+    assert bad.returncode == 2 and "--clock model" in bad.stderr  # 201 processes no, 201 in model time yes
     bad = subprocess.run(
         _petswarm("robot", "--id", "3", "--pos", "nowhere"), capture_output=True, text=True, timeout=30
     )
