@@ -33,6 +33,18 @@ same --world and --hub endpoint.
 """
 
 
+RUN_EXIT_STATUS = """exit status:
+  0    the run finished and every check held (criteria and invariants)
+  1    a check failed; or the hub (or a user) died; or a robot died under --fail-fast
+  2    bad arguments or scenario file
+  3    the run carried on past robots that died unexpectedly (killed, crashed), every other check held;
+       each death is in the record (supervision.jsonl, summary.json "deaths")
+  130  interrupted (Ctrl-C or SIGTERM): every process is stopped and the summary written
+
+summary.json is rewritten every second while the run goes, so a run killed outright leaves one
+("running": true); its children die with it, paused ones too."""
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The whole command line."""
     parser = argparse.ArgumentParser(
@@ -228,7 +240,12 @@ def build_parser() -> argparse.ArgumentParser:
     for p in (org, dis, sts):
         p.add_argument("--json", action="store_true", help="print the robot's answer as JSON (default: in words)")
 
-    run = sub.add_parser("run", help="run a hub and N robots on this machine and summarise the radio traffic")
+    run = sub.add_parser(
+        "run",
+        help="run a hub and N robots on this machine and summarise the radio traffic",
+        epilog=RUN_EXIT_STATUS,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     run.add_argument(
         "scenario",
         nargs="?",
@@ -271,6 +288,12 @@ def build_parser() -> argparse.ArgumentParser:
         "environment and every robot in this one process on a virtual clock, as fast as the CPU allows, "
         "the same run (digest) for the same seed on any machine; lockstep: hub and robot processes over zenoh "
         "on model time the hub owns, exact under any load, the same digest as model",
+    )
+
+    run.add_argument(
+        "--fail-fast",
+        action="store_true",
+        help="end the run when a robot dies unexpectedly (default: record the death and go on without it)",
     )
 
     from cli.chaos import add_arguments as add_chaos_arguments
@@ -624,6 +647,7 @@ def _run(args: argparse.Namespace) -> int:
         record_dir=args.record,
         scenario=args.scenario,
         clock=args.clock,
+        fail_fast=args.fail_fast,
     )
     return run(opts)
 
