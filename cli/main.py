@@ -581,9 +581,23 @@ def _user(args: argparse.Namespace) -> int:
 
 
 def _robot(args: argparse.Namespace) -> int:
-    from petswarm.robot import run_robot
+    from cli.runtime import NotOurRobot, register, unregister
 
     config = robot_config(args)
+    try:  # so that petswarm chaos kill|pause|resume can tell this process is ours (cli/runtime.py)
+        entry = register(config.world, config.robot_id) if config.robot_id else None
+    except (OSError, NotOurRobot) as err:
+        print(f"petswarm robot: not registered for petswarm chaos: {err}", file=sys.stderr)
+        entry = None
+    try:
+        return _run_robot(args, config)
+    finally:
+        unregister(entry)
+
+
+def _run_robot(args: argparse.Namespace, config: RobotConfig) -> int:
+    from petswarm.robot import run_robot
+
     if args.clock == "lockstep":
         from cli.lockstep_node import run_node
 

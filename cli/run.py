@@ -537,4 +537,7 @@ def _print(summary: dict[str, Any], as_json: bool) -> None:
         print(describe_driving(summary["driving"]))
     for note in summary.get("notes", []):
         print(f"note: {note}")
+    for death in summary.get("deaths", []):
+        when = f"{death['cause']}, {death['elapsed_s']:g} s in"
+        print(f"died during the run: {death['process']} ({when}); the run went on without it")
     print("OK" if summary["ok"] else "PROBLEMS: " + "; ".join(summary["problems"]))
