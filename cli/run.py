@@ -143,6 +143,7 @@ def supervise(
     record = RunRecord.create(opts, world, endpoint)
     sup = Supervisor(record.path / "logs")
     watch = Supervision(sup, record, opts.fail_fast, progress)
+    watch.write_progress(force=True)  # from the first moment a kill leaves a summary
     previous = signal.signal(signal.SIGTERM, raise_interrupt)
     session: zenoh.Session | None = None
     summary: dict[str, Any] = {"ok": False, "problems": ["the run did not finish"], "seed": opts.seed}
