@@ -438,6 +438,10 @@ def _use_security(args: argparse.Namespace) -> str | None:
         return None
     if bool(files["tls_cert"]) != bool(files["tls_key"]):
         return "--tls-cert and --tls-key go together"
+    if args.command == "hub" and files["tls_ca"] and not files["tls_cert"]:
+        return "--tls-ca asks clients for certificates: the hub needs its own (--tls-cert and --tls-key)"
+    if args.command == "hub" and files["tls_cert"] and not args.listen.startswith("tls/"):
+        return f"--tls-cert needs a tls/ endpoint to listen on, not {args.listen!r} (e.g. tls/0.0.0.0:7447)"
     from radio_hub.trust import TransportSecurity
     from radio_hub.zenoh_link import use_security
 

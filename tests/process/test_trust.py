@@ -191,12 +191,15 @@ def _wait_both_attached(session: zenoh.Session, keys: Keys, sup: Supervisor) -> 
     raise AssertionError("robots did not attach and ping over TLS:\n" + sup.log_tail("hub"))
 
 
-def test_a_hub_refuses_a_certificate_without_its_key() -> None:
-    done = subprocess.run(
-        [sys.executable, "-m", "cli", "hub", "--tls-cert", __file__],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        env=cross._env(),
-    )
-    assert done.returncode == 2 and "--tls-cert and --tls-key go together" in done.stderr, done.stderr
+@pytest.mark.parametrize(
+    ("args", "why"),
+    [
+        (["--tls-cert", __file__], "--tls-cert and --tls-key go together"),
+        (["--tls-ca", __file__], "the hub needs its own"),
+        (["--tls-cert", __file__, "--tls-key", __file__], "needs a tls/ endpoint"),
+    ],
+)
+def test_a_hub_refuses_tls_options_that_would_not_protect_it(args: list[str], why: str) -> None:
+    argv = [sys.executable, "-m", "cli", "hub", "--listen", "tcp/127.0.0.1:1", *args]
+    done = subprocess.run(argv, capture_output=True, text=True, timeout=60, env=cross._env())
+    assert done.returncode == 2 and why in done.stderr, done.stderr
