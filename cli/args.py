@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
@@ -73,3 +74,11 @@ def surround_config(text: str) -> SurroundConfig:
         return SurroundConfig.from_dict(data)
     except (json.JSONDecodeError, ValueError, TypeError) as err:
         raise argparse.ArgumentTypeError(f"surround config {text!r}: {err}") from None
+
+
+def readable_file(text: str) -> str:
+    """A path to a file this process can read (certificates, keys, config files), made absolute so that it
+    still holds for child processes started elsewhere."""
+    if not os.path.isfile(text) or not os.access(text, os.R_OK):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a readable file")
+    return os.path.abspath(text)

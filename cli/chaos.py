@@ -2,7 +2,9 @@
 
 Faults act inside the emulated medium, where a real radio would suffer them (see radio_hub/chaos.py);
 the hub logs every change with its model and wall time. Killing, pausing and resuming act on the robot
-process itself (it must run on this host): SIGKILL, SIGSTOP and SIGCONT.
+process itself (it must run on this host, as this user): SIGKILL, SIGSTOP and SIGCONT, sent only to a process
+registered as that robot of that world in the private runtime directory and still running its command line
+(cli/runtime.py).
 """
 
 from __future__ import annotations
@@ -18,9 +20,9 @@ import msgpack
 
 from cli.args import int_auto
 from cli.hub_session import with_hub
-from petswarm import control
+from cli.runtime import NotOurRobot, robot_pid
 from radio_hub.chaos import BURST_DEFAULTS, JITTERS, MAX_DELAY_MS, describe_change, describe_fault, parse_fault
-from radio_hub.interface import HubUnavailable, Keys, query_hub
+from radio_hub.interface import Keys, query_hub
 
 SIGNALS = {"kill": signal.SIGKILL, "pause": signal.SIGSTOP, "resume": signal.SIGCONT}
 
@@ -98,7 +100,9 @@ def add_arguments(sub: argparse._SubParsersAction, add_hub: Any, robot_id: Any, 
     add_common(clear)
     add_common(actions.add_parser("list", help="the active faults and the log of changes"))
     for action, sig in SIGNALS.items():
-        p = actions.add_parser(action, help=f"send {sig.name} to a robot process on this host")
+        p = actions.add_parser(
+            action, help=f"send {sig.name} to a robot process of this world on this host (checked to be one)"
+        )
         p.add_argument("--robot", type=robot_id, required=True, help="the robot's id")
         add_common(p)
 
@@ -167,7 +171,7 @@ def chaos_command(args: argparse.Namespace) -> int:
     (malformed: refused here before the hub is asked; or by the hub)."""
     keys = Keys(args.world)
     if args.action in SIGNALS:
-        return with_hub("chaos", args.hub, lambda session: _signal_robot(session, keys, args))
+        return _signal_robot(keys, args)
     request = _request(args)
     if request["op"] == "add":
         try:  # the hub checks again; checking here tells a typo apart from an unreachable hub
@@ -234,38 +238,22 @@ def _ask_hub(session: Any, keys: Keys, request: dict[str, Any]) -> dict[str, Any
     return query_hub(session, keys.chaos, 5.0, msgpack.packb(request, use_bin_type=True))
 
 
-def _signal_robot(session: Any, keys: Keys, args: argparse.Namespace) -> int:
-    status = control.command(session, keys, args.robot, "status", 5.0) if args.action != "resume" else None
-    pid = status["pid"] if status else _remembered_pid(keys, args.robot)
+def _signal_robot(keys: Keys, args: argparse.Namespace) -> int:
+    """Signal a robot process of this host, only after checking it is ours (cli/runtime.py); the pid never
+    comes from the network. 2 with the reason when the target is refused or gone."""
+    sig = SIGNALS[args.action]
     try:
-        os.kill(pid, SIGNALS[args.action])
-    except ProcessLookupError:
-        print(f"petswarm chaos: robot {args.robot} (pid {pid}) is not a process on this host", file=sys.stderr)
+        pid = robot_pid(keys.world, args.robot)
+        os.kill(pid, sig)
+    except NotOurRobot as err:
+        print(f"petswarm chaos {args.action}: refused: {err}", file=sys.stderr)
         return 2
-    if args.action == "pause":
-        _remember_pid(keys, args.robot, pid)
-    name = SIGNALS[args.action].name
+    except ProcessLookupError:
+        print(f"petswarm chaos {args.action}: robot {args.robot} (pid {pid}) has just ended", file=sys.stderr)
+        return 2
     print(
-        json.dumps({"robot": args.robot, "pid": pid, "signal": name})
+        json.dumps({"robot": args.robot, "pid": pid, "signal": sig.name})
         if args.json
-        else f"robot {args.robot} (pid {pid}): {name} sent"
+        else f"robot {args.robot} (pid {pid}): {sig.name} sent"
     )
     return 0
-
-
-def _pid_file(keys: Keys, robot: int) -> str:
-    # a paused robot cannot answer its control channel, so its pid is kept for the resume
-    return os.path.join(os.environ.get("TMPDIR", "/tmp"), f"petswarm-{keys.world}-robot-{robot}.pid")
-
-
-def _remember_pid(keys: Keys, robot: int, pid: int) -> None:
-    with open(_pid_file(keys, robot), "w") as f:
-        f.write(str(pid))
-
-
-def _remembered_pid(keys: Keys, robot: int) -> int:
-    try:
-        with open(_pid_file(keys, robot)) as f:
-            return int(f.read())
-    except (OSError, ValueError):
-        raise HubUnavailable(f"robot {robot} was not paused with petswarm chaos pause (no pid kept)") from None

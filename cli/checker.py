@@ -6,7 +6,9 @@
 - state transitions chain: each transition starts from the state the previous one ended in, so no
   robot was ever in two swarms at once (a slave leaves one swarm before it can join another);
 - every robot ends in a valid state: waiting or driving with its user, never half-way through a swarm;
-- no two IR modules shone at once (the hub's overlap counter), so no IR reading came from two sources.
+- no two IR modules shone at once (the hub's overlap counter), so no IR reading came from two sources;
+- a robot that died during the run (``supervision.jsonl``) is held to what it did while alive: its events
+  may end without ``stop`` and in any state, but they must still start, keep order and chain.
 
 Pure functions over the record's data; ``check_record`` reads a run directory.
 """
@@ -65,12 +67,19 @@ def check_ir(ir: dict[str, Any] | None) -> list[str]:
     return []
 
 
+def died_during(run: Path) -> set[str]:
+    """The processes a run recorded as dying while it ran (their events end early, by no fault of theirs)."""
+    path = run / "supervision.jsonl"
+    return {e["process"] for e in read_events(path) if e.get("kind") == "died"} if path.exists() else set()
+
+
 def check_record(run: Path) -> list[str]:
     """Every invariant of one run record; an empty list when all hold."""
     summary_file = run / "summary.json"
     summary = json.loads(summary_file.read_text()) if summary_file.exists() else None
     finished = summary is not None and "nodes" in summary
     problems = check_counters(summary["nodes"]) if finished else []
+    died = died_during(run)
     for path in sorted((run / "events").glob("*.jsonl")):
-        problems += check_events(path.stem, read_events(path), finished)
+        problems += check_events(path.stem, read_events(path), finished and path.stem not in died)
     return problems + check_ir(summary.get("ir") if summary else None)

@@ -10,7 +10,7 @@ import signal
 import sys
 from typing import TYPE_CHECKING, Any
 
-from cli.args import bounded, int_auto, position, robot_id, seed, surround_config
+from cli.args import bounded, int_auto, position, readable_file, robot_id, seed, surround_config
 
 if TYPE_CHECKING:
     from petswarm.robot import RobotConfig
@@ -36,6 +36,18 @@ same --world and --hub endpoint.
 
   petswarm bench organize --slaves 1-5          swarm organizing time vs slaves, paper vs slotted protocol
 """
+
+
+RUN_EXIT_STATUS = """exit status:
+  0    the run finished and every check held (criteria and invariants)
+  1    a check failed; or the hub (or a user) died; or a robot died under --fail-fast
+  2    bad arguments or scenario file
+  3    the run carried on past robots that died unexpectedly (killed, crashed), every other check held;
+       each death is in the record (supervision.jsonl, summary.json "deaths")
+  130  interrupted (Ctrl-C or SIGTERM): every process is stopped and the summary written
+
+summary.json is rewritten every second while the run goes, so a run killed outright leaves one
+("running": true); its children die with it, paused ones too."""
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -87,6 +99,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=10.0,
         help="lockstep: wall seconds a granted node may stay silent before it is taken as gone (default 10)",
     )
+    _add_tls(hub, "hub")
 
     user = sub.add_parser(
         "user",
@@ -232,7 +245,12 @@ def build_parser() -> argparse.ArgumentParser:
     for p in (org, dis, sts):
         p.add_argument("--json", action="store_true", help="print the robot's answer as JSON (default: in words)")
 
-    run = sub.add_parser("run", help="run a hub and N robots on this machine and summarise the radio traffic")
+    run = sub.add_parser(
+        "run",
+        help="run a hub and N robots on this machine and summarise the radio traffic",
+        epilog=RUN_EXIT_STATUS,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     run.add_argument(
         "scenario",
         nargs="?",
@@ -282,9 +300,18 @@ def build_parser() -> argparse.ArgumentParser:
         "on model time the hub owns, exact under any load, the same digest as model",
     )
 
+    run.add_argument(
+        "--fail-fast",
+        action="store_true",
+        help="end the run when a robot dies unexpectedly (default: record the death and go on without it)",
+    )
+
     from cli.chaos import add_arguments as add_chaos_arguments
 
     add_chaos_arguments(sub, _add_hub, robot_id, bounded)
+    from cli.certs import add_arguments as add_certs_arguments
+
+    add_certs_arguments(sub, bounded)
 
     watch = sub.add_parser("watch", help="a local web page drawing the world live from a hub, or replaying a run")
     _add_hub(watch)
@@ -377,6 +404,67 @@ def _add_world(p: argparse.ArgumentParser) -> None:
 def _add_hub(p: argparse.ArgumentParser) -> None:
     p.add_argument("--hub", default="tcp/127.0.0.1:7447", help="the hub's zenoh endpoint (default %(default)s)")
     _add_world(p)
+    _add_tls(p, "client")
+
+
+def _add_tls(p: argparse.ArgumentParser, side: str) -> None:
+    """TLS files and a zenoh config file (README "Trust model"); none of them on loopback."""
+    tls = p.add_argument_group("transport security (a hub on another host; see README 'Trust model')")
+    if side == "hub":
+        tls.add_argument("--tls-cert", type=readable_file, metavar="PEM", help="the hub's certificate: listen on TLS")
+        tls.add_argument("--tls-key", type=readable_file, metavar="PEM", help="the hub certificate's private key")
+        tls.add_argument(
+            "--tls-ca",
+            type=readable_file,
+            metavar="PEM",
+            help="ask every client for a certificate signed by this CA (mutual TLS) and enforce the access "
+            "control: robot-N and user-N publish only on their own keys, operator asks and commands, "
+            "nobody but the hub publishes on down/**",
+        )
+        tls.add_argument(
+            "--acl-ids",
+            type=bounded(int, 1, 65533),
+            default=64,
+            help="certificates robot-1..robot-N and user-1..user-N get node rights (default %(default)s)",
+        )
+    else:
+        tls.add_argument("--tls-ca", type=readable_file, metavar="PEM", help="check the hub's certificate with this CA")
+        tls.add_argument(
+            "--tls-cert",
+            type=readable_file,
+            metavar="PEM",
+            help="this process's certificate (common name robot-N, user-N or operator) for a hub asking for one",
+        )
+        tls.add_argument("--tls-key", type=readable_file, metavar="PEM", help="that certificate's private key")
+    tls.add_argument(
+        "--zenoh-config", type=readable_file, metavar="FILE", help="a zenoh JSON5 config file the session starts from"
+    )
+
+
+def _use_security(args: argparse.Namespace) -> str | None:
+    """Make the command line's TLS options the process's transport security; the reason when they do not fit."""
+    files = {name: getattr(args, name, None) for name in ("tls_ca", "tls_cert", "tls_key", "zenoh_config")}
+    if not any(files.values()):
+        return None
+    if bool(files["tls_cert"]) != bool(files["tls_key"]):
+        return "--tls-cert and --tls-key go together"
+    if args.command == "hub" and files["tls_ca"] and not files["tls_cert"]:
+        return "--tls-ca asks clients for certificates: the hub needs its own (--tls-cert and --tls-key)"
+    if args.command == "hub" and files["tls_cert"] and not args.listen.startswith("tls/"):
+        return f"--tls-cert needs a tls/ endpoint to listen on, not {args.listen!r} (e.g. tls/0.0.0.0:7447)"
+    from radio_hub.trust import TransportSecurity
+    from radio_hub.zenoh_link import use_security
+
+    use_security(
+        TransportSecurity(
+            ca=files["tls_ca"],
+            cert=files["tls_cert"],
+            key=files["tls_key"],
+            zenoh_config=files["zenoh_config"],
+            acl_ids=getattr(args, "acl_ids", 64),
+        )
+    )
+    return None
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -384,7 +472,12 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     commands = {"hub": _hub, "user": _user, "robot": _robot, "run": _run, "stats": _stats, "bench": _bench}
     commands.update(swarm=_swarm, watch=_watch)
-    handler = {**commands, "report": _report, "chaos": _chaos, "experiment": _experiment}[args.command]
+    commands.update(report=_report, chaos=_chaos, experiment=_experiment, certs=_certs)
+    handler = commands[args.command]
+    unfit = _use_security(args)
+    if unfit:
+        print(f"petswarm {args.command}: {unfit}", file=sys.stderr)
+        return 2
     try:
         return handler(args)
     except KeyboardInterrupt:
@@ -502,9 +595,23 @@ def _user(args: argparse.Namespace) -> int:
 
 
 def _robot(args: argparse.Namespace) -> int:
-    from petswarm.robot import run_robot
+    from cli.runtime import NotOurRobot, register, unregister
 
     config = robot_config(args)
+    try:  # so that petswarm chaos kill|pause|resume can tell this process is ours (cli/runtime.py)
+        entry = register(config.world, config.robot_id) if config.robot_id else None
+    except (OSError, NotOurRobot) as err:
+        print(f"petswarm robot: not registered for petswarm chaos: {err}", file=sys.stderr)
+        entry = None
+    try:
+        return _run_robot(args, config)
+    finally:
+        unregister(entry)
+
+
+def _run_robot(args: argparse.Namespace, config: RobotConfig) -> int:
+    from petswarm.robot import run_robot
+
     if args.clock == "lockstep":
         from cli.lockstep_node import run_node
 
@@ -576,6 +683,7 @@ def _run(args: argparse.Namespace) -> int:
         record_dir=args.record,
         scenario=args.scenario,
         clock=args.clock,
+        fail_fast=args.fail_fast,
     )
     return run(opts)
 
@@ -590,6 +698,12 @@ def _watch(args: argparse.Namespace) -> int:
     from cli.watch import watch_command
 
     return watch_command(args)
+
+
+def _certs(args: argparse.Namespace) -> int:
+    from cli.certs import certs_command
+
+    return certs_command(args)
 
 
 def _chaos(args: argparse.Namespace) -> int:

@@ -17,10 +17,22 @@ from typing import IO, Any
 _PR_SET_PDEATHSIG = 1
 
 
-def _die_with_parent() -> None:
-    # Linux: if the supervisor is killed outright (SIGKILL), the kernel sends SIGTERM to its children.
-    with contextlib.suppress(OSError, AttributeError):
-        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+def _die_with_parent(signum: int) -> Callable[[], None]:
+    """A preexec hook: on Linux the kernel sends ``signum`` to the child when the supervisor dies, even by
+    SIGKILL (it survives exec, so also through a wrapper such as ``ip netns exec``)."""
+
+    def arm() -> None:
+        with contextlib.suppress(OSError, AttributeError):
+            ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signum)
+
+    return arm
+
+
+def parent_death_signal(name: str) -> int:
+    """What a child gets when its supervisor dies: SIGTERM for the hub, so it closes its pcap and world log;
+    SIGKILL for every other child, since a robot paused by ``petswarm chaos pause`` (SIGSTOP) cannot act on
+    SIGTERM and would be left behind in state T (its events are flushed line by line: nothing is lost)."""
+    return signal.SIGTERM if name == "hub" else signal.SIGKILL
 
 
 def free_tcp_port() -> int:
@@ -38,6 +50,8 @@ class Supervisor:
         log_dir.mkdir(parents=True, exist_ok=True)
         self.children: dict[str, subprocess.Popen[bytes]] = {}
         self._logs: dict[str, IO[bytes]] = {}
+        self._accounted: set[str] = set()
+        """Children whose end is known: stopped here, or already reported by ``unexpected_deaths``."""
 
     def spawn(self, name: str, args: list[str], wrapper: Sequence[str] = ()) -> subprocess.Popen[bytes]:
         """Start ``petswarm <args>`` as a child; its stdout and stderr go to ``<log_dir>/<name>.log``.
@@ -56,7 +70,7 @@ class Supervisor:
             stdin=subprocess.DEVNULL,
             stdout=log,
             stderr=subprocess.STDOUT,
-            preexec_fn=_die_with_parent,
+            preexec_fn=_die_with_parent(parent_death_signal(name)),
             env={**os.environ, "PYTHONUNBUFFERED": "1"},
         )
         self.children[name] = proc
@@ -67,6 +81,13 @@ class Supervisor:
         """Children that have exited, with their exit codes."""
         return {name: p.returncode for name, p in self.children.items() if p.poll() is not None}
 
+    def unexpected_deaths(self) -> dict[str, int]:
+        """Children that exited since the last call without being stopped here, with their exit codes
+        (negative: the signal that killed them); each is reported once."""
+        deaths = {name: code for name, code in self.dead().items() if name not in self._accounted}
+        self._accounted.update(deaths)
+        return deaths
+
     def log_tail(self, name: str, lines: int = 15) -> str:
         """The last lines a child wrote."""
         path = self.log_dir / f"{name}.log"
@@ -74,10 +95,15 @@ class Supervisor:
         return "\n".join(text.splitlines()[-lines:])
 
     def stop(self, names: list[str], timeout: float = 5.0) -> dict[str, int]:
-        """SIGTERM the named children, SIGKILL any still alive after ``timeout``; returns exit codes."""
+        """SIGTERM the named children, SIGKILL any still alive after ``timeout``; returns exit codes.
+
+        A paused child (``petswarm chaos pause``) is continued first: a stopped process keeps SIGTERM pending."""
         procs = {n: self.children[n] for n in names if n in self.children}
+        self._accounted.update(procs)
         for proc in procs.values():
             if proc.poll() is None:
+                with contextlib.suppress(ProcessLookupError):
+                    proc.send_signal(signal.SIGCONT)
                 proc.send_signal(signal.SIGTERM)
         deadline = time.monotonic() + timeout
         for proc in procs.values():

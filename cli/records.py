@@ -6,7 +6,9 @@
         logs/*.log             every process's stdout and stderr
         air.pcap               the hub's frame log: every 802.15.4 frame on the air (Wireshark, tshark)
 
-        summary.json           the final summary (also written when the run fails or is interrupted)
+        summary.json           the final summary (also written when the run fails or is interrupted, and
+                               rewritten every second while it runs, so a killed run leaves one)
+        supervision.jsonl      children that died during the run (cli/supervision.py), one line each
 
 Files are written as the run goes (the robots flush every event), so a run that is killed midway
 still leaves a readable record. Records go under ``runs/``, or under ``$PETSWARM_RUNS`` when it is set
@@ -65,8 +67,10 @@ class RunRecord:
         return self.path / "events" / f"{name}.jsonl"
 
     def write(self, name: str, body: dict[str, Any]) -> None:
-        """One JSON file of the record."""
-        (self.path / name).write_text(json.dumps(body, indent=2, default=str) + "\n")
+        """One JSON file of the record, replaced whole: a run killed while writing leaves the previous one."""
+        part = self.path / f".{name}.part"
+        part.write_text(json.dumps(body, indent=2, default=str) + "\n")
+        os.replace(part, self.path / name)
 
     def finish(self, summary: dict[str, Any], exit_codes: dict[str, int]) -> None:
         """The summary, with every process's exit code."""

@@ -1,6 +1,7 @@
 """``petswarm report RUN``: read a run record, print its summary, render its plots to PNG.
 
-Works on a finished run and on one that was killed midway (no summary: the events still tell the story).
+Works on a finished run and on one that was killed midway (only the summary it wrote while running, or
+none: the events still tell the story).
 A scenario run also leaves the hub's ground truth (``world.jsonl``); from it come the driving figures, the
 bodies' paths (``trajectories.png``) and each slave's formation error over time (``formation_error.png``).
 """
@@ -83,6 +84,11 @@ def describe(manifest: dict[str, Any], summary: dict[str, Any] | None, events: d
     ]
     if summary is None:
         lines.append("no summary: the run was killed before it finished; the events below are all there is")
+    elif summary.get("running"):
+        lines.append(
+            f"the run was killed before it finished, {summary.get('elapsed_s', 0):g} s in (its last summary was "
+            "written while it ran); the events below tell the rest"
+        )
     else:
         verdict = "OK" if summary.get("ok") else "PROBLEMS: " + "; ".join(summary.get("problems", []))
         lines.append(verdict)
@@ -97,6 +103,8 @@ def describe(manifest: dict[str, Any], summary: dict[str, Any] | None, events: d
                 f"  swarm: members {organized['members']} in {organized['organize_time_s'] * 1000:.1f} ms, "
                 f"{organized['retries']} retries"
             )
+    for death in (summary or {}).get("deaths", []):
+        lines.append(f"  {death['process']} died during the run ({death['cause']}, {death['elapsed_s']:g} s in)")
     for name, evs in events.items():
         states = [e["to"] for e in evs if e["kind"] == "state"]
         last = evs[-1]["kind"] if evs else "nothing"

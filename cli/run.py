@@ -8,7 +8,7 @@ import os
 import signal
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import dataclass, replace
 from typing import Any, Protocol
 
@@ -19,6 +19,7 @@ from cli.checker import check_record
 from cli.metrics import describe_driving
 from cli.processes import Supervisor, free_tcp_port, raise_interrupt
 from cli.records import RunRecord
+from cli.supervision import RunAborted, Supervision
 from cli.swarm import describe
 from petswarm import control
 from petswarm.robot import DEFAULT_PAN
@@ -53,6 +54,8 @@ class RunOptions:
     clock: str = "wall"
     """``wall``: processes over zenoh in real time; ``model``: one process on model time (``cli.model_run``);
     ``lockstep``: processes on model time the hub owns (``cli.lockstep_run``)."""
+    fail_fast: bool = False
+    """End the run at a robot's unexpected death instead of recording it and going on without the robot."""
 
     def for_scenario(self, scenario: Any) -> RunOptions:
         """These options with the scenario's robot count and duration (what its record's manifest shows)."""
@@ -121,6 +124,7 @@ class RunContext:
     record: RunRecord
     sup: Supervisor
     session: zenoh.Session
+    watch: Supervision
 
 
 def supervise(
@@ -138,6 +142,8 @@ def supervise(
     keys = Keys(world)
     record = RunRecord.create(opts, world, endpoint)
     sup = Supervisor(record.path / "logs")
+    watch = Supervision(sup, record, opts.fail_fast, progress)
+    watch.write_progress(force=True)  # from the first moment a kill leaves a summary
     previous = signal.signal(signal.SIGTERM, raise_interrupt)
     session: zenoh.Session | None = None
     summary: dict[str, Any] = {"ok": False, "problems": ["the run did not finish"], "seed": opts.seed}
@@ -147,9 +153,10 @@ def supervise(
         # the air's frame log belongs to the record unless the user wants the capture elsewhere
         hub_args += ["--pcap", opts.pcap or str(record.path / "air.pcap"), *hub_extra(record)]
         sup.spawn("hub", hub_args + (["--config", opts.config] if opts.config else []))
-        session = _wait_for_hub(sup, endpoint, keys, opts.startup_timeout)
-        summary = phase(RunContext(opts, world, endpoint, keys, record, sup, session))
-    except (RunFailed, HubUnavailable) as err:
+        session = _wait_for_hub(watch, endpoint, keys, opts.startup_timeout)
+        summary = phase(RunContext(opts, world, endpoint, keys, record, sup, session, watch))
+        watch.check()  # a death in the last moments counts too
+    except (RunFailed, RunAborted, HubUnavailable) as err:
         progress(f"failed: {err}")
         summary["problems"] = [f"failed: {err}"]
         return 1
@@ -162,6 +169,7 @@ def supervise(
             session.close()
         codes = sup.stop_all()
         signal.signal(signal.SIGTERM, previous)
+        summary["deaths"] = watch.deaths
         record.finish(summary, codes)
         progress(f"stopped {len(codes)} processes; record in {record.path}")
     if after_stop is not None:
@@ -172,7 +180,7 @@ def supervise(
     summary["ok"] = not summary["problems"]
     record.finish(summary, codes)
     _print(summary, opts.as_json)
-    return 0 if summary["ok"] else 1
+    return watch.exit_status(summary["ok"])
 
 
 def _ping_and_organize(ctx: RunContext) -> dict[str, Any]:
@@ -183,12 +191,15 @@ def _ping_and_organize(ctx: RunContext) -> dict[str, Any]:
         progress(f"warning: {note}")
     for rid in range(1, opts.robots + 1):
         ctx.sup.spawn(f"robot-{rid}", ping_robot_argv(opts, rid, ctx.endpoint, ctx.world, ctx.record))
-    _wait_for_robots(ctx.sup, session, keys, opts.robots, opts.startup_timeout)
+    _wait_for_robots(ctx.watch, session, keys, opts.robots, opts.startup_timeout)
     timeline = FaultTimeline(list(opts.faults))
-    _exercise(ctx.sup, session, keys, opts.duration, timeline)
+    _exercise(ctx.watch, session, keys, opts.duration, timeline)
     timeline.apply_due(hub_chaos(session, keys), float("inf"))  # what is left acts on the swarm phase
-    swarm = asyncio.run(organize_and_disperse(ZenohControl(session, keys), opts)) if opts.organize else {}
-    summary = _summarise(session, keys, opts, ctx.world, ctx.endpoint)
+    ctx.watch.check()
+    dead = ctx.watch.dead_robots
+    swarm = asyncio.run(organize_and_disperse(ZenohControl(session, keys), opts, dead)) if opts.organize else {}
+    ctx.watch.check()
+    summary = _summarise(session, keys, opts, ctx.world, ctx.endpoint, dead())
     summary["faults"] = timeline.applied
     summary["notes"] = notes
     problems = summary["problems"] + swarm.pop("problems", [])
@@ -220,17 +231,10 @@ def organize_shortfall(opts: RunOptions) -> list[str]:
     ]
 
 
-def _check_alive(sup: Supervisor) -> None:
-    dead = sup.dead()
-    if dead:
-        name, code = next(iter(dead.items()))
-        raise RunFailed(f"{name} exited with code {code}:\n{sup.log_tail(name)}")
-
-
-def _wait_for_hub(sup: Supervisor, endpoint: str, keys: Keys, timeout: float) -> zenoh.Session:
+def _wait_for_hub(watch: Supervision, endpoint: str, keys: Keys, timeout: float) -> zenoh.Session:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
-        _check_alive(sup)
+        watch.check()
         try:
             session = open_session("client", endpoint)
         except HubUnavailable:
@@ -242,7 +246,7 @@ def _wait_for_hub(sup: Supervisor, endpoint: str, keys: Keys, timeout: float) ->
             return session
         except HubUnavailable:
             session.close()
-    raise RunFailed(f"hub did not come up within {timeout} s:\n{sup.log_tail('hub')}")
+    raise RunFailed(f"hub did not come up within {timeout} s:\n{watch.sup.log_tail('hub')}")
 
 
 def _attached(session: zenoh.Session, keys: Keys) -> int:
@@ -250,26 +254,26 @@ def _attached(session: zenoh.Session, keys: Keys) -> int:
     return sum(1 for n in stats["nodes"].values() if n["attached"])
 
 
-def _wait_for_robots(sup: Supervisor, session: zenoh.Session, keys: Keys, count: int, timeout: float) -> None:
+def _wait_for_robots(watch: Supervision, session: zenoh.Session, keys: Keys, count: int, timeout: float) -> None:
     deadline = time.monotonic() + timeout
     seen = -1
     while time.monotonic() < deadline:
-        _check_alive(sup)
+        watch.check()
         attached = _attached(session, keys)
         if attached != seen:
             progress(f"{attached}/{count} robots attached")
             seen = attached
-        if attached >= count:
+        if attached >= count - len(watch.dead_robots()):
             return
         time.sleep(0.2)
     raise RunFailed(f"only {seen}/{count} robots attached within {timeout} s")
 
 
-def _exercise(sup: Supervisor, session: zenoh.Session, keys: Keys, duration: float, timeline: FaultTimeline) -> None:
+def _exercise(watch: Supervision, session: zenoh.Session, keys: Keys, duration: float, timeline: FaultTimeline) -> None:
     start = time.monotonic()
     next_report = start
     while (elapsed := time.monotonic() - start) < duration:
-        _check_alive(sup)
+        watch.check()
         timeline.apply_due(hub_chaos(session, keys), elapsed)
         if time.monotonic() >= next_report:
             try:
@@ -277,6 +281,7 @@ def _exercise(sup: Supervisor, session: zenoh.Session, keys: Keys, duration: flo
             except HubUnavailable:  # a busy hub: progress can wait, the run goes on
                 totals = None
             if totals is not None:
+                watch.progress = {"phase": "ping", "phase_elapsed_s": round(elapsed, 1), "totals": totals}
                 progress(
                     f"t={elapsed:5.1f}/{duration:g}s  sent {totals['sent']}  delivered {totals['delivered']}  "
                     f"collided {totals['collided']}  lost {totals['lost']}"
@@ -358,8 +363,11 @@ class ZenohControl:
         await asyncio.sleep(seconds)
 
 
-async def organize_and_disperse(ctl: RunControl, opts: RunOptions) -> dict[str, Any]:
-    """Robot 1 (connected to user 1) organizes, the swarm holds a second, then disperses; states are checked."""
+async def organize_and_disperse(
+    ctl: RunControl, opts: RunOptions, dead: Callable[[], Collection[int]] = frozenset
+) -> dict[str, Any]:
+    """Robot 1 (connected to user 1) organizes, the swarm holds a second, then disperses; states are checked.
+    Robots in ``dead()`` (died during the run) are neither asked nor expected to join."""
     progress(f"robot 1 organizes a swarm of {opts.organize} ({opts.protocol} protocol)")
     organized = await ctl.command(1, "organize", 60.0, count=opts.organize)
     if "error" in organized:
@@ -369,8 +377,8 @@ async def organize_and_disperse(ctl: RunControl, opts: RunOptions) -> dict[str, 
         f"{organized['organize_time_s'] * 1000:.1f} ms, {organized['retries']} retries"
     )
     await ctl.sleep(1.0)
-    problems = swarm_problems(opts.robots, await statuses(ctl, opts.robots), organized)
-    expected = min(opts.organize, opts.robots - 1)
+    problems = swarm_problems(opts.robots, await statuses(ctl, opts.robots, dead()), organized)
+    expected = min(opts.organize, opts.robots - 1 - len(set(dead()) - {1}))
     if len(organized["members"]) < expected:
         problems.append(f"only {len(organized['members'])} of the {expected} robots available joined the swarm")
     if not organized["members"]:
@@ -379,14 +387,21 @@ async def organize_and_disperse(ctl: RunControl, opts: RunOptions) -> dict[str, 
 
     progress(f"dispersed in {dispersed.get('disperse_time_s', 0) * 1000:.1f} ms")
     await ctl.sleep(0.3)
-    problems += swarm_problems(opts.robots, await statuses(ctl, opts.robots), None)
+    problems += swarm_problems(opts.robots, await statuses(ctl, opts.robots, dead()), None)
     return {"organization": organized, "dispersal": dispersed, "problems": problems}
 
 
-async def statuses(ctl: RunControl, robots: int) -> dict[int, dict[str, Any] | str]:
-    """Every robot's status, or the reason it gave none."""
+DIED = {"died": True}
+"""The status of a robot that died during the run: it is not asked, and no check expects anything of it."""
+
+
+async def statuses(ctl: RunControl, robots: int, dead: Collection[int] = ()) -> dict[int, dict[str, Any] | str]:
+    """Every robot's status, or the reason it gave none; DIED for the robots in ``dead``."""
     answers: dict[int, dict[str, Any] | str] = {}
     for rid in range(1, robots + 1):
+        if rid in dead:
+            answers[rid] = DIED
+            continue
         try:
             answers[rid] = await ctl.command(rid, "status")
         except HubUnavailable as err:
@@ -410,6 +425,8 @@ def swarm_problems(robots: int, status: dict[int, dict[str, Any] | str], organiz
         if isinstance(answer, str):
             problems.append(f"{answer} {when}")
             continue
+        if answer is DIED:
+            continue
         got = (answer["state"], answer["radio"]["pan_id"])
         if got != want:
             problems.append(
@@ -418,16 +435,19 @@ def swarm_problems(robots: int, status: dict[int, dict[str, Any] | str], organiz
     return problems
 
 
-def _summarise(session: zenoh.Session, keys: Keys, opts: RunOptions, world: str, endpoint: str) -> dict[str, Any]:
+def _summarise(
+    session: zenoh.Session, keys: Keys, opts: RunOptions, world: str, endpoint: str, dead: Collection[int] = ()
+) -> dict[str, Any]:
     ctl = ZenohControl(session, keys)
     stats = query_hub(session, keys.stats, timeout=STATS_TIMEOUT_S)
-    return summarise(stats, asyncio.run(statuses(ctl, opts.robots)), opts, world, endpoint)
+    return summarise(stats, asyncio.run(statuses(ctl, opts.robots, dead)), opts, world, endpoint)
 
 
 def summarise(
     stats: dict[str, Any], status: dict[int, dict[str, Any] | str], opts: RunOptions, world: str, endpoint: str
 ) -> dict[str, Any]:
-    """The run's summary from the hub's stats and every robot's status."""
+    """The run's summary from the hub's stats and every robot's status; a robot that died during the run
+    (DIED) keeps its hub counters and is left out of the hearing checks."""
     nodes: dict[str, Any] = {}
     problems: list[str] = [answer for answer in status.values() if isinstance(answer, str)]
     for rid in range(1, opts.robots + 1):
@@ -458,12 +478,15 @@ def summarise(
             "pings_answered": robot.get("pings_answered", 0),
             "peak_rss_mb": robot.get("peak_rss_mb"),
         }
-    everyone = set(range(1, opts.robots + 1))
-    all_pairs = all(set(n["heard_from"]) >= everyone - {rid} for rid, n in enumerate(nodes.values(), 1))
-    pairs = sum(len(set(n["heard_from"]) - {rid}) for rid, n in enumerate(nodes.values(), 1))
-    if opts.robots > 1 and not all_pairs and opts.robots <= ALL_PAIRS_UP_TO:
+        if answer is DIED:
+            nodes[name]["died"] = True
+    alive = {rid: n for rid, n in enumerate(nodes.values(), 1) if not n.get("died")}
+    everyone = set(alive)
+    all_pairs = all(set(n["heard_from"]) >= everyone - {rid} for rid, n in alive.items())
+    pairs = sum(len(set(n["heard_from"]) - {rid}) for rid, n in alive.items())
+    if len(alive) > 1 and not all_pairs and opts.robots <= ALL_PAIRS_UP_TO:
         problems.append(HEARING_PROBLEMS[0])
-    elif opts.robots > ALL_PAIRS_UP_TO and any(not n["heard_from"] for n in nodes.values()):
+    elif opts.robots > ALL_PAIRS_UP_TO and any(not n["heard_from"] for n in alive.values()):
         problems.append(HEARING_PROBLEMS[1])
     gaps = stats["hub"]["transport_gaps"] + sum(n["transport_gaps"] for n in nodes.values())
     if gaps:
@@ -477,7 +500,7 @@ def summarise(
         "robots": opts.robots,
         "duration_s": opts.duration,
         "all_pairs_heard": all_pairs,
-        "pairs_heard_fraction": round(pairs / max(opts.robots * (opts.robots - 1), 1), 3),
+        "pairs_heard_fraction": round(pairs / max(len(alive) * (len(alive) - 1), 1), 3),
         "nodes": nodes,
         "channels": stats["channels"],
         "hub": stats["hub"],
@@ -515,4 +538,7 @@ def _print(summary: dict[str, Any], as_json: bool) -> None:
         print(describe_driving(summary["driving"]))
     for note in summary.get("notes", []):
         print(f"note: {note}")
+    for death in summary.get("deaths", []):
+        when = f"{death['cause']}, {death['elapsed_s']:g} s in"
+        print(f"died during the run: {death['process']} ({when}); the run went on without it")
     print("OK" if summary["ok"] else "PROBLEMS: " + "; ".join(summary["problems"]))

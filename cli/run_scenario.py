@@ -17,20 +17,19 @@ from typing import Any
 import zenoh
 
 from cli.metrics import driving_metrics, read_world
-from cli.processes import Supervisor
 from cli.records import RunRecord
 from cli.run import (
     HEARING_PROBLEMS,
     FaultTimeline,
     RunContext,
     RunOptions,
-    _check_alive,
     _summarise,
     _wait_for_robots,
     hub_chaos,
     progress,
     supervise,
 )
+from cli.supervision import Supervision
 from petswarm.scenario import Scenario
 from radio_hub.interface import Keys
 
@@ -54,14 +53,14 @@ def _drive(ctx: RunContext, scenario: Scenario) -> dict[str, Any]:
     opts, endpoint, world = ctx.opts, ctx.endpoint, ctx.world
     for rid in range(1, scenario.robot_count + 1):
         ctx.sup.spawn(f"robot-{rid}", scenario_robot_argv(opts, scenario, rid, endpoint, world, ctx.record))
-    _wait_for_robots(ctx.sup, ctx.session, ctx.keys, scenario.robot_count, opts.startup_timeout)
+    _wait_for_robots(ctx.watch, ctx.session, ctx.keys, scenario.robot_count, opts.startup_timeout)
     if scenario.user is not None:
         user_args = ["user", "--scenario", str(scenario.path), "--hub", endpoint, "--world", world]
         user_args += ["--seed", str(opts.seed), "--record", str(ctx.record.events_of(scenario.user.node_id))]
         ctx.sup.spawn("user", [*user_args, "--duration", str(scenario.duration_s)])
     timeline = FaultTimeline(list(scenario.faults) + list(opts.faults))
-    _follow(ctx.sup, ctx.session, ctx.keys, scenario.duration_s, timeline)
-    summary = _summarise(ctx.session, ctx.keys, opts, world, endpoint)
+    _follow(ctx.watch, ctx.session, ctx.keys, scenario.duration_s, timeline)
+    summary = _summarise(ctx.session, ctx.keys, opts, world, endpoint, ctx.watch.dead_robots())
     summary["problems"] = [p for p in summary["problems"] if p not in HEARING_PROBLEMS]  # no ping phase here
     summary.update(scenario=scenario.name, faults=timeline.applied, duration_s=scenario.duration_s)
     summary["ok"] = not summary["problems"]
@@ -90,15 +89,15 @@ def _surround_args(scenario: Scenario) -> list[str]:
     return [*args, "--surround-config", json.dumps(law)] if law else args
 
 
-def _follow(sup: Supervisor, session: zenoh.Session, keys: Keys, duration: float, timeline: FaultTimeline) -> None:
+def _follow(watch: Supervision, session: zenoh.Session, keys: Keys, duration: float, timeline: FaultTimeline) -> None:
     """Apply the fault timeline and report progress until the user is done (or the duration is over)."""
     start = time.monotonic()
     next_report = start
     while (elapsed := time.monotonic() - start) < duration + 2.0:
-        dead = sup.dead()
+        dead = watch.sup.dead()
         if "user" in dead and dead["user"] == 0:
             return
-        _check_alive(sup)
+        watch.check()
         timeline.apply_due(hub_chaos(session, keys), elapsed)
         if time.monotonic() >= next_report:
             progress(f"t={elapsed:5.1f}/{duration:g}s")

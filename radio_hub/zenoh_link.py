@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import re
 import sys
 from collections.abc import Callable
@@ -20,16 +21,32 @@ import zenoh
 
 from radio_hub.keys import Keys
 from radio_hub.port import HubUnavailable
+from radio_hub.trust import TransportSecurity, access_control, tls_settings
 
 _ENDPOINT = re.compile(r"^(tcp|udp|tls|quic)/(\[[0-9a-fA-F:.]+\]|[A-Za-z0-9_.-]+):\d{1,5}$")
+_security = TransportSecurity()
+
+
+def use_security(security: TransportSecurity) -> None:
+    """Every session this process opens from now on uses ``security`` (the command line's TLS options):
+    one process, one identity, so the setting is process-wide rather than threaded through every caller."""
+    global _security
+    _security = security
 
 
 def session_config(mode: str, endpoint: str) -> zenoh.Config:
-    """A zenoh config: ``router`` listens on ``endpoint``, ``client`` connects to it; no multicast."""
+    """A zenoh config: ``router`` listens on ``endpoint``, ``client`` connects to it; no multicast. The
+    process's TransportSecurity adds TLS (and, on a router asking for client certificates, access control)
+    on top of its zenoh config file, if it gave one."""
     if mode not in ("router", "client"):
         raise ValueError("mode must be router or client")
-    config = zenoh.Config()
+    security = _security
+    config = zenoh.Config.from_file(security.zenoh_config) if security.zenoh_config else zenoh.Config()
     config.insert_json5("mode", f'"{mode}"')
+    for name, value in tls_settings(security, mode).items():
+        config.insert_json5(f"transport/link/tls/{name}", json.dumps(value))
+    if mode == "router" and security.mutual:
+        config.insert_json5("access_control", json.dumps(access_control(security.acl_ids)))
     where = "listen/endpoints" if mode == "router" else "connect/endpoints"
     config.insert_json5(where, f'["{endpoint}"]')
     config.insert_json5("scouting/multicast/enabled", "false")

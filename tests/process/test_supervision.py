@@ -1,0 +1,179 @@
+"""Supervision with real processes: signals only to our own robots, a run that survives its robots, and a
+run killed outright that leaves a summary and no children behind."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from cli.processes import free_tcp_port
+from cli.supervision import DEATHS_ONLY
+
+pytestmark = pytest.mark.process
+
+
+def _env(tmp_path: Path) -> dict[str, str]:
+    """A private runtime directory of the test's own, so registrations of parallel tests never meet."""
+    runtime = tmp_path / "xdg"
+    runtime.mkdir(mode=0o700, exist_ok=True)
+    return {**os.environ, "XDG_RUNTIME_DIR": str(runtime), "PYTHONUNBUFFERED": "1"}
+
+
+def _petswarm(env: dict[str, str], *args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "cli", *args], capture_output=True, text=True, timeout=timeout, env=env
+    )
+
+
+def _state(pid: int) -> str | None:
+    """The process's state letter (R, S, T, Z...), None when there is no such process."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return None
+
+
+def _wait_registered(runtime: Path, name: str, proc: subprocess.Popen[bytes]) -> dict[str, Any]:
+    entry = runtime / "petswarm" / name
+    deadline = time.monotonic() + 20
+    while not entry.exists():
+        assert proc.poll() is None and time.monotonic() < deadline, f"{name} never registered"
+        time.sleep(0.05)
+    return json.loads(entry.read_text())
+
+
+def _forge(runtime: Path, world: str, robot: int, pid: int, start: int) -> None:
+    body = {"world": world, "robot": robot, "pid": pid, "start": start, "token": "forged"}
+    (runtime / "petswarm" / f"{world}.robot-{robot}.json").write_text(json.dumps(body))
+
+
+def test_chaos_signals_only_a_registered_robot_of_that_world(tmp_path: Path) -> None:
+    env = _env(tmp_path)
+    runtime = Path(env["XDG_RUNTIME_DIR"])
+    hub = f"tcp/127.0.0.1:{free_tcp_port()}"
+    quiet: dict[str, Any] = {"env": env, "stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
+    hub_proc = subprocess.Popen([sys.executable, "-m", "cli", "hub", "--listen", hub, "--world", "alpha"], **quiet)
+    robot = subprocess.Popen(
+        [sys.executable, "-m", "cli", "robot", "--id", "1", "--world", "alpha", "--hub", hub], **quiet
+    )
+    bystander = subprocess.Popen(["sleep", "30"])
+    try:
+        registered = _wait_registered(runtime, "alpha.robot-1.json", robot)
+        assert registered["pid"] == robot.pid
+        assert (runtime / "petswarm").stat().st_mode & 0o777 == 0o700
+
+        refusals = {
+            "pid 1": (1, registered["start"]),
+            "a process that is no robot": (bystander.pid, _start(bystander.pid)),
+            "another world's robot": (robot.pid, registered["start"]),
+        }
+        for why, (pid, start) in refusals.items():
+            _forge(runtime, "beta", 1, pid, start)
+            done = _petswarm(env, "chaos", "kill", "--robot", "1", "--world", "beta")
+            assert done.returncode == 2 and "refused" in done.stderr, (why, done.stderr)
+        unregistered = _petswarm(env, "chaos", "pause", "--robot", "7", "--world", "alpha")
+        assert unregistered.returncode == 2 and "not registered" in unregistered.stderr
+        assert bystander.poll() is None and _state(robot.pid) in ("R", "S")
+
+        assert _petswarm(env, "chaos", "pause", "--robot", "1", "--world", "alpha").returncode == 0
+        assert _state(robot.pid) == "T"
+        assert _petswarm(env, "chaos", "resume", "--robot", "1", "--world", "alpha").returncode == 0
+        assert _state(robot.pid) in ("R", "S")
+        assert _petswarm(env, "chaos", "kill", "--robot", "1", "--world", "alpha").returncode == 0
+        assert robot.wait(10) == -signal.SIGKILL
+    finally:
+        for proc in (robot, bystander, hub_proc):
+            proc.kill()
+            proc.wait()
+
+
+def _start(pid: int) -> int:
+    return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[19])
+
+
+def _run(env: dict[str, str], record: Path, world: str, *args: str) -> subprocess.Popen[str]:
+    argv = [sys.executable, "-m", "cli", "run", "--record", str(record), "--world", world, "--seed", "3", *args]
+    return subprocess.Popen(argv, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def _running_summary(record: Path, run: subprocess.Popen[str], until: str, timeout: float = 30) -> dict[str, Any]:
+    """The summary the run rewrites as it goes, once its phase has reached ``until`` (a key of it)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        assert run.poll() is None, run.communicate()[1][-3000:]
+        try:
+            summary = json.loads((record / "summary.json").read_text())
+        except (OSError, ValueError):
+            summary = {}
+        if summary.get("running") and until in summary:
+            return summary
+        time.sleep(0.2)
+    raise AssertionError("the run never wrote a summary while running")
+
+
+def test_a_run_survives_a_robot_killed_from_outside(tmp_path: Path) -> None:
+    env, record = _env(tmp_path), tmp_path / "record"
+    run = _run(env, record, "survive", "--robots", "5", "--organize", "3", "--duration", "20", "--json")
+    try:
+        summary = _running_summary(record, run, "totals")  # the ping phase has begun: every robot attached
+        time.sleep(3.0)
+        os.kill(summary["processes"]["robot-5"], signal.SIGKILL)
+        out, err = run.communicate(timeout=60)
+    finally:
+        run.kill()
+    assert run.returncode == DEATHS_ONLY, err[-3000:]
+    final = json.loads(out)
+    assert final["ok"] and final["problems"] == [] and final["invariants"] == "all hold", final["problems"]
+    assert [(d["process"], d["cause"]) for d in final["deaths"]] == [("robot-5", "SIGKILL")]
+    assert final["organization"]["members"] == [2, 3, 4]  # robot 5 gone, the swarm of 3 formed without it
+    assert final["dispersal"]["unconfirmed"] == []
+    assert final["nodes"]["robot-5"]["died"] is True
+    died = [json.loads(line) for line in (record / "supervision.jsonl").read_text().splitlines()]
+    assert [d["process"] for d in died] == ["robot-5"]
+    assert "robot-5 died (SIGKILL)" in err
+
+
+def test_a_robot_death_ends_the_run_under_fail_fast(tmp_path: Path) -> None:
+    env, record = _env(tmp_path), tmp_path / "record"
+    run = _run(env, record, "fast", "--robots", "2", "--duration", "20", "--fail-fast")
+    try:
+        summary = _running_summary(record, run, "totals")
+        os.kill(summary["processes"]["robot-2"], signal.SIGKILL)
+        _, err = run.communicate(timeout=30)
+    finally:
+        run.kill()
+    assert run.returncode == 1, err[-3000:]
+    final = json.loads((record / "summary.json").read_text())
+    assert not final["ok"] and "robot-2 died (SIGKILL)" in final["problems"][0]
+    assert [d["process"] for d in final["deaths"]] == ["robot-2"]
+
+
+def test_a_run_killed_outright_leaves_a_summary_and_no_children(tmp_path: Path) -> None:
+    env, record = _env(tmp_path), tmp_path / "record"
+    run = _run(env, record, "orphans", "--robots", "3", "--duration", "30")
+    try:
+        summary = _running_summary(record, run, "totals")
+        paused = _petswarm(env, "chaos", "pause", "--robot", "2", "--world", "orphans")
+        assert paused.returncode == 0, paused.stderr
+        children = summary["processes"]
+        assert _state(children["robot-2"]) == "T"
+        run.kill()  # SIGKILL: run's own code gets no say
+        run.wait()
+    finally:
+        run.kill()
+        run.communicate()
+    left = json.loads((record / "summary.json").read_text())
+    assert left["running"] is True and not left["ok"] and "totals" in left
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline and any(_state(pid) not in (None, "Z") for pid in children.values()):
+        time.sleep(0.1)
+    alive = {name: _state(pid) for name, pid in children.items() if _state(pid) not in (None, "Z")}
+    assert alive == {}, f"children outlived their run: {alive}"
