@@ -21,7 +21,7 @@ import numpy as np
 import zenoh
 
 from petswarm import clock
-from petswarm.control import all_robots_key, answer_relayed, robot_key
+from petswarm.control import all_robots_key, answer_relayed, guarded_handle, robot_key
 from petswarm.driving import Driver
 from petswarm.exchange import MessageProcessingManager
 from petswarm.formation import RESPONSES, FormationConfig, FormationError, NetworkFormation, Swarm
@@ -190,8 +190,11 @@ class Robot:
     async def _receive_loop(self) -> None:
         while True:
             incoming = await self.rf.receive()
-            self._remember(incoming)
-            await self._on_message(incoming)
+            try:
+                self._remember(incoming)
+                await self._on_message(incoming)
+            except Exception as err:  # one message must not stop the robot hearing the next
+                self.rf.radio.faults.record("receive", err, type(incoming.message).__name__)
 
     async def _on_message(self, incoming: Incoming) -> None:
         msg = incoming.message
@@ -384,6 +387,8 @@ class Robot:
             "tx_results": dict(self.rf.tx_results),
             "radio_malformed": radio.malformed,
             "transport_gaps": radio.transport_gaps,
+            "radio_dropped": {**radio.dropped, "link": radio.link_dropped},
+            "faults": radio.faults.to_dict(),
             "state": self.sequence.state.label,
             "user": self.formation.user if self.sequence.user_connected else 0,
             "swarm": None if self.formation.swarm is None else self.formation.swarm.to_dict(),
@@ -446,7 +451,7 @@ class ControlServer:
             self.malformed += 1
             answer: dict[str, Any] = {"error": f"malformed command: {type(err).__name__}"}
         else:
-            answer = await self.robot.handle(cmd)
+            answer = await guarded_handle(self.robot.handle, cmd, self.robot.rf.radio.faults)
         if query is not None:
             try:
                 query.reply(query.key_expr, msgpack.packb(answer, use_bin_type=True))
