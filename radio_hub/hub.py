@@ -57,6 +57,10 @@ INBOX_PER_NODE = 1000
 """Messages of one attached node waiting in the inbox; a node past it loses its newest (counted)."""
 INBOX_STRANGERS = 1000
 """Messages of every id that is not attached (first attaches included) waiting in the inbox, together."""
+STRANGERS_PER_S = 2000
+"""Messages of ids that are not attached taken into the inbox per second, together (attaches included: a
+swarm of 50 attaches in well under a second); the rest are dropped in zenoh's thread at once, so a flood
+of made-up ids costs the job loop almost nothing."""
 INBOX_OTHER = 1000
 """Queries and liveliness changes waiting in the inbox."""
 INBOX_BUCKET_BYTES = 4 << 20
@@ -119,6 +123,8 @@ class RadioHub:
         self.inbox_dropped: Counter[str] = Counter()
         """Items refused at the inbox: ``node`` (an attached node past its limit), ``stranger``, ``other``,
         ``oversized`` (longer than ``wire.MAX_UP_BYTES``)."""
+        self._stranger_window = (0.0, 0)
+        """(start of the current second, strangers admitted in it)."""
         self._tokens: dict[tuple[str, str], None] = {}
         """Liveliness tokens present, (node id, instance)."""
         self._tokenless: dict[str, int] = {}
@@ -203,6 +209,8 @@ class RadioHub:
         if item[0] == "up":
             node_id, size = self.keys.node_of(item[1]), len(item[2])
             bucket, limit = (node_id, INBOX_PER_NODE) if node_id in self.env.kinds else ("", INBOX_STRANGERS)
+            if not bucket and not self._stranger_admitted():
+                return
         else:
             bucket, limit = "?", INBOX_OTHER
         with self._waiting_lock:
@@ -219,6 +227,19 @@ class RadioHub:
                 item[1].drop()  # the query ends unanswered
             return
         self._inbox.put((*item, bucket))
+
+    def _stranger_admitted(self) -> bool:
+        """Within ``STRANGERS_PER_S`` (else counted as dropped)."""
+        now = time.monotonic()
+        with self._waiting_lock:
+            start, admitted = self._stranger_window
+            if now - start >= 1.0:
+                start, admitted = now, 0
+            if admitted >= STRANGERS_PER_S:
+                self.inbox_dropped["stranger"] += 1
+                return False
+            self._stranger_window = (start, admitted + 1)
+            return True
 
     def _oversized(self) -> None:
         with self._waiting_lock:
@@ -255,9 +276,13 @@ class RadioHub:
         kind = item[0]
         if kind == "up":
             node_id = self.keys.node_of(item[1])
-            if self._refuse_unproven(node_id, item[2]):
+            known = node_id in self.env.kinds
+            if not known and self._refuse_unproven(node_id, item[2]):
                 return
             self.env.receive(node_id, item[2], self.now_us())
+            instance = self.env.instance_of(node_id)
+            if not known and instance is not None and (node_id, instance) not in self._tokens:
+                self._tokenless.setdefault(node_id, self.now_us())  # counts towards MAX_UNPROVEN at once
         elif kind == "alive":
             node_id, instance = self.keys.alive_of(item[1])
             if item[2] == zenoh.SampleKind.DELETE:
@@ -298,7 +323,7 @@ class RadioHub:
 
     def _refuse_unproven(self, node_id: str, data: bytes) -> bool:
         """An attach from an id that is not attached, without a token, when ``MAX_UNPROVEN`` wait already."""
-        if node_id in self.env.kinds or len(self._tokenless) < MAX_UNPROVEN:
+        if len(self._tokenless) < MAX_UNPROVEN:
             return False
         try:
             msg = wire.decode(data, wire.MAX_UP_BYTES)
@@ -338,6 +363,7 @@ class RadioHub:
             "limits": {
                 "per_node": INBOX_PER_NODE,
                 "strangers": INBOX_STRANGERS,
+                "strangers_per_s": STRANGERS_PER_S,
                 "other": INBOX_OTHER,
                 "bucket_bytes": INBOX_BUCKET_BYTES,
             },

@@ -22,6 +22,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from radio_hub import wire
+from radio_hub.ble import MAX_PAYLOAD as BLE_MAX_PAYLOAD
 from radio_hub.guard import Faults
 from radio_hub.keys import DEFAULT_ENDPOINT, DEFAULT_WORLD, check_name
 from radio_hub.light import RECEIVERS as IR_RECEIVERS
@@ -210,6 +211,8 @@ RESEND_S = 0.5
 QUEUE_LIMIT = 1000
 """Received frames, IR sweeps, BLE messages and LF bursts each waiting for the node at most; past it the
 oldest is dropped and counted (``RadioClient.dropped``): a flood costs the node messages, not memory."""
+LF_MAX_DATA = 4
+"""User data bytes an LF burst carries."""
 ERRORS_KEPT = 100
 """The hub's latest error reasons a radio keeps (``RadioClient.errors``)."""
 
@@ -539,8 +542,14 @@ class RadioClient:
         elif isinstance(msg, wire.Sensors):
             self._on_sensors(msg)
         elif isinstance(msg, wire.BleReceived):
+            if len(msg.payload) > BLE_MAX_PAYLOAD:
+                self.malformed += 1
+                return
             self._enqueue("ble", self._ble, BleMessage(msg.src, msg.payload, msg.t_us))
         elif isinstance(msg, wire.LfHeard):
+            if len(msg.data) > LF_MAX_DATA:
+                self.malformed += 1
+                return
             heard = LfBurstHeard(msg.antenna, msg.pattern, msg.data, msg.rssi_dbm, msg.t_us)
             self._enqueue("lf", self._lf, heard)
         elif isinstance(msg, wire.Grant):

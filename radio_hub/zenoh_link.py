@@ -27,6 +27,8 @@ from radio_hub.port import HubUnavailable
 DOWN_PENDING_LIMIT = 2000
 """Messages from the hub a node's event loop may have waiting; more are dropped and counted (``dropped``):
 a flood on a node's downlink key costs it those messages, never unbounded memory."""
+DOWN_PENDING_BYTES = 2 << 20
+"""Bytes of such messages waiting at most (the hub's own are a few hundred bytes each)."""
 STRANGER_ANSWERS_PER_S = 200
 """Answers (errors) a hub sends per second to ids that are not attached; more are dropped and counted."""
 
@@ -200,6 +202,7 @@ class ZenohLink:
         """Messages from the hub dropped: longer than ``wire.MAX_MESSAGE_BYTES``, or ``DOWN_PENDING_LIMIT``
         already waiting for the node's event loop."""
         self._pending = 0
+        self._pending_bytes = 0
         self._lock = threading.Lock()
 
     @classmethod
@@ -218,19 +221,23 @@ class ZenohLink:
         session, keys = self.session, self.keys
 
         def down(sample: zenoh.Sample) -> None:  # zenoh's thread: hand over and return at once
-            if len(sample.payload) > wire.MAX_MESSAGE_BYTES:
-                self.dropped += 1
-                return
+            size = len(sample.payload)
             with self._lock:
-                if self._pending >= DOWN_PENDING_LIMIT:
+                if (
+                    size > wire.MAX_MESSAGE_BYTES
+                    or self._pending >= DOWN_PENDING_LIMIT
+                    or (self._pending_bytes + size > DOWN_PENDING_BYTES)
+                ):
                     self.dropped += 1
                     return
                 self._pending += 1
+                self._pending_bytes += size
             loop.call_soon_threadsafe(handed, sample.payload.to_bytes())
 
         def handed(data: bytes) -> None:  # the node's loop
             with self._lock:
                 self._pending -= 1
+                self._pending_bytes -= len(data)
             on_down(data)
 
         def hub(sample: zenoh.Sample) -> None:  # a hub appeared (again: it knows nothing of us) or went away
