@@ -12,6 +12,7 @@ import os
 import resource
 import signal
 import sys
+import threading
 from collections import Counter, deque
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
@@ -422,12 +423,22 @@ def _identity_dict(radio: RadioIdentity) -> dict[str, Any]:
     return d
 
 
+CONTROL_PENDING = 64
+"""Control commands a robot has in hand at once (a flood on its control keys is dropped and counted)."""
+CONTROL_MAX_BYTES = 64 << 10
+"""The longest control command a robot reads."""
+
+
 class ControlServer:
     """Serves a robot's control queryable and the all-robots topic on the robot's event loop."""
 
     def __init__(self, session: zenoh.Session, robot: Robot) -> None:
         self.robot = robot
         self.malformed = 0
+        self.dropped = 0
+        """Commands refused unread: too long, or ``CONTROL_PENDING`` already in hand."""
+        self._pending = 0
+        self._lock = threading.Lock()
         self._loop = asyncio.get_running_loop()
         keys = Keys(robot.rf.radio.world)
         self._decls = [
@@ -436,13 +447,34 @@ class ControlServer:
         ]
 
     def _on_query(self, query: zenoh.Query) -> None:
+        size = 0 if query.payload is None else len(query.payload)
+        if not self._admit(size):
+            query.drop()  # unanswered: the asker times out
+            return
         payload = query.payload.to_bytes() if query.payload is not None else b""
         self._loop.call_soon_threadsafe(self.robot._spawn, self._answer(query, payload))
 
     def _on_broadcast(self, sample: zenoh.Sample) -> None:
-        self._loop.call_soon_threadsafe(self.robot._spawn, self._answer(None, sample.payload.to_bytes()))
+        if self._admit(len(sample.payload)):
+            self._loop.call_soon_threadsafe(self.robot._spawn, self._answer(None, sample.payload.to_bytes()))
+
+    def _admit(self, size: int) -> bool:
+        """Zenoh's thread: at most ``CONTROL_PENDING`` commands of at most ``CONTROL_MAX_BYTES`` in hand."""
+        with self._lock:
+            if size > CONTROL_MAX_BYTES or self._pending >= CONTROL_PENDING:
+                self.dropped += 1
+                return False
+            self._pending += 1
+            return True
 
     async def _answer(self, query: zenoh.Query | None, payload: bytes) -> None:
+        try:
+            await self._answer_one(query, payload)
+        finally:
+            with self._lock:
+                self._pending -= 1
+
+    async def _answer_one(self, query: zenoh.Query | None, payload: bytes) -> None:
         try:
             cmd = msgpack.unpackb(payload, raw=False)
             if not isinstance(cmd, dict):

@@ -372,7 +372,8 @@ def decode(data: bytes, max_bytes: int = MAX_MESSAGE_BYTES) -> Message:
         raise WireError("message is not a map")
     if body.pop("v", None) != WIRE_VERSION:
         raise WireError(f"unsupported wire version (want {WIRE_VERSION})")
-    cls = _TYPES.get(body.pop("t", None))  # type: ignore[arg-type]
+    kind = body.pop("t", None)
+    cls = _TYPES.get(kind) if isinstance(kind, str) else None
     if cls is None:
         raise WireError("unknown message type")
     try:

@@ -236,3 +236,11 @@ def test_oversized_and_non_finite_input_is_refused_before_use(tail):
             raise AssertionError(f"vx={bad} was accepted")
     with contextlib.suppress(wire.WireError):
         wire.decode(tail)
+
+
+def test_a_type_that_is_not_a_string_is_a_wire_error():
+    # found by the fuzz test: an unhashable type escaped decode as TypeError, past the hub's handler
+    for kind in ([], {}, 1.5, None):
+        with contextlib.suppress(wire.WireError):
+            wire.decode(msgpack.packb({"v": 1, "t": kind, "n": 1}))
+            raise AssertionError(f"t={kind!r} was accepted")
