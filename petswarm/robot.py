@@ -452,11 +452,20 @@ class ControlServer:
             query.drop()  # unanswered: the asker times out
             return
         payload = query.payload.to_bytes() if query.payload is not None else b""
-        self._loop.call_soon_threadsafe(self.robot._spawn, self._answer(query, payload))
+        self._hand_over(query, payload)
 
     def _on_broadcast(self, sample: zenoh.Sample) -> None:
         if self._admit(len(sample.payload)):
-            self._loop.call_soon_threadsafe(self.robot._spawn, self._answer(None, sample.payload.to_bytes()))
+            self._hand_over(None, sample.payload.to_bytes())
+
+    def _hand_over(self, query: zenoh.Query | None, payload: bytes) -> None:
+        coro = self._answer(query, payload)
+        try:
+            self._loop.call_soon_threadsafe(self.robot._spawn, coro)
+        except RuntimeError:  # the robot's loop has closed: the process is ending
+            coro.close()
+            with self._lock:
+                self._pending -= 1
 
     def _admit(self, size: int) -> bool:
         """Zenoh's thread: at most ``CONTROL_PENDING`` commands of at most ``CONTROL_MAX_BYTES`` in hand."""

@@ -232,7 +232,12 @@ class ZenohLink:
                     return
                 self._pending += 1
                 self._pending_bytes += size
-            loop.call_soon_threadsafe(handed, sample.payload.to_bytes())
+            try:
+                loop.call_soon_threadsafe(handed, sample.payload.to_bytes())
+            except RuntimeError:  # the node's loop has closed (the process is ending): nobody to hand it to
+                with self._lock:
+                    self._pending -= 1
+                    self._pending_bytes -= size
 
         def handed(data: bytes) -> None:  # the node's loop
             with self._lock:
@@ -241,7 +246,8 @@ class ZenohLink:
             on_down(data)
 
         def hub(sample: zenoh.Sample) -> None:  # a hub appeared (again: it knows nothing of us) or went away
-            loop.call_soon_threadsafe(on_hub, sample.kind == zenoh.SampleKind.PUT)
+            with contextlib.suppress(RuntimeError):  # the node's loop has closed
+                loop.call_soon_threadsafe(on_hub, sample.kind == zenoh.SampleKind.PUT)
 
         self._decls = [
             session.liveliness().declare_token(keys.alive(node_id, instance)),
