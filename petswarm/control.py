@@ -21,6 +21,7 @@ from radio_hub.interface import HubUnavailable, Keys
 if TYPE_CHECKING:
     import zenoh
 
+    from radio_hub.guard import Faults
     from radio_hub.port import RadioClient
     from radio_hub.wire import Relayed
 
@@ -110,6 +111,17 @@ class RelayControl:
             future.set_result(body.get("answer") or {})
 
 
+async def guarded_handle(
+    handle: Callable[[dict[str, Any]], Awaitable[dict[str, Any]]], cmd: dict[str, Any], faults: Faults
+) -> dict[str, Any]:
+    """``handle(cmd)``, or an error answer when it raises something nobody expected (counted in ``faults``)."""
+    try:
+        return await handle(cmd)
+    except Exception as err:
+        faults.record("command", err, str(cmd.get("cmd"))[:64])
+        return {"error": f"{type(err).__name__}: {err}"}
+
+
 def answer_relayed(
     handle: Callable[[dict[str, Any]], Awaitable[dict[str, Any]]],
     radio: RadioClient,
@@ -127,7 +139,7 @@ def answer_relayed(
             answer: dict[str, Any] = {"error": f"malformed command: {type(err).__name__}"}
             cmd = {}
         else:
-            answer = await handle(cmd)
+            answer = await guarded_handle(handle, cmd, radio.faults)
         radio.relay(msg.frm, msgpack.packb({"id": cmd.get("id"), "answer": answer}, use_bin_type=True))
 
     return lambda msg: spawn(serve(msg))

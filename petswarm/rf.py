@@ -50,5 +50,9 @@ class RfCommunicationManager:
             except MessageError:
                 self.malformed += 1
                 continue
+            except Exception as err:  # a decoder bug must not stop the robot hearing the next frame
+                self.malformed += 1
+                self.radio.faults.record("swarm message", err)
+                continue
             self.received += 1
             return Incoming(message, rx)

@@ -12,6 +12,7 @@ import os
 import resource
 import signal
 import sys
+import threading
 from collections import Counter, deque
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
@@ -21,7 +22,7 @@ import numpy as np
 import zenoh
 
 from petswarm import clock
-from petswarm.control import all_robots_key, answer_relayed, robot_key
+from petswarm.control import all_robots_key, answer_relayed, guarded_handle, robot_key
 from petswarm.driving import Driver
 from petswarm.exchange import MessageProcessingManager
 from petswarm.formation import RESPONSES, FormationConfig, FormationError, NetworkFormation, Swarm
@@ -190,8 +191,11 @@ class Robot:
     async def _receive_loop(self) -> None:
         while True:
             incoming = await self.rf.receive()
-            self._remember(incoming)
-            await self._on_message(incoming)
+            try:
+                self._remember(incoming)
+                await self._on_message(incoming)
+            except Exception as err:  # one message must not stop the robot hearing the next
+                self.rf.radio.faults.record("receive", err, type(incoming.message).__name__)
 
     async def _on_message(self, incoming: Incoming) -> None:
         msg = incoming.message
@@ -384,6 +388,8 @@ class Robot:
             "tx_results": dict(self.rf.tx_results),
             "radio_malformed": radio.malformed,
             "transport_gaps": radio.transport_gaps,
+            "radio_dropped": {**radio.dropped, "link": radio.link_dropped},
+            "faults": radio.faults.to_dict(),
             "state": self.sequence.state.label,
             "user": self.formation.user if self.sequence.user_connected else 0,
             "swarm": None if self.formation.swarm is None else self.formation.swarm.to_dict(),
@@ -417,12 +423,22 @@ def _identity_dict(radio: RadioIdentity) -> dict[str, Any]:
     return d
 
 
+CONTROL_PENDING = 64
+"""Control commands a robot has in hand at once (a flood on its control keys is dropped and counted)."""
+CONTROL_MAX_BYTES = 64 << 10
+"""The longest control command a robot reads."""
+
+
 class ControlServer:
     """Serves a robot's control queryable and the all-robots topic on the robot's event loop."""
 
     def __init__(self, session: zenoh.Session, robot: Robot) -> None:
         self.robot = robot
         self.malformed = 0
+        self.dropped = 0
+        """Commands refused unread: too long, or ``CONTROL_PENDING`` already in hand."""
+        self._pending = 0
+        self._lock = threading.Lock()
         self._loop = asyncio.get_running_loop()
         keys = Keys(robot.rf.radio.world)
         self._decls = [
@@ -431,13 +447,43 @@ class ControlServer:
         ]
 
     def _on_query(self, query: zenoh.Query) -> None:
+        size = 0 if query.payload is None else len(query.payload)
+        if not self._admit(size):
+            query.drop()  # unanswered: the asker times out
+            return
         payload = query.payload.to_bytes() if query.payload is not None else b""
-        self._loop.call_soon_threadsafe(self.robot._spawn, self._answer(query, payload))
+        self._hand_over(query, payload)
 
     def _on_broadcast(self, sample: zenoh.Sample) -> None:
-        self._loop.call_soon_threadsafe(self.robot._spawn, self._answer(None, sample.payload.to_bytes()))
+        if self._admit(len(sample.payload)):
+            self._hand_over(None, sample.payload.to_bytes())
+
+    def _hand_over(self, query: zenoh.Query | None, payload: bytes) -> None:
+        coro = self._answer(query, payload)
+        try:
+            self._loop.call_soon_threadsafe(self.robot._spawn, coro)
+        except RuntimeError:  # the robot's loop has closed: the process is ending
+            coro.close()
+            with self._lock:
+                self._pending -= 1
+
+    def _admit(self, size: int) -> bool:
+        """Zenoh's thread: at most ``CONTROL_PENDING`` commands of at most ``CONTROL_MAX_BYTES`` in hand."""
+        with self._lock:
+            if size > CONTROL_MAX_BYTES or self._pending >= CONTROL_PENDING:
+                self.dropped += 1
+                return False
+            self._pending += 1
+            return True
 
     async def _answer(self, query: zenoh.Query | None, payload: bytes) -> None:
+        try:
+            await self._answer_one(query, payload)
+        finally:
+            with self._lock:
+                self._pending -= 1
+
+    async def _answer_one(self, query: zenoh.Query | None, payload: bytes) -> None:
         try:
             cmd = msgpack.unpackb(payload, raw=False)
             if not isinstance(cmd, dict):
@@ -446,7 +492,7 @@ class ControlServer:
             self.malformed += 1
             answer: dict[str, Any] = {"error": f"malformed command: {type(err).__name__}"}
         else:
-            answer = await self.robot.handle(cmd)
+            answer = await guarded_handle(self.robot.handle, cmd, self.robot.rf.radio.faults)
         if query is not None:
             try:
                 query.reply(query.key_expr, msgpack.packb(answer, use_bin_type=True))

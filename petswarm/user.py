@@ -29,7 +29,15 @@ from petswarm.imu import ACCEL_PERIOD_S, GYRO_PERIOD_S, BeltImu
 from petswarm.lf_location import rssi_to_distance
 from petswarm.scenario import UserPlan
 from petswarm.sequence import EventLog
-from radio_hub.interface import HubLink, HubUnavailable, LfBurstHeard, RadioClient, RadioError, RadioIdentity
+from radio_hub.interface import (
+    BleMessage,
+    HubLink,
+    HubUnavailable,
+    LfBurstHeard,
+    RadioClient,
+    RadioError,
+    RadioIdentity,
+)
 from radio_hub.lf import LfConfig, wake_pattern, wakes
 
 PLACE_PERIOD_S = 0.02
@@ -131,7 +139,11 @@ class User:
 
     async def _belt_lf(self) -> None:
         while True:
-            self._on_burst(await self.client.lf_heard())
+            burst = await self.client.lf_heard()
+            try:
+                self._on_burst(burst)
+            except Exception as err:  # one odd burst must not deafen the belt
+                self.client.faults.record("lf", err)
 
     def _on_burst(self, burst: LfBurstHeard) -> None:
         self.counters["bursts"] += 1
@@ -164,15 +176,23 @@ class User:
         while True:
             message = await self.client.ble_receive()
             try:
-                body = user_link.decode(message.payload)
-            except ValueError:
+                self._on_ble(message)
+            except Exception as err:  # one odd message must not deafen the wearable
                 self.counters["bad_ble"] += 1
-                continue
-            if body["k"] == "state" and message.src == self.owner:
-                self.owned = body.get("state") not in ("waiting", None)
-            if body["k"] == "pair" and message.src == self.owner and not self._repair(body.get("robot")):
-                continue
-            self.log.record(f"ble_{body['k']}", src=message.src, **{k: v for k, v in body.items() if k != "k"})
+                self.client.faults.record("ble", err)
+
+    def _on_ble(self, message: BleMessage) -> None:
+        """One BLE message from a robot: owner state, a re-pairing, or something to record."""
+        try:
+            body = user_link.decode(message.payload)
+        except ValueError:
+            self.counters["bad_ble"] += 1
+            return
+        if body["k"] == "state" and message.src == self.owner:
+            self.owned = body.get("state") not in ("waiting", None)
+        if body["k"] == "pair" and message.src == self.owner and not self._repair(body.get("robot")):
+            return
+        self.log.record(f"ble_{body['k']}", src=message.src, **{k: v for k, v in body.items() if k != "k"})
 
     def _repair(self, robot: object) -> bool:
         """The owner handed the master's role to ``robot``: wake on its pattern and report to it from now.

@@ -18,6 +18,9 @@ import numpy as np
 
 from radio_hub.config import _build
 
+MAX_PAYLOAD = 512
+"""The longest BLE message the air carries (the wearables' messages are a few dozen bytes)."""
+
 
 @dataclass
 class BleConfig:
@@ -90,6 +93,9 @@ class BleAir:
     _last_due: dict[tuple[str, str], int] = field(default_factory=dict)
 
     def send(self, src: str, dst: str, payload: bytes, now_us: int, distance_m: float) -> None:
+        """Queue ``payload`` from ``src`` to ``dst``; ValueError when it is longer than ``MAX_PAYLOAD``."""
+        if len(payload) > MAX_PAYLOAD:
+            raise ValueError(f"a BLE payload is at most {MAX_PAYLOAD} bytes, not {len(payload)}")
         """Queue a message; lost or out-of-range messages are only counted."""
         cfg = self.config
         self.counters.sent += 1

@@ -263,24 +263,39 @@ def _burst_fields(spec: dict[str, Any]) -> dict[str, Any]:
     return fields
 
 
+MAX_FAULTS = 256
+"""Active faults at once; another add is refused (each fault costs every delivery a check)."""
+LOG_KEPT = 1000
+"""Changes the chaos log keeps (the oldest go first); ``Chaos.log_dropped`` counts those gone."""
+
+
 @dataclass
 class Chaos:
-    """The active faults and the log of every change."""
+    """The active faults and the log of the latest ``LOG_KEPT`` changes."""
 
     faults: dict[int, Fault] = field(default_factory=dict)
     log: list[dict[str, Any]] = field(default_factory=list)
+    log_dropped: int = 0
     _ids: itertools.count = field(default_factory=lambda: itertools.count(1))
     _chains: dict[int, GilbertElliott] = field(default_factory=dict)
     """Each burst fault's chains, one per (sender, receiver) link, all starting in the good state."""
 
     def add(self, spec: dict[str, Any], now_us: int, wall: float) -> Fault:
-        """Activate a fault; ValueError when the spec is malformed."""
+        """Activate a fault; ValueError when the spec is malformed or ``MAX_FAULTS`` are active."""
+        if len(self.faults) >= MAX_FAULTS:
+            raise ValueError(f"{MAX_FAULTS} faults are active already: clear some first")
         fault = parse_fault(next(self._ids), spec)
         self.faults[fault.fault_id] = fault
         if fault.kind == "burst":
             self._chains[fault.fault_id] = GilbertElliott(fault.burst_config())
-        self.log.append({"op": "add", "model_us": now_us, "wall": wall, **fault.to_dict()})
+        self._log({"op": "add", "model_us": now_us, "wall": wall, **fault.to_dict()})
         return fault
+
+    def _log(self, entry: dict[str, Any]) -> None:
+        self.log.append(entry)
+        if len(self.log) > LOG_KEPT:
+            self.log_dropped += len(self.log) - LOG_KEPT
+            del self.log[: len(self.log) - LOG_KEPT]
 
     def clear(self, fault_id: int | None, now_us: int, wall: float) -> list[int]:
         """End one fault (or all when None); the ids that ended."""
@@ -288,7 +303,7 @@ class Chaos:
         for fid in ended:
             del self.faults[fid]
             self._chains.pop(fid, None)
-        self.log.append({"op": "clear", "model_us": now_us, "wall": wall, "ended": ended})
+        self._log({"op": "clear", "model_us": now_us, "wall": wall, "ended": ended})
         return ended
 
     def separated(self, a: str, b: str) -> bool:

@@ -19,6 +19,7 @@ import resource
 import sys
 import tomllib
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
@@ -30,10 +31,12 @@ from radio_hub import wire
 from radio_hub.ble import BleAir, BleConfig
 from radio_hub.chaos import describe_change
 from radio_hub.config import MediumConfig, check_keys
+from radio_hub.guard import Faults
 from radio_hub.ir_air import IrAir
 from radio_hub.keys import check_name
 from radio_hub.lf import LfConfig, antenna_positions, lf_rssi
 from radio_hub.light import PERSON_BEACON_POWER, IrConfig
+from radio_hub.mac import Frame, FrameError, FrameType
 from radio_hub.medium import Medium, Output, RadioNode, Reception, Transmission, TxReport, TxStatus
 from radio_hub.pcap import PcapWriter
 from radio_hub.world import Obstacle, World, WorldConfig, parse_obstacle
@@ -51,6 +54,11 @@ HUB = "hub"
 """The name a ``Relay`` gives the environment itself."""
 NODE_KINDS = ("robot", "user", "control")
 """``control``: a run's orchestrator in model and lockstep time (no body, no radio; it only relays)."""
+GONE_KEPT = 256
+"""Departed (or never attached) ids whose bookkeeping is kept: radio counters for the run's record, downlink
+numbering; beyond this the oldest are forgotten, so a stream of new ids cannot grow the hub."""
+MAX_GAP = 1 << 32
+"""The most one message adds to ``transport_gaps`` (a forged sequence number must not overflow the counter)."""
 
 
 def process_usage() -> dict[str, float]:
@@ -106,6 +114,12 @@ class HubCounters:
     config_errors: int = 0
     attaches: int = 0
     detaches: int = 0
+    foreign: int = 0
+    """Messages for an attached id with another session key than the one it attached with (refused)."""
+    spoofed: int = 0
+    """Frames whose source address is not the sender's own (refused)."""
+    forgotten: int = 0
+    """Departed ids whose bookkeeping was dropped (``GONE_KEPT``)."""
     lag_us: deque[int] = field(default_factory=lambda: deque(maxlen=20000))
 
     def to_dict(self) -> dict[str, Any]:
@@ -118,6 +132,9 @@ class HubCounters:
             "config_errors": self.config_errors,
             "attaches": self.attaches,
             "detaches": self.detaches,
+            "foreign": self.foreign,
+            "spoofed": self.spoofed,
+            "forgotten": self.forgotten,
             "lag_p50_us": float(np.percentile(lags, 50)),
             "lag_p99_us": float(np.percentile(lags, 99)),
             "lag_samples": len(self.lag_us),
@@ -156,8 +173,17 @@ class Environment:
             on_air_end=None if self._pcap is None else self._write_pcap,
         )
         self.counters = HubCounters()
+        self.faults = Faults("hub")
+        """Unexpected exceptions in the entry points, per kind (the input is dropped, the hub goes on)."""
+        self.holder_alive: Callable[[str, str], bool] | None = None
+        """Whether the liveliness token of (node id, instance) is present. A shell that watches tokens sets it:
+        an attach with another session key then cannot take an id whose holder is still there. None (model
+        time: every node is in this process) lets a new attach replace the old one."""
         self._up_seq: dict[str, int] = {}
         self._instances: dict[str, str] = {}
+        self._session_keys: dict[str, int] = {}
+        self._gone: dict[str, None] = {}
+        """Ids that left (oldest first), whose counters and numbering are still kept."""
         self.ir = IrAir(config.ir, np.random.default_rng([seed, 1]))
         self.world = World(config.world, config.obstacles)
         self.ble = BleAir(config.ble, np.random.default_rng([seed, 2]))
@@ -213,15 +239,26 @@ class Environment:
         self._deliver_ble()
 
     def receive(self, node_id: str, data: bytes, now_us: int) -> None:
-        """A node's message (``wire``-encoded) arrived at ``now_us``."""
+        """A node's message (``wire``-encoded) arrived at ``now_us``. Never raises: anything unexpected is
+        counted in ``faults`` and the message dropped."""
         self._at(now_us)
-        self._on_up(node_id, data)
+        try:
+            self._on_up(node_id, data)
+        except Exception as err:
+            self.faults.record("receive", err, f"{len(data)} bytes from {node_id[:64]!r}")
 
     def node_gone(self, node_id: str, instance: str, now_us: int) -> None:
         """The node's liveliness ended; ignored when another instance has attached under that id since."""
         self._at(now_us)
-        if node_id in self._kinds and self._instances.get(node_id) == instance:
-            self._detach(node_id)
+        try:
+            if node_id in self._kinds and self._instances.get(node_id) == instance:
+                self._detach(node_id)
+        except Exception as err:
+            self.faults.record("node_gone", err, node_id[:64])
+
+    def session_key_of(self, node_id: str) -> int | None:
+        """The session key the attached node ``node_id`` attached with (None: not attached)."""
+        return self._session_keys.get(node_id) if node_id in self._kinds else None
 
     def air(self) -> dict[str, Any]:
         """Every transmission the medium keeps in its air log."""
@@ -322,16 +359,23 @@ class Environment:
     def _on_up(self, node_id: str, data: bytes) -> None:
         try:
             check_name("node", node_id)
-            msg = wire.decode(data)
+            msg = wire.decode(data, wire.MAX_UP_BYTES)
         except ValueError as err:
             self.counters.malformed += 1
+            if node_id in self._kinds or not _is_name(node_id):
+                # an attached id hears nothing it did not send (it may be someone else speaking for it)
+                return
             self._send_down(node_id, wire.Error(reason=f"malformed message: {err}"))
             return
         if isinstance(msg, wire.Attach) and msg.exclusive and node_id in self._kinds:
-            # a refused claim must not touch the live node's sequence numbering
+            # a refused claim must not touch the live node's sequence numbering (its holder ignores the answer)
             self._send_down(node_id, wire.Error(reason=f"node id {node_id} is taken", instance=msg.instance))
             return
-        self._check_sequence(node_id, msg)
+        if node_id in self._kinds and msg.s != self._session_keys.get(node_id) and not self._may_take(node_id, msg):
+            self.counters.foreign += 1  # refused without an answer: an answer would reach the id's holder
+            return
+        if node_id in self._kinds and not isinstance(msg, wire.Attach):
+            self._check_sequence(node_id, msg)
         if isinstance(msg, wire.Attach):
             self._on_attach(node_id, msg)
         elif node_id not in self._kinds:
@@ -347,10 +391,7 @@ class Environment:
         elif isinstance(msg, (wire.Drive, wire.Place, wire.LfBurst, wire.BleSend, wire.Telemetry)):
             self._on_body(node_id, msg)
         elif isinstance(msg, wire.Transmit):
-            if self._kinds[node_id] != "robot":
-                self._send_down(node_id, wire.Error(token=msg.token, reason="a user has no 802.15.4 radio"))
-                return
-            self._dispatch(self.medium.submit(node_id, msg.psdu, msg.token, self.now_us()))
+            self._on_transmit(node_id, msg)
         elif isinstance(msg, wire.Configure):
             self._on_configure(node_id, msg)
         elif isinstance(msg, wire.SetIrMode):
@@ -358,6 +399,28 @@ class Environment:
         else:
             self.counters.malformed += 1
             self._send_down(node_id, wire.Error(reason=f"{msg.TYPE} is not a node-to-hub message"))
+
+    def _may_take(self, node_id: str, msg: wire.Message) -> bool:
+        """A message with another session key than the attached node's: only an attach, and only once the
+        holder's liveliness token is gone (a restarted process), may take the id."""
+        if not isinstance(msg, wire.Attach):
+            return False
+        alive = self.holder_alive
+        return alive is None or not alive(node_id, self._instances.get(node_id, ""))
+
+    def _on_transmit(self, node_id: str, msg: wire.Transmit) -> None:
+        if self._kinds[node_id] != "robot":
+            self._send_down(node_id, wire.Error(token=msg.token, reason="a user has no 802.15.4 radio"))
+            return
+        node = self.medium.nodes.get(node_id)
+        src = _source_of(msg.psdu)
+        if node is not None and src is not None and src != node.short_addr:
+            self.counters.spoofed += 1
+            reason = f"source address 0x{src:04x} is not this node's (0x{node.short_addr:04x})"
+            report = TxReport(node_id, msg.token, TxStatus.REFUSED, 0, 0, self.now_us(), self.now_us(), reason)
+            self._send_down(node_id, _tx_done(report))
+            return
+        self._dispatch(self.medium.submit(node_id, msg.psdu, msg.token, self.now_us()))
 
     def _on_relay(self, node_id: str, msg: wire.Relay) -> None:
         """The control channel: to another node as it is, or a question to the hub answered at once."""
@@ -391,7 +454,7 @@ class Environment:
         # an attach starts a node's numbering (a node re-attaching after a hub restart goes on counting)
         last = msg.n - 1 if isinstance(msg, wire.Attach) else self._up_seq.get(node_id, msg.n - 1)
         if msg.n > last + 1:
-            self.counters.transport_gaps += msg.n - last - 1
+            self.counters.transport_gaps += min(msg.n - last - 1, MAX_GAP)
         self._up_seq[node_id] = msg.n
 
     def _on_attach(self, node_id: str, msg: wire.Attach) -> None:
@@ -419,6 +482,9 @@ class Environment:
             self.ir.power[node_id] = PERSON_BEACON_POWER
         self.counters.attaches += 1
         self._instances[node_id] = msg.instance
+        self._session_keys[node_id] = msg.s
+        self._gone.pop(node_id, None)
+        self._check_sequence(node_id, msg)
 
         self._down_seq[node_id] = 0
         self._send_down(node_id, self._attached(node_id, 0))
@@ -551,8 +617,24 @@ class Environment:
         self.ir.power.pop(node_id, None)
         self._kinds.pop(node_id, None)
         self._telemetry.pop(node_id, None)
+        self._up_seq.pop(node_id, None)
+        self._session_keys.pop(node_id, None)
+        self._instances.pop(node_id, None)
         self.counters.detaches += 1
         self.downlink.forget(node_id)
+        self._forget_gone(node_id)
+
+    def _forget_gone(self, node_id: str) -> None:
+        """``node_id`` is not (or no longer) attached: keep its bookkeeping while it is among the last
+        ``GONE_KEPT`` such ids, then drop it."""
+        self._gone.pop(node_id, None)
+        self._gone[node_id] = None
+        while len(self._gone) > GONE_KEPT:
+            old = next(iter(self._gone))
+            del self._gone[old]
+            self._down_seq.pop(old, None)
+            self.medium.node_counters.pop(old, None)
+            self.counters.forgotten += 1
 
     # -- outputs ---------------------------------------------------------------------------------
 
@@ -584,6 +666,8 @@ class Environment:
         self._send_down(node_id, msg)
 
     def _send_down(self, node_id: str, msg: wire.Message) -> None:
+        if node_id not in self._down_seq and node_id not in self._kinds:
+            self._forget_gone(node_id)  # an answer to an id that never attached: its numbering is bounded too
         seq = self._down_seq.get(node_id, 0) + 1
         self._down_seq[node_id] = seq
         msg.n = seq
@@ -628,8 +712,9 @@ class Environment:
             "config": medium.config.to_dict(),
             "nodes": nodes,
             "channels": channels,
-            "hub": self.counters.to_dict(),
+            "hub": {**self.counters.to_dict(), "faults": self.faults.to_dict()},
             "chaos": [f.to_dict() for f in medium.chaos.faults.values()],
+            "chaos_log_dropped": medium.chaos.log_dropped,
             "ir": {
                 **self.ir.counter.as_dict(self.now_us()),
                 "sweeps": self.ir.sweeps,
@@ -668,6 +753,23 @@ def _reference(master: dict[str, Any] | None, slot: list[float] | None) -> list[
         return None
     c, s = math.cos(master["yaw"]), math.sin(master["yaw"])
     return [round(master["x"] + c * slot[0] - s * slot[1], 4), round(master["y"] + s * slot[0] + c * slot[1], 4)]
+
+
+def _source_of(psdu: bytes) -> int | None:
+    """The short source address of a data or command frame (None: an ACK, or no frame; the medium judges)."""
+    try:
+        frame = Frame.decode(psdu)
+    except FrameError:
+        return None
+    return None if frame.frame_type == FrameType.ACK else frame.src
+
+
+def _is_name(node_id: str) -> bool:
+    try:
+        check_name("node", node_id)
+    except ValueError:
+        return False
+    return True
 
 
 def _pos(values: list[float]) -> tuple[float, float]:

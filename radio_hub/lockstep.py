@@ -60,6 +60,8 @@ class LockstepLink(ZenohLink):
         self._seen = 0
         self._loop: Any = None
         self._on_down: Callable[[bytes], None] | None = None
+        self.session_key = 0
+        """The node's session key (its radio sets it): an idle carries it like every message of the node."""
 
     def open(
         self, node_id: str, instance: str, on_down: Callable[[bytes], None], on_hub: Callable[[bool], None]
@@ -110,7 +112,7 @@ class LockstepLink(ZenohLink):
     def idle(self, next_timer: float | None) -> None:
         """Tell the hub: handled up to the last grant, the next timer is due at ``next_timer``."""
         with contextlib.suppress(HubUnavailable):
-            self.put(wire.Idle(seen=self._seen, next_s=next_timer).encode())
+            self.put(wire.Idle(seen=self._seen, next_s=next_timer, s=self.session_key).encode())
 
     async def close(self) -> None:
         """Leave the world: no more idles; then undeclare and close as a zenoh link does."""
@@ -215,13 +217,22 @@ class LockstepHub:
         """Run rounds until ``stop``."""
         while not self._stop.is_set():
             try:
-                self._handle(self._inbox.get(timeout=0.5))
+                self._handle_safely(self._inbox.get(timeout=0.5))
                 while True:
-                    self._handle(self._inbox.get_nowait())
+                    self._handle_safely(self._inbox.get_nowait())
             except queue.Empty:
                 pass
-            self._bury_the_silent()
-            self._run_rounds()
+            try:
+                self._bury_the_silent()
+                self._run_rounds()
+            except Exception as err:  # counted in stats; the rounds go on with the next input
+                self.env.faults.record("rounds", err)
+
+    def _handle_safely(self, item: tuple[Any, ...]) -> None:
+        try:
+            self._handle(item)
+        except Exception as err:  # nothing a client sends ends the hub
+            self.env.faults.record(f"handle {item[0]}", err)
 
     def stats(self) -> dict[str, Any]:
         """The environment's counters, with the lockstep clock's."""
@@ -261,6 +272,10 @@ class LockstepHub:
             msg = wire.decode(data)
         except wire.WireError:
             msg = None
+        key = self.env.session_key_of(node_id)
+        if isinstance(msg, wire.Idle) and key is not None and msg.s != key:
+            self.env.counters.foreign += 1  # another session's idle must not move this node's rounds
+            return
         node = self.nodes.get(node_id)
         if node is None:
             if not isinstance(msg, (wire.Attach, wire.Idle)):  # the last words of a node that has left

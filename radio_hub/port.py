@@ -14,6 +14,7 @@ import asyncio
 import contextlib
 import itertools
 import secrets
+from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any, Protocol
@@ -21,6 +22,8 @@ from typing import Any, Protocol
 import numpy as np
 
 from radio_hub import wire
+from radio_hub.ble import MAX_PAYLOAD as BLE_MAX_PAYLOAD
+from radio_hub.guard import Faults
 from radio_hub.keys import DEFAULT_ENDPOINT, DEFAULT_WORLD, check_name
 from radio_hub.light import RECEIVERS as IR_RECEIVERS
 from radio_hub.mac import BROADCAST, Frame, FrameError, FrameType
@@ -205,6 +208,14 @@ REQUEST_TIMEOUT_S = 5.0
 RESEND_S = 0.5
 """An idempotent request (re-attach, configure, IR mode) unanswered this long is sent again."""
 
+QUEUE_LIMIT = 1000
+"""Received frames, IR sweeps, BLE messages and LF bursts each waiting for the node at most; past it the
+oldest is dropped and counted (``RadioClient.dropped``): a flood costs the node messages, not memory."""
+LF_MAX_DATA = 4
+"""User data bytes an LF burst carries."""
+ERRORS_KEPT = 100
+"""The hub's latest error reasons a radio keeps (``RadioClient.errors``)."""
+
 
 class RadioClient:
     """One node's 802.15.4 radio, attached to the hub's air."""
@@ -215,13 +226,18 @@ class RadioClient:
         self.request_timeout = 5.0
         self.malformed = 0
         self.transport_gaps = 0
-        self.errors: list[str] = []
+        self.errors: deque[str] = deque(maxlen=ERRORS_KEPT)
+        self.dropped: Counter[str] = Counter()
+        """Messages from the hub dropped because their queue was full, per queue (``rx``, ``ir``, ``ble``,
+        ``lf``)."""
+        self.faults = Faults(f"radio {identity.node_id}")
+        """Unexpected exceptions while handling the hub's messages (each message is dropped, the node goes on)."""
         self.link = link
         self._loop = asyncio.get_running_loop()
-        self._rx: asyncio.Queue[RxFrame] = asyncio.Queue()
-        self._ir: asyncio.Queue[IrSweep] = asyncio.Queue()
-        self._ble: asyncio.Queue[BleMessage] = asyncio.Queue()
-        self._lf: asyncio.Queue[LfBurstHeard] = asyncio.Queue()
+        self._rx: asyncio.Queue[RxFrame] = asyncio.Queue(QUEUE_LIMIT)
+        self._ir: asyncio.Queue[IrSweep] = asyncio.Queue(QUEUE_LIMIT)
+        self._ble: asyncio.Queue[BleMessage] = asyncio.Queue(QUEUE_LIMIT)
+        self._lf: asyncio.Queue[LfBurstHeard] = asyncio.Queue(QUEUE_LIMIT)
         self.sensors: OwnSensors | None = None
         """The latest own-body sensors (robots; the hub sends them at 25 Hz)."""
         self.beacons = BeaconSweep(0, {}, {})
@@ -239,6 +255,9 @@ class RadioClient:
         self._dsn = itertools.count()
         node_id = identity.node_id
         self.instance = secrets.token_hex(8)
+        self.session_key = secrets.randbits(63) or 1
+        """Sent with every message: the hub refuses this id's messages with any other key while we are
+        attached (someone else's session speaking for us)."""
         self.reattaches = 0
         self.hub_present = True
         """False while the hub's liveliness token is gone (the hub died or restarts): silence means nothing."""
@@ -247,6 +266,8 @@ class RadioClient:
         """Called after the radio attached again to a restarted hub (the hub forgot IR modes and the like)."""
         self._attached_once = False
         self._reattaching: asyncio.Task[None] | None = None
+        if hasattr(link, "session_key"):  # a link that speaks for the node itself (a lockstep idle)
+            link.session_key = self.session_key
         link.open(node_id, self.instance, self._on_down, self._hub_seen)
 
     @classmethod
@@ -452,8 +473,20 @@ class RadioClient:
         self._ultrasonic_rad = np.radians(np.asarray(attached.ultrasonic_deg, dtype=float))
 
     def _put(self, msg: wire.Message) -> None:
-        msg.n = next(self._up_seq)
+        msg.n, msg.s = next(self._up_seq), self.session_key
         self.link.put(msg.encode())
+
+    @property
+    def link_dropped(self) -> int:
+        """Messages the link dropped before they reached the node's loop (too long, or too many waiting)."""
+        return int(getattr(self.link, "dropped", 0))
+
+    def _enqueue(self, name: str, queue: asyncio.Queue[Any], item: Any) -> None:
+        """Into a bounded queue; when full, the oldest goes (the freshest reading is the useful one)."""
+        if queue.full():
+            queue.get_nowait()
+            self.dropped[name] += 1
+        queue.put_nowait(item)
 
     async def _request(self, token: int, msg: wire.Message, resend_s: float | None = None) -> Any:
         """Send ``msg`` and wait up to ``request_timeout`` for the hub's answer to ``token``. With ``resend_s``
@@ -483,11 +516,18 @@ class RadioClient:
                 fut.exception()  # a caller cancelled as the radio closed: its error is seen, never warned about
 
     def _on_down(self, data: bytes) -> None:
+        """One message from the hub; never raises (anything unexpected is counted in ``faults``)."""
         try:
             msg = wire.decode(data)
         except wire.WireError:
             self.malformed += 1
             return
+        try:
+            self._on_message(msg)
+        except Exception as err:
+            self.faults.record("downlink", err, msg.TYPE)
+
+    def _on_message(self, msg: wire.Message) -> None:
         if isinstance(msg, (wire.Attached, wire.Error)) and msg.instance not in ("", self.instance):
             return  # another process claiming our id at the same moment: its answer, not ours
         if isinstance(msg, wire.Attached) and msg.token == 0:
@@ -502,9 +542,16 @@ class RadioClient:
         elif isinstance(msg, wire.Sensors):
             self._on_sensors(msg)
         elif isinstance(msg, wire.BleReceived):
-            self._ble.put_nowait(BleMessage(msg.src, msg.payload, msg.t_us))
+            if len(msg.payload) > BLE_MAX_PAYLOAD:
+                self.malformed += 1
+                return
+            self._enqueue("ble", self._ble, BleMessage(msg.src, msg.payload, msg.t_us))
         elif isinstance(msg, wire.LfHeard):
-            self._lf.put_nowait(LfBurstHeard(msg.antenna, msg.pattern, msg.data, msg.rssi_dbm, msg.t_us))
+            if len(msg.data) > LF_MAX_DATA:
+                self.malformed += 1
+                return
+            heard = LfBurstHeard(msg.antenna, msg.pattern, msg.data, msg.rssi_dbm, msg.t_us)
+            self._enqueue("lf", self._lf, heard)
         elif isinstance(msg, wire.Grant):
             pass  # lockstep: the link has already moved the clock; the grant only keeps the numbering whole
         elif isinstance(msg, wire.Relayed) and self.on_relayed is not None:
@@ -529,15 +576,18 @@ class RadioClient:
         except FrameError:
             self.malformed += 1
             return
-        self._rx.put_nowait(RxFrame(frame, msg.rssi_dbm, msg.lqi, msg.start_us, msg.end_us, msg.submitted_us))
+        self._enqueue("rx", self._rx, RxFrame(frame, msg.rssi_dbm, msg.lqi, msg.start_us, msg.end_us, msg.submitted_us))
 
     def _on_ir(self, msg: wire.IrSample) -> None:
         if len(msg.readings) != 4 * IR_RECEIVERS:
             self.malformed += 1
             return
-        self._ir.put_nowait(IrSweep(np.frombuffer(msg.readings, dtype="<f4").astype(float), msg.t_us))
+        self._enqueue("ir", self._ir, IrSweep(np.frombuffer(msg.readings, dtype="<f4").astype(float), msg.t_us))
 
     def _on_sensors(self, msg: wire.Sensors) -> None:
+        if len(msg.ranges) != 4 * len(self._ultrasonic_rad):
+            self.malformed += 1
+            return
         ranges = np.frombuffer(msg.ranges, dtype="<f4").astype(float)
         if len(ranges) != len(self._ultrasonic_rad):
             self.malformed += 1
@@ -548,6 +598,9 @@ class RadioClient:
             callback(self.sensors)
 
     def _on_beacons(self, msg: wire.IrBeacons) -> None:
+        if len(msg.readings) != 4 * IR_RECEIVERS * len(msg.sources):
+            self.malformed += 1
+            return
         block = np.frombuffer(msg.readings, dtype="<f4").astype(float)
         gains = msg.gains or [1.0] * len(msg.sources)
         if block.size != len(msg.sources) * IR_RECEIVERS or len(gains) != len(msg.sources):
@@ -572,6 +625,13 @@ class RadioClient:
     def _start_reattach(self) -> None:
         if self._reattaching is None or self._reattaching.done():
             self._reattaching = self._loop.create_task(self._reattach())
+            self._reattaching.add_done_callback(self._reattach_done)
+
+    def _reattach_done(self, task: asyncio.Task[None]) -> None:
+        # nobody may await a re-attach started by the hub's reappearance or its "not attached": its failure
+        # (no hub, or a refusal, perhaps forged) is counted here, and the next hint starts another
+        if not task.cancelled() and task.exception() is not None:
+            self.faults.record("reattach", task.exception())  # type: ignore[arg-type]
 
     async def _reattached(self) -> None:
         self._start_reattach()

@@ -1,19 +1,33 @@
 """Messages between a node and the hub, encoded with msgpack.
 
 Every message is a map with the envelope version ``v``, a type ``t`` and a per-sender sequence number
-``n`` (so either side can count messages the transport lost: it should lose none). Decoding is strict:
-anything malformed raises ``WireError``, which the receiver counts and drops.
+``n`` (so either side can count messages the transport lost: it should lose none). A node's messages also
+carry its session key ``s``: a random number the node picks once and sends with its ``Attach`` and every
+message after it; the hub binds the node id to it and refuses the id's messages with any other key (another
+zenoh session speaking for the node). Decoding is strict: anything malformed raises ``WireError``, which the
+receiver counts and drops; that includes a message longer than ``MAX_MESSAGE_BYTES`` (checked before any
+parsing), an integer msgpack cannot carry, a sequence number or session key outside 0 to 2**63-1, and a float that
+is not finite.
 """
 
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass, field, fields
 from typing import Any, ClassVar
 
 import msgpack
 
 WIRE_VERSION = 1
+MAX_MESSAGE_BYTES = 1 << 20
+"""No message of this protocol is longer (the largest, a hub's stats relayed to a run, is tens of kB)."""
+MAX_UP_BYTES = 64 << 10
+"""No node-to-hub message is longer (a frame is at most 127 bytes; a relayed control command is small)."""
+INT_MIN, INT_MAX = -(1 << 63), (1 << 64) - 1
+"""What msgpack carries (an extended address is a 64-bit unsigned number); sequence numbers and session keys
+must also be at most ``SEQ_MAX``."""
+SEQ_MAX = (1 << 63) - 1
 NOT_ATTACHED = "node is not attached"
 """The hub's error for a node it does not know; after a hub restart the node attaches again on it."""
 
@@ -28,10 +42,14 @@ class Message:
 
     TYPE: ClassVar[str] = ""
     n: int = field(default=0, kw_only=True)
+    s: int = field(default=0, kw_only=True)
+    """The sending node's session key (0: none, as on every hub-to-node message)."""
 
     def encode(self) -> bytes:
         """msgpack bytes with the envelope."""
         body = {name: getattr(self, name) for name in _field_names(type(self))}
+        if not self.s:
+            del body["s"]
         body["v"], body["t"] = WIRE_VERSION, self.TYPE
         return msgpack.packb(body, use_bin_type=True)
 
@@ -341,8 +359,11 @@ _TYPES: dict[str, type[Message]] = {
 }
 
 
-def decode(data: bytes) -> Message:
-    """Parse one message; raises WireError on anything but a well-formed, known, current message."""
+def decode(data: bytes, max_bytes: int = MAX_MESSAGE_BYTES) -> Message:
+    """Parse one message; raises WireError on anything but a well-formed, known, current message of at most
+    ``max_bytes`` bytes."""
+    if len(data) > max_bytes:
+        raise WireError(f"message of {len(data)} bytes exceeds {max_bytes}")
     try:
         body = msgpack.unpackb(data, raw=False)
     except Exception as err:  # msgpack raises several unrelated types on garbage
@@ -351,7 +372,8 @@ def decode(data: bytes) -> Message:
         raise WireError("message is not a map")
     if body.pop("v", None) != WIRE_VERSION:
         raise WireError(f"unsupported wire version (want {WIRE_VERSION})")
-    cls = _TYPES.get(body.pop("t", None))  # type: ignore[arg-type]
+    kind = body.pop("t", None)
+    cls = _TYPES.get(kind) if isinstance(kind, str) else None
     if cls is None:
         raise WireError("unknown message type")
     try:
@@ -359,6 +381,8 @@ def decode(data: bytes) -> Message:
     except TypeError as err:
         raise WireError(f"bad {cls.TYPE} fields: {err}") from None
     _check_types(msg)
+    if not (0 <= msg.n <= SEQ_MAX and 0 <= msg.s <= SEQ_MAX):
+        raise WireError(f"sequence number and session key are 0 to {SEQ_MAX}")
     return msg
 
 
@@ -388,7 +412,7 @@ def _check_types(msg: Message) -> None:
         elif kind == _NUMBERS:
             ok = isinstance(value, list) and len(value) in lengths and _numbers(value)
         else:
-            ok = isinstance(value, accepted) and (kind == _BOOL) == isinstance(value, bool)
+            ok = isinstance(value, accepted) and (kind == _BOOL) == isinstance(value, bool) and _in_range(value)
         if not ok:
             raise WireError(f"{msg.TYPE}.{name} has the wrong type ({type(value).__name__})")
 
@@ -418,7 +442,16 @@ def _checks(cls: type[Message]) -> tuple[tuple[str, bool, int, tuple[type, ...],
 
 
 def _numbers(values: list[Any]) -> bool:
-    """Every value an int or a float, and none a bool."""
-    if _PLAIN_NUMBERS.issuperset(map(type, values)):  # what msgpack decodes to: the common case, quickly
-        return True
-    return all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values)
+    """Every value an int or a float in range, and none a bool."""
+    if not _PLAIN_NUMBERS.issuperset(map(type, values)):  # msgpack decodes to these two: anything else is wrong
+        return False
+    return all(map(_in_range, values))
+
+
+def _in_range(value: Any) -> bool:
+    """A float is finite, an int fits msgpack's range; anything else passes (its type was checked)."""
+    if type(value) is float:
+        return math.isfinite(value)
+    if type(value) is int:
+        return INT_MIN <= value <= INT_MAX
+    return True

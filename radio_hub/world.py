@@ -28,6 +28,10 @@ from radio_hub.config import _build, check_keys
 KINDS = ("robot", "user")
 
 
+MAX_COORDINATE_M = 1e6
+"""How far from the origin a body may be put (a forged pose of 1e300 m must not turn distances into inf)."""
+
+
 @dataclass
 class WorldConfig:
     """Constants of the world and of the robots' bodies and own sensors (choices documented per field)."""
@@ -196,8 +200,8 @@ class World:
         """Place a body (again): a re-attached node keeps no velocity."""
         if kind not in KINDS:
             raise ValueError(f"body kind must be one of {KINDS}, not {kind!r}")
-        if not all(math.isfinite(v) for v in (x, y, yaw)):
-            raise ValueError("a pose must be finite numbers")
+        if not all(math.isfinite(v) for v in (x, y, yaw)) or max(abs(x), abs(y)) > MAX_COORDINATE_M:
+            raise ValueError(f"a pose must be finite numbers within {MAX_COORDINATE_M:g} m")
         radius = self.config.robot_radius_m if kind == "robot" else self.config.user_radius_m
         body = Body(body_id, kind, radius, np.array([x, y, _wrap(yaw)], dtype=float))
         self.bodies[body_id] = body
@@ -222,8 +226,8 @@ class World:
         self, body_id: str, x: float, y: float, yaw: float, vx: float = 0.0, vy: float = 0.0, omega: float = 0.0
     ) -> None:
         """Set a body's pose and world velocity outright (a user walking, or a test teleporting a robot)."""
-        if not all(math.isfinite(v) for v in (x, y, yaw, vx, vy, omega)):
-            raise ValueError("a pose must be finite numbers")
+        if not all(math.isfinite(v) for v in (x, y, yaw, vx, vy, omega)) or max(abs(x), abs(y)) > MAX_COORDINATE_M:
+            raise ValueError(f"a pose must be finite numbers within {MAX_COORDINATE_M:g} m")
         body = self.bodies[body_id]
         body.pose = np.array([x, y, _wrap(yaw)], dtype=float)
         body.velocity = np.array([vx, vy, omega], dtype=float)

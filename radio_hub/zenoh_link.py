@@ -13,15 +13,26 @@ import contextlib
 import json
 import re
 import sys
+import threading
+import time
 from collections.abc import Callable
 from typing import Any
 
 import msgpack
 import zenoh
 
+from radio_hub import wire
 from radio_hub.keys import Keys
 from radio_hub.port import HubUnavailable
 from radio_hub.trust import TransportSecurity, access_control, tls_settings
+
+DOWN_PENDING_LIMIT = 2000
+"""Messages from the hub a node's event loop may have waiting; more are dropped and counted (``dropped``):
+a flood on a node's downlink key costs it those messages, never unbounded memory."""
+DOWN_PENDING_BYTES = 2 << 20
+"""Bytes of such messages waiting at most (the hub's own are a few hundred bytes each)."""
+STRANGER_ANSWERS_PER_S = 200
+"""Answers (errors) a hub sends per second to ids that are not attached; more are dropped and counted."""
 
 _ENDPOINT = re.compile(r"^(tcp|udp|tls|quic)/(\[[0-9a-fA-F:.]+\]|[A-Za-z0-9_.-]+):\d{1,5}$")
 _security = TransportSecurity()
@@ -91,22 +102,43 @@ class HubDownlink:
     """A hub shell's ``Downlink``: the environment's messages to nodes on one reliable publisher per node,
     declared when first needed, and the world's state on ``world_pub``; nothing while ``session`` is None."""
 
-    def __init__(self, keys: Keys) -> None:
+    def __init__(self, keys: Keys, is_member: Callable[[str], bool] | None = None) -> None:
+        """``is_member(node_id)``: whether the id is attached. Non-members (an id that sent something without
+        attaching, or has left) get no publisher of their own and at most ``STRANGER_ANSWERS_PER_S``
+        answers a second, so a stream of made-up ids costs the hub neither memory nor much time."""
         self.keys = keys
         self.session: zenoh.Session | None = None
         self.world_pub: zenoh.Publisher | None = None
+        self.is_member = is_member
+        self.stranger_answers_dropped = 0
         self._pubs: dict[str, zenoh.Publisher] = {}
+        self._window_s = 0.0
+        self._window_answers = 0
 
     def send(self, node_id: str, data: bytes) -> None:
         if self.session is None:
             return
         try:
             pub = self._pubs.get(node_id)
+            if pub is None and self.is_member is not None and not self.is_member(node_id):
+                self._answer_stranger(node_id, data)
+                return
             if pub is None:
                 pub = self._pubs[node_id] = reliable_publisher(self.session, self.keys.down(node_id))
             pub.put(data)
         except zenoh.ZError as err:
             print(f"hub: cannot reach {node_id}: {err}", file=sys.stderr)
+
+    def _answer_stranger(self, node_id: str, data: bytes) -> None:
+        now = time.monotonic()
+        if now - self._window_s >= 1.0:
+            self._window_s, self._window_answers = now, 0
+        if self._window_answers >= STRANGER_ANSWERS_PER_S:
+            self.stranger_answers_dropped += 1
+            return
+        self._window_answers += 1
+        assert self.session is not None
+        self.session.put(self.keys.down(node_id), data)
 
     def forget(self, node_id: str) -> None:
         pub = self._pubs.pop(node_id, None)
@@ -127,13 +159,27 @@ class HubDownlink:
 
 
 def declare_hub_keys(
-    session: zenoh.Session, keys: Keys, put: Callable[[tuple[Any, ...]], None], *, chaos: bool = True
+    session: zenoh.Session,
+    keys: Keys,
+    put: Callable[[tuple[Any, ...]], None],
+    *,
+    chaos: bool = True,
+    oversized: Callable[[], None] | None = None,
 ) -> list[Any]:
     """What a hub shell serves on its router session, every callback a hand-off to ``put`` (its inbox): nodes'
     messages (``("up", key, bytes)``), their liveliness (``("alive", key, kind)``), the queryables (``("stats",
-    query)``...; the chaos queryable only with ``chaos``) and the hub's own liveliness token."""
+    query)``...; the chaos queryable only with ``chaos``) and the hub's own liveliness token. A node's message
+    longer than ``wire.MAX_UP_BYTES`` is dropped before it is copied out of zenoh (``oversized`` counts it)."""
+
+    def up(sample: zenoh.Sample) -> None:
+        if len(sample.payload) > wire.MAX_UP_BYTES:
+            if oversized is not None:
+                oversized()
+            return
+        put(("up", str(sample.key_expr), sample.payload.to_bytes()))
+
     decls = [
-        session.declare_subscriber(keys.up_all, lambda s: put(("up", str(s.key_expr), s.payload.to_bytes()))),
+        session.declare_subscriber(keys.up_all, up),
         session.liveliness().declare_subscriber(
             keys.alive_all, lambda s: put(("alive", str(s.key_expr), s.kind)), history=True
         ),
@@ -148,9 +194,13 @@ def declare_hub_keys(
 
 
 def reply(query: zenoh.Query, body: dict[str, Any]) -> None:
-    """Answer a query with a msgpack map, and let it go."""
+    """Answer a query with a msgpack map (an error map if it cannot be packed), and let it go."""
     try:
-        query.reply(query.key_expr, msgpack.packb(body, use_bin_type=True))
+        try:
+            data = msgpack.packb(body, use_bin_type=True)
+        except (TypeError, ValueError, OverflowError) as err:
+            data = msgpack.packb({"error": f"cannot encode the answer: {type(err).__name__}: {err}"})
+        query.reply(query.key_expr, data)
     finally:
         query.drop()
 
@@ -165,6 +215,12 @@ class ZenohLink:
         """Close the session with the link (True when the link opened it)."""
         self._decls: list[Any] = []
         self._pub: zenoh.Publisher | None = None
+        self.dropped = 0
+        """Messages from the hub dropped: longer than ``wire.MAX_MESSAGE_BYTES``, or ``DOWN_PENDING_LIMIT``
+        already waiting for the node's event loop."""
+        self._pending = 0
+        self._pending_bytes = 0
+        self._lock = threading.Lock()
 
     @classmethod
     async def connect(cls, endpoint: str, world: str, session: zenoh.Session | None = None) -> ZenohLink:
@@ -182,10 +238,33 @@ class ZenohLink:
         session, keys = self.session, self.keys
 
         def down(sample: zenoh.Sample) -> None:  # zenoh's thread: hand over and return at once
-            loop.call_soon_threadsafe(on_down, sample.payload.to_bytes())
+            size = len(sample.payload)
+            with self._lock:
+                if (
+                    size > wire.MAX_MESSAGE_BYTES
+                    or self._pending >= DOWN_PENDING_LIMIT
+                    or (self._pending_bytes + size > DOWN_PENDING_BYTES)
+                ):
+                    self.dropped += 1
+                    return
+                self._pending += 1
+                self._pending_bytes += size
+            try:
+                loop.call_soon_threadsafe(handed, sample.payload.to_bytes())
+            except RuntimeError:  # the node's loop has closed (the process is ending): nobody to hand it to
+                with self._lock:
+                    self._pending -= 1
+                    self._pending_bytes -= size
+
+        def handed(data: bytes) -> None:  # the node's loop
+            with self._lock:
+                self._pending -= 1
+                self._pending_bytes -= len(data)
+            on_down(data)
 
         def hub(sample: zenoh.Sample) -> None:  # a hub appeared (again: it knows nothing of us) or went away
-            loop.call_soon_threadsafe(on_hub, sample.kind == zenoh.SampleKind.PUT)
+            with contextlib.suppress(RuntimeError):  # the node's loop has closed
+                loop.call_soon_threadsafe(on_hub, sample.kind == zenoh.SampleKind.PUT)
 
         self._decls = [
             session.liveliness().declare_token(keys.alive(node_id, instance)),

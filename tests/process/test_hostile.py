@@ -1,0 +1,209 @@
+"""A rogue zenoh client against a real hub with three real robots on loopback (issue 15's attacks).
+
+The rogue has its own zenoh session, as any process that reaches the port would. It sends extreme sequence
+numbers, floods made-up ids, attaches 2,000 nodes without a liveliness token, pushes 2,000 x 100 kB messages
+into a robot's downlink, speaks for robots it is not, spoofs a robot's source address and forges error
+replies. The hub and the robots must stay up, the robots keep at least half their quiet delivery rate under
+the flood, memory stays within the stated bounds, fake attaches are gone within 10 s, and what is refused is
+counted.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import msgpack
+import zenoh
+
+from radio_hub import wire
+from radio_hub.mac import Frame, FrameType
+from radio_hub.zenoh_link import reliable_publisher, session_config
+
+ROBOTS = (1, 2, 3)
+FAKE_ATTACHES = 2000
+HUB_RSS_BOUND_MB = 100
+"""What the attacks may add to the hub's peak resident memory (it starts near 65 MB; they add about 55)."""
+ROBOT_RSS_BOUND_MB = 60
+"""What 2,000 x 100 kB messages on its downlink may add to a robot's peak resident memory (about 42 MB now;
+263 MB, never freed, before the bounds)."""
+
+
+def _rss_mb(pid: int, field: str = "VmHWM") -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith(field + ":"):
+            return int(line.split()[1]) / 1024
+    raise AssertionError(f"no {field} for {pid}")
+
+
+def _pongs(air: Any) -> int:
+    """Pongs every robot has heard so far (each is a frame delivered to it and handed up)."""
+    return sum(sum(air.cmd(rid, "status")["heard_from"].values()) for rid in ROBOTS)
+
+
+def _pong_rate(air: Any, seconds: float) -> float:
+    start, t0 = _pongs(air), time.monotonic()
+    time.sleep(seconds)
+    return (_pongs(air) - start) / (time.monotonic() - t0)
+
+
+FLOOD_RATE = 50_000
+"""Messages per second the rogue floods made-up ids with (issue 15's figure)."""
+
+
+class Flood:
+    """A thread putting small messages for made-up ids at ``FLOOD_RATE``, over its own publishers."""
+
+    def __init__(self, session: zenoh.Session, air: Any, ids: int = 50) -> None:
+        self.pubs = [session.declare_publisher(air.keys.up(f"flood-{i}")) for i in range(ids)]
+        self.data = wire.Drive(vx=0.1, n=1, s=7).encode()
+        self.sent = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def _run(self) -> None:
+        pubs, data = self.pubs, self.data
+        while not self._stop.is_set():
+            for pub in pubs:
+                pub.put(data)
+            self.sent += len(pubs)
+            ahead = self.sent / FLOOD_RATE - (time.monotonic() - self.t0)
+            if ahead > 0:
+                time.sleep(ahead)
+
+    def __enter__(self) -> Flood:
+        self.t0 = time.monotonic()
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join()
+        self.rate = self.sent / (time.monotonic() - self.t0)
+        for pub in self.pubs:
+            pub.undeclare()
+
+
+def _attempts(stats: dict[str, Any]) -> int:
+    """Attaches the hub took, refused for want of a token, or dropped at the inbox (with the flood's)."""
+    refused = stats["liveliness"]["refused_unproven"] + stats["inbox"]["dropped"].get("stranger", 0)
+    return stats["hub"]["attaches"] + refused
+
+
+def _attached(stats: dict[str, Any]) -> set[str]:
+    return {node for node, entry in stats["nodes"].items() if entry.get("attached")}
+
+
+def test_a_rogue_client_cannot_take_the_hub_or_its_robots_down(make_air: Any) -> None:
+    air = make_air()
+    for rid in ROBOTS:
+        air.robot(rid, (2.0 * rid, 0.0), 0x1000, 11, "--ping-interval", "0.1")
+    hub_pid = air.sup.children["hub"].pid
+    rogue = zenoh.open(session_config("client", air.endpoint))
+    keys = air.keys
+    try:
+        hub_rss0 = _rss_mb(hub_pid)
+        quiet = _pong_rate(air, 2.5)
+        assert quiet > 10, quiet
+
+        # extreme sequence numbers: the hub used to die packing the gap counter into its stats reply
+        for n in (-(2**63), 2**64 - 1, 2**63 - 1):
+            for node in ("robot-1", "fake-n"):
+                rogue.put(keys.up(node), msgpack.packb({"v": 1, "t": "drive", "n": n}))
+        time.sleep(0.3)
+        stats = air.stats()
+        assert stats["hub"]["foreign"] >= 1 and stats["hub"]["malformed"] >= 4
+        assert 0 <= stats["hub"]["transport_gaps"] < 2**63
+
+        # a flood of made-up ids: the robots keep at least half their quiet delivery rate
+        with Flood(rogue, air) as flood:
+            time.sleep(0.5)
+            flooded = _pong_rate(air, 2.5)
+        print(f"pongs/s quiet {quiet:.1f}, under a {flood.rate:.0f} msg/s flood {flooded:.1f}")
+        assert flooded >= quiet / 2, (quiet, flooded, flood.rate)
+
+        # 2,000 attaches without a liveliness token: each refused or detached, all gone within 10 s
+        time.sleep(1.0)  # the flood's tail has reached the hub and its stranger budget is fresh
+        before = air.stats()
+        for i in range(FAKE_ATTACHES):
+            attach = wire.Attach(short_addr=1000 + i, pan_id=0x1000, instance="none", n=1, s=5)
+            rogue.put(keys.up(f"fake-{i}"), attach.encode())
+        sent_at = time.monotonic()
+        robots = {f"robot-{rid}" for rid in ROBOTS}
+        while _attempts(air.stats()) - _attempts(before) < FAKE_ATTACHES or _attached(air.stats()) != robots:
+            assert time.monotonic() - sent_at < 10, (_attempts(air.stats()) - _attempts(before), air.stats()["inbox"])
+            time.sleep(0.25)
+        gone_s = time.monotonic() - sent_at
+        stats = air.stats()
+        live = stats["liveliness"]
+        print(f"fake attaches gone after {gone_s:.1f} s: {live}, inbox {stats['inbox']}")
+        assert live["expired"] > 0  # some did attach, and were detached for want of a token
+        assert len(stats["nodes"]) <= len(ROBOTS) + 256  # departed ids' counters are capped (GONE_KEPT)
+
+        # 2,000 x 100 kB messages straight into robot 2's downlink: its memory stays bounded
+        robot_pid = air.sup.children["robot-2"].pid
+        robot_rss0 = _rss_mb(robot_pid)
+        heavy = wire.LfHeard(data=b"\xaa" * 100_000, n=1).encode()
+        down = reliable_publisher(rogue, keys.down("robot-2"))  # blocks rather than drops: every one arrives
+        for _ in range(2000):
+            down.put(heavy)
+        down.undeclare()
+        time.sleep(1.0)
+        status = air.cmd(2, "status")
+        robot_rss = _rss_mb(robot_pid)
+        print(f"robot 2 peak RSS {robot_rss0:.0f} -> {robot_rss:.0f} MB; dropped {status['radio_dropped']}")
+        assert robot_rss - robot_rss0 <= ROBOT_RSS_BOUND_MB
+        assert status["radio_dropped"]["link"] + status["radio_malformed"] > 0  # refused, and counted
+
+        # speaking for robot 1 from another session: refused and counted, robot 1 stays attached
+        foreign0 = air.stats()["hub"]["foreign"]
+        rogue.put(keys.up("robot-1"), wire.Detach(n=50, s=12345).encode())
+        rogue.put(keys.up("robot-1"), wire.Attach(short_addr=1, pan_id=0x1000, instance="rogue", n=1, s=12345).encode())
+        rogue.put(keys.up("robot-1"), wire.Drive(vx=1.0, n=51, s=12345).encode())
+        time.sleep(0.5)
+        stats = air.stats()
+        assert stats["hub"]["foreign"] - foreign0 == 3
+        assert "robot-1" in _attached(stats)
+
+        # a rogue of its own (token and all) sends frames with robot 2's source address: 20 of 20 refused
+        alive = rogue.liveliness().declare_token(keys.alive("rogue-1", "r1"))
+        answers: list[wire.Message] = []
+        sub = rogue.declare_subscriber(
+            keys.down("rogue-1"), lambda s: answers.append(wire.decode(s.payload.to_bytes()))
+        )
+        time.sleep(0.3)
+        rogue.put(keys.up("rogue-1"), wire.Attach(short_addr=77, pan_id=0x1000, instance="r1", n=1, s=9).encode())
+        spoof = Frame(FrameType.DATA, 1, 0x1000, 0xFFFF, 0x1000, 2, b"spoof").encode()
+        for i in range(20):
+            rogue.put(keys.up("rogue-1"), wire.Transmit(token=i + 1, psdu=spoof, n=2 + i, s=9).encode())
+        time.sleep(0.5)
+        refused = [m for m in answers if isinstance(m, wire.TxDone) and m.status == "refused"]
+        assert len(refused) == 20, answers
+        assert air.stats()["hub"]["spoofed"] >= 20
+
+        # forged error replies in robot 3's downlink: no "Task exception was never retrieved"
+        down = rogue.declare_publisher(keys.down("robot-3"))
+        down.put(wire.Error(token=0, reason=wire.NOT_ATTACHED, n=10**6).encode())
+        for forged in range(1, 50):
+            down.put(wire.Error(token=forged, reason="forged", n=10**6 + forged).encode())
+        down.undeclare()
+        time.sleep(1.5)
+        sub.undeclare()
+        alive.undeclare()
+
+        final = air.stats()
+        hub_rss = _rss_mb(hub_pid)
+        print(f"hub peak RSS {hub_rss0:.0f} -> {hub_rss:.0f} MB; faults {final['hub']['faults']}")
+        assert hub_rss - hub_rss0 <= HUB_RSS_BOUND_MB
+        assert final["hub"]["faults"] == {}
+        assert _pong_rate(air, 1.0) > 0  # the swarm still talks
+        assert not air.sup.dead(), air.sup.dead()
+    finally:
+        rogue.close()
+    codes = air.close()
+    assert codes["hub"] == 0, codes
+    for name in air.sup.children:
+        log = (air.sup.log_dir / f"{name}.log").read_text(errors="replace")
+        assert "Traceback" not in log and "never retrieved" not in log, (name, log[-2000:])
