@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -260,12 +261,23 @@ class SurroundController:
         ultrasonic hits and the human's body (those beyond A are ignored); ``human_xy``: the human's
         position, or None if not sensed (then no f_G); ``own_velocity`` (2,) in the robot's frame.
         """
-        if not dt > 0:
-            raise ValueError(f"dt must be > 0, not {dt!r}")
         neighbours = _plain_points("neighbours_xy", neighbours_xy)
         obstacles = _plain_points("obstacle_points", obstacle_points)
         velocity = _plain_vector("own_velocity", own_velocity)
         human = None if human_xy is None else _plain_vector("human_xy", human_xy)
+        return np.array(self.step_plain(neighbours, obstacles, human, velocity, dt))
+
+    def step_plain(
+        self,
+        neighbours: Sequence[Sequence[float]],
+        obstacles: Sequence[Sequence[float]],
+        human: Sequence[float] | None,
+        velocity: Sequence[float],
+        dt: float,
+    ) -> tuple[float, float]:
+        """``step`` on points as plain float pairs, unchecked (the pilot's own sensing, finite by making)."""
+        if not dt > 0:
+            raise ValueError(f"dt must be > 0, not {dt!r}")
         c = self.config
         distances = [math.sqrt(x * x + y * y) for x, y in neighbours]
         near = [d <= c.sight_m for d in distances]
@@ -279,9 +291,11 @@ class SurroundController:
         f_g = self._surround(g, human, velocity)
         self._forces = (f_r, f_o, f_g)
         force = (f_r[0] + f_o[0] + f_g[0], f_r[1] + f_o[1] + f_g[1])
-        return np.array(self._command(force, velocity, dt))
+        return self._command(force, velocity, dt)
 
-    def _centroid(self, neighbours: list[list[float]], near: list[bool], dt: float) -> tuple[tuple[float, float], int]:
+    def _centroid(
+        self, neighbours: Sequence[Sequence[float]], near: list[bool], dt: float
+    ) -> tuple[tuple[float, float], int]:
         count = sum(near)
         gx = gy = 0.0
         for i, ((x, y), seen) in enumerate(zip(neighbours, near, strict=True)):
@@ -316,10 +330,10 @@ class SurroundController:
 
     def _repulsion(
         self,
-        neighbours: list[list[float]],
+        neighbours: Sequence[Sequence[float]],
         distances: list[float],
         near: list[bool],
-        obstacles: list[list[float]],
+        obstacles: Sequence[Sequence[float]],
     ) -> tuple[float, float]:
         c = self.config
         sx = sy = 0.0
@@ -335,7 +349,7 @@ class SurroundController:
         return -sx, -sy
 
     def _surround(
-        self, g: tuple[float, float], human: list[float] | None, velocity: list[float]
+        self, g: tuple[float, float], human: Sequence[float] | None, velocity: Sequence[float]
     ) -> tuple[float, float]:
         if human is None:
             return 0.0, 0.0
@@ -361,7 +375,7 @@ class SurroundController:
         pull = self.config.surround_force * c_i
         return pull * tx, pull * ty
 
-    def _command(self, force: tuple[float, float], velocity: list[float], dt: float) -> tuple[float, float]:
+    def _command(self, force: tuple[float, float], velocity: Sequence[float], dt: float) -> tuple[float, float]:
         c = self.config
         vx, vy = velocity
         ax, ay = _plain_clip(
@@ -376,7 +390,7 @@ def _plain_clip(x: float, y: float, limit: float) -> tuple[float, float]:
     return x * scale, y * scale
 
 
-def _plain_points(name: str, value: np.ndarray) -> list[list[float]]:
+def _plain_points(name: str, value: np.ndarray) -> Sequence[Sequence[float]]:
     """``_points`` as a list of [x, y] pairs."""
     rows = value.tolist() if isinstance(value, np.ndarray) else np.asarray(value, dtype=float).tolist()
     if not rows:
