@@ -114,7 +114,8 @@ manoeuvring target than the critically damped 0.09, which a swarm pushing and br
 
 
 class BeaconTracker:
-    """Each beacon's position and velocity in the robot's frame, between and across 20 Hz sweeps.
+    """Each beacon's position and velocity in the robot's frame, between and across sweeps (designed for 20 Hz
+    sweeps under 25 Hz steps; the hub sweeps at 100 Hz today, see ``radio_hub.environment.BEACONS_EVERY``).
 
     Why: stepping at 25 Hz on 20 Hz sweeps, a tracker that takes beacons to stand still between sweeps sees
     a neighbour driving beside it at v fall back by v x 40 ms and jump ahead at the next sweep; the law
@@ -175,6 +176,11 @@ class BeaconTracker:
         own = np.asarray(own_velocity, dtype=float)
         period = self._since_fix
         self._since_fix = 0.0
+        if period > 0 and names and names == self._names:  # the same beacons as last sweep: every track goes on
+            innovation = np.asarray(xy, dtype=float).reshape(-1, 2) - self._position
+            self._position = self._position + self.alpha * innovation
+            self._velocity = self._velocity + self.beta * innovation / period
+            return
         fix_row = {n: i for i, n in enumerate(names)}
         old = self._rows
         kept = [n for n in self._names if n in fix_row]  # tracks go on in their order, new ones after

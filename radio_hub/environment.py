@@ -43,8 +43,11 @@ SENSORS_EVERY = 2
 PUBLISH_EVERY = 5
 """World ticks per world publication for viewers (10 Hz)."""
 BEACONS_EVERY = 5
-"""IR sweeps per beacon sweep (100 Hz sweeps: beacons at 20 Hz; 20 robots x 19 sources at 100 Hz would swamp
-the nodes)."""
+"""Meant as IR sweeps per beacon sweep (beacons at 20 Hz), but what it divides is ``IrAir.sweeps``, which counts
+only receive sweeps: with no module receiving (the surround formation) that count stays 0 and beacons are swept
+at every IR period, 100 Hz; once receive sweeps have stopped at a count that is not a multiple of 5, not at
+all. The surround pilot has only been run and measured at the 100 Hz it gets (a robot steps at 25 Hz on the
+latest sweep); a true 20 Hz gave the cylinder one contact on seed 1 (see the surround-speed branch's report)."""
 
 
 HUB = "hub"
