@@ -4,9 +4,9 @@ The robot process's ``surround_driver`` feeds it from the hub (real time); ``cli
 from the hub's world and IR models stepped in model time. Both run this very code, so what the model-time
 bench shows is what a robot process does, less its scheduling.
 
-Each step (on every body-sensor sample, 25 Hz, with the model time between samples as dt, not only when a
-beacon sweep comes: the hub sweeps beacons at 100 Hz today, see ``radio_hub.environment.BEACONS_EVERY``, so a
-step takes in the sweep of its own instant):
+Each step (on every body-sensor sample, 25 Hz, with the model time between samples as dt; the hub sweeps
+beacons with the body sensors, ``radio_hub.environment.BEACONS_EVERY``, so a step takes in the sweep of its own
+instant, and steps on without one when a sample comes alone):
 1. the beacon tracker (``surround_sensing.BeaconTracker``) moves every tracked beacon on by dt, and takes
    in a new sweep's fixes when one came (a robot that gets no sweep for ``STALE_AFTER_S`` forgets them all,
    and steps on its echoes alone, so it still keeps off walls and slows to a stop);
@@ -41,8 +41,7 @@ from petswarm.surround_sensing import BeaconTracker, SensingConfig, beacon_fixes
 from radio_hub.interface import BeaconSweep, IrConfig, OwnSensors
 
 STALE_AFTER_S = 0.2
-"""No new sweep for this long (four periods of the 20 Hz sweeps once documented; 20 of the 100 Hz the hub runs):
-nothing is seen any more."""
+"""No new sweep for this long (five periods of the hub's 25 Hz beacon sweeps): nothing is seen any more."""
 SENSOR_PERIOD_S = 0.04
 """The hub sends body sensors at 25 Hz: the first step's dt."""
 

@@ -115,7 +115,7 @@ manoeuvring target than the critically damped 0.09, which a swarm pushing and br
 
 class BeaconTracker:
     """Each beacon's position and velocity in the robot's frame, between and across sweeps (designed for 20 Hz
-    sweeps under 25 Hz steps; the hub sweeps at 100 Hz today, see ``radio_hub.environment.BEACONS_EVERY``).
+    sweeps under 25 Hz steps; the hub sweeps with the body sensors, 25 Hz, so a lost or late sweep is bridged).
 
     Why: stepping at 25 Hz on 20 Hz sweeps, a tracker that takes beacons to stand still between sweeps sees
     a neighbour driving beside it at v fall back by v x 40 ms and jump ahead at the next sweep; the law

@@ -42,12 +42,12 @@ SENSORS_EVERY = 2
 """World ticks per robot sensor message (50 Hz ticks: sensors at 25 Hz)."""
 PUBLISH_EVERY = 5
 """World ticks per world publication for viewers (10 Hz)."""
-BEACONS_EVERY = 5
-"""Meant as IR sweeps per beacon sweep (beacons at 20 Hz), but what it divides is ``IrAir.sweeps``, which counts
-only receive sweeps: with no module receiving (the surround formation) that count stays 0 and beacons are swept
-at every IR period, 100 Hz; once receive sweeps have stopped at a count that is not a multiple of 5, not at
-all. The surround pilot has only been run and measured at the 100 Hz it gets (a robot steps at 25 Hz on the
-latest sweep); a true 20 Hz gave the cylinder one contact on seed 1 (see the surround-speed branch's report)."""
+BEACONS_EVERY = SENSORS_EVERY
+"""World ticks per beacon sweep: beacons are swept with the body sensors (25 Hz), so a robot, which steps on
+each sample, steps on the sweep of its own instant. (They were meant to go at 20 Hz, every fifth IR sweep, but
+the count divided was of receive sweeps, which stays 0 in the surround formation: they went at every IR
+period, 100 Hz, of which a robot used the one at its sample's instant. A true 20 Hz gave the cylinder a
+contact on seed 1, its fixes up to 50 ms old and beating against the 25 Hz steps.)"""
 
 
 HUB = "hub"
@@ -238,10 +238,11 @@ class Environment:
         chaos = self.medium.chaos
         for node_id, readings in self.ir.receive_sweep(poses, chaos).items():
             self._send_down(node_id, wire.IrSample(readings=readings.astype("<f4").tobytes(), t_us=now))
-        if self.ir.sweeps % BEACONS_EVERY == 0:
-            for node_id, (sources, block, gains) in self.ir.beacon_sweep(poses, chaos).items():
-                readings = block.astype("<f4", copy=False).tobytes()
-                self._send_down(node_id, wire.IrBeacons(sources=sources, readings=readings, t_us=now, gains=gains))
+
+    def _sweep_beacons(self, now: int) -> None:
+        for node_id, (sources, block, gains) in self.ir.beacon_sweep(self.world.poses(), self.medium.chaos).items():
+            readings = block.astype("<f4", copy=False).tobytes()
+            self._send_down(node_id, wire.IrBeacons(sources=sources, readings=readings, t_us=now, gains=gains))
 
     def _tick_world(self) -> None:
         now = self.now_us()
@@ -258,6 +259,8 @@ class Environment:
                 node.position = (float(body.pose[0]), float(body.pose[1]))
         if self._ticks % SENSORS_EVERY == 0:
             self._send_sensors(now)
+        if self._ticks % BEACONS_EVERY == 0:
+            self._sweep_beacons(now)
         if self._world_log is not None or self._ticks % PUBLISH_EVERY == 0:
             self._record_world(now)
 
@@ -636,6 +639,7 @@ class Environment:
             "ir": {
                 **self.ir.counter.as_dict(self.now_us()),
                 "sweeps": self.ir.sweeps,
+                "beacon_sweeps": self.ir.beacon_sweeps,
                 "config": self.ir.config.to_dict(),
             },
             "world_model": {

@@ -123,8 +123,7 @@ class BeaconSweep:
 
     Made from maps (``BeaconSweep(t_us, readings, gains)``) or, as it comes off the air, from one (sources, 12)
     block (``of_block``); either way ``readings``/``gains`` are the maps and ``arrays()`` the block, each
-    worked out from the other only when asked for (a robot reads the block up to 25 times a second, of the
-    100 sweeps the hub sends)."""
+    worked out from the other only when asked for (a robot reads the block on each body-sensor sample, 25 Hz)."""
 
     __slots__ = ("_block", "_gain_list", "_gains", "_readings", "_sources", "t_us")
 
