@@ -1,8 +1,9 @@
 """The surround formation (docs/SURROUND.md): each robot follows its local swarm's centroid and the human.
 
 Pure and vectorised. ``SurroundLaw`` runs the control law of many robots at once (the simulation's path);
-``SurroundController`` is one robot's law on its own sensing, in its own frame (the robot process's path):
-both share one implementation, so what the simulation shows is what a robot runs.
+``SurroundController`` is one robot's law on its own sensing, in its own frame (the robot process's path),
+the same law in plain floats with the same operations in the same order, so it computes the batched law's
+numbers bit for bit: what the simulation shows is what a robot runs.
 
 Robot i, with neighbours p_j (robots within the sight S), OBJ_i (robots and obstacle points within the
 avoidance range A, the human among them) and the human at p_G, all in its own frame:
@@ -30,7 +31,8 @@ differences in the world's.
 from __future__ import annotations
 
 import dataclasses
-import functools
+import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -223,17 +225,27 @@ class SurroundLaw:
 
 
 class SurroundController:
-    """One robot's surround law on its own sensing, in its own frame (x forward, y left), heading held fixed."""
+    """One robot's surround law on its own sensing, in its own frame (x forward, y left), heading held fixed.
+
+    The law of ``SurroundLaw`` for one robot in plain floats, operation for operation (sums in the same
+    order, squares as products, ``max`` for ``np.maximum``), so it gives the batched law's numbers bit for
+    bit (``tests/unit/test_surround.py`` holds them equal): numpy's per-call overhead on arrays of two
+    values cost a robot about a millisecond per step.
+    """
 
     def __init__(self, config: SurroundConfig | None = None) -> None:
         self.config = config or SurroundConfig()
-        self._law = SurroundLaw(self.config, 1)
+        self._g: tuple[float, float] | None = None
+        self._rate = (0.0, 0.0)
+        self._count = 0
+        self._differenced = 0
+        self._forces = ((0.0, 0.0), (0.0, 0.0), (0.0, 0.0))
 
     @property
     def last_forces(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(f_R, f_O, f_G) of the last step, each a (2,) array, for logging."""
-        last = self._law.last
-        return last.centroid[0], last.repulsion[0], last.surround[0]
+        f_r, f_o, f_g = self._forces
+        return np.array(f_r), np.array(f_o), np.array(f_g)
 
     def step(
         self,
@@ -249,35 +261,154 @@ class SurroundController:
         ultrasonic hits and the human's body (those beyond A are ignored); ``human_xy``: the human's
         position, or None if not sensed (then no f_G); ``own_velocity`` (2,) in the robot's frame.
         """
-        neighbours = _points("neighbours_xy", neighbours_xy)
-        obstacles = _points("obstacle_points", obstacle_points)
-        velocity = _vector("own_velocity", own_velocity)
-        human = _NO_HUMAN if human_xy is None else _vector("human_xy", human_xy)
-        command = self._law.step(
-            neighbours[None],
-            _all_seen(len(neighbours)),
-            obstacles[None],
-            _all_seen(len(obstacles)),
-            human[None],
-            _HUMAN_UNSEEN if human_xy is None else _HUMAN_SEEN,
-            velocity[None],
-            dt,
+        neighbours = _plain_points("neighbours_xy", neighbours_xy)
+        obstacles = _plain_points("obstacle_points", obstacle_points)
+        velocity = _plain_vector("own_velocity", own_velocity)
+        human = None if human_xy is None else _plain_vector("human_xy", human_xy)
+        return np.array(self.step_plain(neighbours, obstacles, human, velocity, dt))
+
+    def step_plain(
+        self,
+        neighbours: Sequence[Sequence[float]],
+        obstacles: Sequence[Sequence[float]],
+        human: Sequence[float] | None,
+        velocity: Sequence[float],
+        dt: float,
+    ) -> tuple[float, float]:
+        """``step`` on points as plain float pairs, unchecked (the pilot's own sensing, finite by making)."""
+        if not dt > 0:
+            raise ValueError(f"dt must be > 0, not {dt!r}")
+        c = self.config
+        distances = [math.sqrt(x * x + y * y) for x, y in neighbours]
+        near = [d <= c.sight_m for d in distances]
+        g, count = self._centroid(neighbours, near, dt)
+        rate, accel = self._derivatives(g, count, dt)
+        f_r = (
+            c.inertia * accel[0] + c.damping * rate[0] + c.stiffness * g[0],
+            c.inertia * accel[1] + c.damping * rate[1] + c.stiffness * g[1],
         )
-        return command[0]
+        f_o = self._repulsion(neighbours, distances, near, obstacles)
+        f_g = self._surround(g, human, velocity)
+        self._forces = (f_r, f_o, f_g)
+        force = (f_r[0] + f_o[0] + f_g[0], f_r[1] + f_o[1] + f_g[1])
+        return self._command(force, velocity, dt)
+
+    def _centroid(
+        self, neighbours: Sequence[Sequence[float]], near: list[bool], dt: float
+    ) -> tuple[tuple[float, float], int]:
+        count = sum(near)
+        gx = gy = 0.0
+        for i, ((x, y), seen) in enumerate(zip(neighbours, near, strict=True)):
+            x, y = (x, y) if seen else (0.0, 0.0)
+            # numpy's sum starts from the first term (0.0 + -0.0 would lose the sign of a lone -0.0)
+            gx, gy = (x, y) if i == 0 else (gx + x, gy + y)
+        g = (gx / (count + 1), gy / (count + 1))
+        tau = self.config.centroid_filter_s
+        if tau > 0 and self._g is not None:
+            # A robot entering or leaving the sight moves g at once: filtering that step would smear the jump
+            # over several steps and read it as motion.
+            alpha = dt / (tau + dt) if count == self._count else 1.0
+            old = self._g
+            g = (old[0] + alpha * (g[0] - old[0]), old[1] + alpha * (g[1] - old[1]))
+        return g, count
+
+    def _derivatives(
+        self, g: tuple[float, float], count: int, dt: float
+    ) -> tuple[tuple[float, float], tuple[float, float]]:
+        rate, accel = (0.0, 0.0), (0.0, 0.0)
+        old = self._g
+        if old is not None and count == self._count:
+            last = self._rate
+            rate = ((g[0] - old[0]) / dt, (g[1] - old[1]) / dt)
+            if self._differenced >= 1:
+                accel = ((rate[0] - last[0]) / dt, (rate[1] - last[1]) / dt)
+            self._differenced += 1
+        elif old is not None:
+            rate = self._rate
+        self._g, self._rate, self._count = g, rate, count
+        return rate, accel
+
+    def _repulsion(
+        self,
+        neighbours: Sequence[Sequence[float]],
+        distances: list[float],
+        near: list[bool],
+        obstacles: Sequence[Sequence[float]],
+    ) -> tuple[float, float]:
+        c = self.config
+        sx = sy = 0.0
+        points = [(p, d, seen) for p, d, seen in zip(neighbours, distances, near, strict=True)]
+        points += [(p, math.sqrt(p[0] * p[0] + p[1] * p[1]), True) for p in obstacles]
+        for i, ((x, y), d, seen) in enumerate(points):
+            inside = seen and d <= c.avoidance_m and d > 0
+            reach = max(d, MIN_RANGE_M)
+            magnitude = c.repulsion / (reach * reach) if inside else 0.0
+            scale = max(d, 1e-12)
+            px, py = magnitude * (x / scale), magnitude * (y / scale)
+            sx, sy = (px, py) if i == 0 else (sx + px, sy + py)
+        return -sx, -sy
+
+    def _surround(
+        self, g: tuple[float, float], human: Sequence[float] | None, velocity: Sequence[float]
+    ) -> tuple[float, float]:
+        if human is None:
+            return 0.0, 0.0
+        hx, hy = human
+        human_distance = math.sqrt(hx * hx + hy * hy)
+        if not human_distance > 0:
+            return 0.0, 0.0
+        reach = max(human_distance, 1e-9)
+        tx, ty = hx / reach, hy / reach
+        g_norm = max(math.sqrt(g[0] * g[0] + g[1] * g[1]), 1e-9)
+        ux, uy = g[0] / g_norm, g[1] / g_norm
+        vx, vy = velocity
+        speed = math.sqrt(vx * vx + vy * vy)
+        # cos of a bearing difference is the dot product of unit vectors; an undefined bearing (g_i = 0,
+        # or the robot still) gives cos = 0: neither for nor against.
+        cos_human = tx * ux + ty * uy
+        if speed > STILL_MPS:
+            moving = max(speed, 1e-9)
+            cos_motion = vx / moving * ux + vy / moving * uy
+        else:
+            cos_motion = 0.0
+        c_i = (1 + cos_human) * (1 + cos_motion) / 4
+        pull = self.config.surround_force * c_i
+        return pull * tx, pull * ty
+
+    def _command(self, force: tuple[float, float], velocity: Sequence[float], dt: float) -> tuple[float, float]:
+        c = self.config
+        vx, vy = velocity
+        ax, ay = _plain_clip(
+            (force[0] - c.drag * vx) / c.body_mass, (force[1] - c.drag * vy) / c.body_mass, c.max_accel_mps2
+        )
+        return _plain_clip(vx + ax * dt, vy + ay * dt, c.max_speed_mps)
 
 
-_NO_HUMAN = np.zeros(2)
-_HUMAN_SEEN, _HUMAN_UNSEEN = np.array([True]), np.array([False])
-for _constant in (_NO_HUMAN, _HUMAN_SEEN, _HUMAN_UNSEEN):
-    _constant.flags.writeable = False
+def _plain_clip(x: float, y: float, limit: float) -> tuple[float, float]:
+    """``_clip_norm`` of one vector."""
+    scale = min(1.0, limit / max(math.sqrt(x * x + y * y), 1e-12))
+    return x * scale, y * scale
 
 
-@functools.cache
-def _all_seen(count: int) -> np.ndarray:
-    """A (1, count) mask of True (read-only: shared by every step with that many points)."""
-    mask = np.ones((1, count), dtype=bool)
-    mask.flags.writeable = False
-    return mask
+def _plain_points(name: str, value: np.ndarray) -> Sequence[Sequence[float]]:
+    """``_points`` as a list of [x, y] pairs."""
+    rows = value.tolist() if isinstance(value, np.ndarray) else np.asarray(value, dtype=float).tolist()
+    if not rows:
+        return []
+    if not all(len(row) == 2 if isinstance(row, list) else False for row in rows):
+        raise ValueError(f"{name} must have shape (k, 2), not {np.shape(value)}")
+    if not all(math.isfinite(x) and math.isfinite(y) for x, y in rows):
+        raise ValueError(f"{name} must be finite")
+    return [[float(x), float(y)] for x, y in rows]
+
+
+def _plain_vector(name: str, value: np.ndarray) -> list[float]:
+    """``_vector`` as a list [x, y]."""
+    array = value if isinstance(value, np.ndarray) else np.asarray(value, dtype=float)
+    xy = array.tolist()
+    if array.shape != (2,) or not (math.isfinite(xy[0]) and math.isfinite(xy[1])):
+        raise ValueError(f"{name} must be a finite (2,) vector, not {value!r}")
+    return [float(xy[0]), float(xy[1])]
 
 
 def extent(positions: np.ndarray) -> float:

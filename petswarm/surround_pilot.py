@@ -4,8 +4,9 @@ The robot process's ``surround_driver`` feeds it from the hub (real time); ``cli
 from the hub's world and IR models stepped in model time. Both run this very code, so what the model-time
 bench shows is what a robot process does, less its scheduling.
 
-Each step (on every body-sensor sample, 25 Hz, with the model time between samples as dt, not only on the
-20 Hz beacon sweeps):
+Each step (on every body-sensor sample, 25 Hz, with the model time between samples as dt; the hub sweeps
+beacons with the body sensors, ``radio_hub.environment.BEACONS_EVERY``, so a step takes in the sweep of its own
+instant, and steps on without one when a sample comes alone):
 1. the beacon tracker (``surround_sensing.BeaconTracker``) moves every tracked beacon on by dt, and takes
    in a new sweep's fixes when one came (a robot that gets no sweep for ``STALE_AFTER_S`` forgets them all,
    and steps on its echoes alone, so it still keeps off walls and slows to a stop);
@@ -36,11 +37,11 @@ from petswarm.driving import EchoRanges
 from petswarm.motion import DriveLimits, MotorCommand
 from petswarm.pet_controller import PetControllerConfig, safety
 from petswarm.surround import SurroundConfig, SurroundController
-from petswarm.surround_sensing import BeaconTracker, SensingConfig, beacon_fixes, echo_points, sense_many
+from petswarm.surround_sensing import BeaconTracker, SensingConfig, beacon_fixes, echo_list, sense_lists
 from radio_hub.interface import BeaconSweep, IrConfig, OwnSensors
 
 STALE_AFTER_S = 0.2
-"""Four sweep periods (the hub sweeps beacons at 20 Hz) without a new sweep: nothing is seen any more."""
+"""No new sweep for this long (five periods of the hub's 25 Hz beacon sweeps): nothing is seen any more."""
 SENSOR_PERIOD_S = 0.04
 """The hub sends body sensors at 25 Hz: the first step's dt."""
 
@@ -83,6 +84,8 @@ class SurroundPilot:
         self._last_us: int | None = None
         self._sweep_t_us = 0
         self._sweep_at = -float("inf")
+        self._ring_angles: np.ndarray | None = None
+        self._ring_trig: tuple[list[float], list[float]] = ([], [])
 
     def step(self, sensors: OwnSensors, sweep: BeaconSweep, now_s: float) -> tuple[float, float] | None:
         """The motor command (vx, vy) for this sample, or None to send nothing (no human seen yet, or a sample
@@ -111,18 +114,27 @@ class SurroundPilot:
     def _drive(self, sensors: OwnSensors, dt: float) -> tuple[float, float] | None:
         config = self.config
         tracker = self.tracker
-        echoes = echo_points(sensors.ranges_m, sensors.angles_rad, config.law.robot_radius_m)
-        seen = sense_many(tracker.names, tracker.positions, echoes, config.human_id, self._sensing)
-        if not self.engaged and seen.human is None:
+        echoes = echo_list(sensors.ranges_m.tolist(), *self._ring(sensors.angles_rad), config.law.robot_radius_m)
+        neighbours, obstacles, human, dropped = sense_lists(
+            tracker.names, tracker.positions, echoes, config.human_id, self._sensing
+        )
+        if not self.engaged and human is None:
             return None
         self.engaged = True
-        velocity = np.array(sensors.odometry[:2], dtype=float)
-        wanted = self.controller.step(seen.neighbours, seen.obstacles, seen.human, velocity, dt)
+        velocity = (float(sensors.odometry[0]), float(sensors.odometry[1]))
+        vx, vy = self.controller.step_plain(neighbours, obstacles, human, velocity, dt)
         # the law's repulsion acts on IR estimates up to a sweep old; the ultrasonic ring is the last word
-        safe = safety(MotorCommand(float(wanted[0]), float(wanted[1]), 0.0), self._echoes.ranges(sensors), SAFETY)
+        safe = safety(MotorCommand(vx, vy, 0.0), self._echoes.ranges(sensors), SAFETY)
         self.command = np.array([safe.vx, safe.vy])
         self.counters["steps"] += 1
-        self.counters["human_seen"] += seen.human is not None
-        self.counters["echoes_dropped"] += seen.echoes_dropped
+        self.counters["human_seen"] += human is not None
+        self.counters["echoes_dropped"] += dropped
         self.counters["beacons"] = len(tracker.names)
         return safe.vx, safe.vy
+
+    def _ring(self, angles_rad: np.ndarray) -> tuple[list[float], list[float]]:
+        """The cosines and sines of the ultrasonic sensors' angles, worked out again only when the ring changes."""
+        if self._ring_angles is not angles_rad:
+            self._ring_angles = angles_rad
+            self._ring_trig = (np.cos(angles_rad).tolist(), np.sin(angles_rad).tolist())
+        return self._ring_trig

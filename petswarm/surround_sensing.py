@@ -114,7 +114,8 @@ manoeuvring target than the critically damped 0.09, which a swarm pushing and br
 
 
 class BeaconTracker:
-    """Each beacon's position and velocity in the robot's frame, between and across 20 Hz sweeps.
+    """Each beacon's position and velocity in the robot's frame, between and across sweeps (designed for 20 Hz
+    sweeps under 25 Hz steps; the hub sweeps with the body sensors, 25 Hz, so a lost or late sweep is bridged).
 
     Why: stepping at 25 Hz on 20 Hz sweeps, a tracker that takes beacons to stand still between sweeps sees
     a neighbour driving beside it at v fall back by v x 40 ms and jump ahead at the next sweep; the law
@@ -175,6 +176,11 @@ class BeaconTracker:
         own = np.asarray(own_velocity, dtype=float)
         period = self._since_fix
         self._since_fix = 0.0
+        if period > 0 and names and names == self._names:  # the same beacons as last sweep: every track goes on
+            innovation = np.asarray(xy, dtype=float).reshape(-1, 2) - self._position
+            self._position = self._position + self.alpha * innovation
+            self._velocity = self._velocity + self.beta * innovation / period
+            return
         fix_row = {n: i for i, n in enumerate(names)}
         old = self._rows
         kept = [n for n in self._names if n in fix_row]  # tracks go on in their order, new ones after
@@ -211,12 +217,21 @@ def echo_points(ranges_m: np.ndarray, angles_rad: np.ndarray, robot_radius_m: fl
     angles = np.asarray(angles_rad, dtype=float)
     if ranges.shape != angles.shape:
         raise ValueError(f"ranges_m {ranges.shape} and angles_rad {angles.shape} must match")
-    heard = np.isfinite(ranges)
-    reach = robot_radius_m + ranges[heard]
-    toward = angles[heard]
-    points = np.empty((len(reach), 2))
-    np.multiply(np.cos(toward), reach, out=points[:, 0])
-    np.multiply(np.sin(toward), reach, out=points[:, 1])
+    points = echo_list(ranges.tolist(), np.cos(angles).tolist(), np.sin(angles).tolist(), robot_radius_m)
+    return np.array(points, dtype=float).reshape(-1, 2)
+
+
+def echo_list(
+    ranges: list[float], cos: list[float], sin: list[float], robot_radius_m: float
+) -> list[tuple[float, float]]:
+    """``echo_points`` in plain floats, given the cosines and sines of the sensors' angles (a robot's ring is
+    fixed, so it works them out once): a pilot step handles eight echoes, where numpy's per-call overhead is
+    most of the cost."""
+    points = []
+    for r, c, s in zip(ranges, cos, sin, strict=True):
+        if math.isfinite(r):
+            reach = robot_radius_m + r
+            points.append((c * reach, s * reach))
     return points
 
 
@@ -237,36 +252,60 @@ def sense_many(
     names: list[str], xy: np.ndarray, echoes: np.ndarray, human_id: str, config: SensingConfig
 ) -> SurroundSensing:
     """``sense`` with the beacons as arrays: ``names`` (k) at ``xy`` (k, 2)."""
+    xy = np.asarray(xy, dtype=float).reshape(-1, 2)
     echoes = np.asarray(echoes, dtype=float).reshape(-1, 2)
+    neighbours, obstacles, human, dropped = sense_lists(names, xy, echoes.tolist(), human_id, config)
+    return SurroundSensing(
+        np.array(neighbours, dtype=float).reshape(-1, 2),
+        np.array(obstacles, dtype=float).reshape(-1, 2),
+        None if human is None else np.array(human),
+        dropped,
+    )
+
+
+Point = tuple[float, float]
+
+
+def sense_lists(
+    names: list[str], xy: np.ndarray, echoes: list[Point], human_id: str, config: SensingConfig
+) -> tuple[list[list[float]], list[Point], list[float] | None, int]:
+    """``sense_many`` in plain floats (what a pilot step runs): the beacons ``names`` at ``xy`` (k, 2), the
+    echo points; returns the neighbours, the obstacle points, the human (or None) and how many echoes a
+    beacon explained."""
+    rows = xy.tolist()
     at = names.index(human_id) if human_id in names else None
-    if at is None:
-        human, neighbours = None, xy
-    else:
-        human = xy[at]
-        neighbours = np.concatenate([xy[:at], xy[at + 1 :]])
-    explained_count = 0
+    human = None if at is None else rows[at]
+    neighbours = rows if at is None else rows[:at] + rows[at + 1 :]
     obstacles = echoes
-    if len(echoes) and len(xy):
+    if echoes and rows:
         # an echo within a beacon's body (its radius plus the slack) came off it
         radius = config.robot_radius_m + config.echo_match_m
-        reach = np.full(len(xy), radius)
-        if at is not None:
-            reach[at] = config.person_radius_m + config.echo_match_m
-        gap = echoes[:, None, :] - xy[None, :, :]
-        explained = np.logical_or.reduce(np.sqrt(np.add.reduce(gap * gap, axis=-1)) <= reach, axis=1)
-        explained_count = int(np.count_nonzero(explained))
-        if explained_count:
-            obstacles = echoes[~explained]
-    if human is not None:
-        obstacles = np.concatenate([obstacles, _surface_toward_me(human, config.person_radius_m)[None]])
-    return SurroundSensing(neighbours, obstacles, human, explained_count)
+        person = config.person_radius_m + config.echo_match_m
+        reaches = [person if j == at else radius for j in range(len(rows))]
+        obstacles = [p for p in echoes if not _explained(p, rows, reaches)]
+    dropped = len(echoes) - len(obstacles)
+    if at is not None:
+        obstacles = [*obstacles, _surface_toward_me(xy[at], config.person_radius_m)]
+    return neighbours, obstacles, human, dropped
 
 
-def _surface_toward_me(centre: np.ndarray, radius: float) -> np.ndarray:
+def _explained(point: Point, centres: list[list[float]], reaches: list[float]) -> bool:
+    """Whether ``point`` lies within one of the bodies (centre and reach)."""
+    x, y = point
+    for (cx, cy), reach in zip(centres, reaches, strict=True):
+        gx, gy = x - cx, y - cy
+        if math.sqrt(gx * gx + gy * gy) <= reach:
+            return True
+    return False
+
+
+def _surface_toward_me(centre: np.ndarray, radius: float) -> Point:
     """The point of a disc's surface nearest the robot; a centre estimated inside the disc's radius (the robot
     pressed against him, or a short estimate) puts it a hair in front of the robot, pushing straight away."""
-    distance = math.sqrt(float(centre.dot(centre)))
+    distance = math.sqrt(float(centre.dot(centre)))  # numpy's dot, as ever: its rounding is the record's
     if distance <= 1e-9:
-        return np.zeros(2)
+        return (0.0, 0.0)
     reach = max(distance - radius, 0.01)
-    return centre * (reach / distance)
+    x, y = centre.tolist()
+    scale = reach / distance
+    return (x * scale, y * scale)

@@ -45,9 +45,12 @@ SENSORS_EVERY = 2
 """World ticks per robot sensor message (50 Hz ticks: sensors at 25 Hz)."""
 PUBLISH_EVERY = 5
 """World ticks per world publication for viewers (10 Hz)."""
-BEACONS_EVERY = 5
-"""IR sweeps per beacon sweep (100 Hz sweeps: beacons at 20 Hz; 20 robots x 19 sources at 100 Hz would swamp
-the nodes)."""
+BEACONS_EVERY = SENSORS_EVERY
+"""World ticks per beacon sweep: beacons are swept with the body sensors (25 Hz), so a robot, which steps on
+each sample, steps on the sweep of its own instant. (They were meant to go at 20 Hz, every fifth IR sweep, but
+the count divided was of receive sweeps, which stays 0 in the surround formation: they went at every IR
+period, 100 Hz, of which a robot used the one at its sample's instant. A true 20 Hz gave the cylinder a
+contact on seed 1, its fixes up to 50 ms old and beating against the 25 Hz steps.)"""
 
 
 HUB = "hub"
@@ -272,10 +275,11 @@ class Environment:
         chaos = self.medium.chaos
         for node_id, readings in self.ir.receive_sweep(poses, chaos).items():
             self._send_down(node_id, wire.IrSample(readings=readings.astype("<f4").tobytes(), t_us=now))
-        if self.ir.sweeps % BEACONS_EVERY == 0:
-            for node_id, (sources, block, gains) in self.ir.beacon_sweep(poses, chaos).items():
-                readings = block.astype("<f4", copy=False).tobytes()
-                self._send_down(node_id, wire.IrBeacons(sources=sources, readings=readings, t_us=now, gains=gains))
+
+    def _sweep_beacons(self, now: int) -> None:
+        for node_id, (sources, block, gains) in self.ir.beacon_sweep(self.world.poses(), self.medium.chaos).items():
+            readings = block.astype("<f4", copy=False).tobytes()
+            self._send_down(node_id, wire.IrBeacons(sources=sources, readings=readings, t_us=now, gains=gains))
 
     def _tick_world(self) -> None:
         now = self.now_us()
@@ -292,6 +296,8 @@ class Environment:
                 node.position = (float(body.pose[0]), float(body.pose[1]))
         if self._ticks % SENSORS_EVERY == 0:
             self._send_sensors(now)
+        if self._ticks % BEACONS_EVERY == 0:
+            self._sweep_beacons(now)
         if self._world_log is not None or self._ticks % PUBLISH_EVERY == 0:
             self._record_world(now)
 
@@ -718,6 +724,7 @@ class Environment:
             "ir": {
                 **self.ir.counter.as_dict(self.now_us()),
                 "sweeps": self.ir.sweeps,
+                "beacon_sweeps": self.ir.beacon_sweeps,
                 "config": self.ir.config.to_dict(),
             },
             "world_model": {

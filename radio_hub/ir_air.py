@@ -26,6 +26,9 @@ class IrAir:
         self.counter = OverlapCounter()
         self.period_us = max(round(1e6 / config.sample_rate_hz), 1)
         self.sweeps = 0
+        """Receive sweeps made (the periodic sweeps while something transmits)."""
+        self.beacon_sweeps = 0
+        """Beacon sweeps made (the environment asks for them, with the body sensors)."""
         self.power: dict[str, float] = {}
         """Beacons brighter than a robot's module, by node (the person's: ``PERSON_BEACON_POWER``)."""
         self._next_us: int | None = None
@@ -79,6 +82,7 @@ class IrAir:
         names = [n for n, mode in self.counter.modes.items() if mode is IrMode.BEACON and n in poses]
         if len(names) < 2:
             return {}
+        self.beacon_sweeps += 1
         at = np.array([poses[n] for n in names], dtype=float)
         dx = at[None, :, 0] - at[:, None, 0]
         dy = at[None, :, 1] - at[:, None, 1]
@@ -134,8 +138,8 @@ class IrAir:
         return readings
 
     def _schedule(self, now_us: int) -> None:
-        beacons = sum(mode is IrMode.BEACON for mode in self.counter.modes.values())
-        if not self.counter.transmitters and beacons < 2:
+        # beacons are swept with the body sensors, on the world's ticks: only transmitters need the sweeps
+        if not self.counter.transmitters:
             self._next_us = None
         elif self._next_us is None:
             self._next_us = now_us + self.period_us

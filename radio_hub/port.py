@@ -126,7 +126,7 @@ class BeaconSweep:
 
     Made from maps (``BeaconSweep(t_us, readings, gains)``) or, as it comes off the air, from one (sources, 12)
     block (``of_block``); either way ``readings``/``gains`` are the maps and ``arrays()`` the block, each
-    worked out from the other only when asked for (a robot reads the block, 20 to 100 times a second)."""
+    worked out from the other only when asked for (a robot reads the block on each body-sensor sample, 25 Hz)."""
 
     __slots__ = ("_block", "_gain_list", "_gains", "_readings", "_sources", "t_us")
 
