@@ -23,7 +23,7 @@ def _run(tmp: Path, clock: str, *extra: str) -> dict:
         cwd=ROOT,
     )
     assert done.stdout, done.stderr[-2000:]
-    return json.loads(done.stdout)
+    return _with_exit_codes(json.loads(done.stdout), tmp / clock)
 
 
 @pytest.mark.timeout(400)
@@ -70,7 +70,7 @@ def _scenario(tmp: Path, scenario: str, clock: str, seed: int) -> dict:
     argv = [sys.executable, "-m", "cli", "run", scenario, "--seed", str(seed), "--clock", clock, "--json"]
     done = subprocess.run([*argv, "--record", str(tmp / clock)], capture_output=True, text=True, timeout=880, cwd=ROOT)
     assert done.stdout, done.stderr[-2000:]
-    return json.loads(done.stdout)
+    return _with_exit_codes(json.loads(done.stdout), tmp / clock)
 
 
 CONNECTED_FRACTION = 0.95
@@ -92,3 +92,8 @@ def test_twenty_surround_robot_processes_pass_the_cylinder_within_the_original_b
     assert driving["connected_at_end"], driving["connected_fraction"]
     assert driving["connected_fraction"] >= CONNECTED_FRACTION, driving["connected_fraction"]
     assert driving["centre_to_user_end_m"] < KEEP_UP_M, driving["centre_to_user_end_m"]
+
+
+def _with_exit_codes(summary: dict, record: Path) -> dict:
+    """The printed summary, with the processes' exit codes that the record's summary.json adds at the end."""
+    return {**summary, "exit_codes": json.loads((record / "summary.json").read_text()).get("exit_codes", {})}
