@@ -26,8 +26,7 @@ from radio_hub.ble import MAX_PAYLOAD as BLE_MAX_PAYLOAD
 from radio_hub.guard import Faults
 from radio_hub.keys import DEFAULT_ENDPOINT, DEFAULT_WORLD, check_name
 from radio_hub.light import RECEIVERS as IR_RECEIVERS
-from radio_hub.mac import BROADCAST, Frame, FrameError, FrameType
-from radio_hub.medium import TxStatus
+from radio_hub.mac import BROADCAST, Frame, FrameError, FrameType, TxStatus
 
 MODEL_EPOCH_S = 1_700_000_000.0
 """The wall-clock time model and lockstep runs report for model time 0, on both sides (a fixed date: records of
