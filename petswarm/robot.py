@@ -18,11 +18,11 @@ from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import msgpack
-import numpy as np
 import zenoh
 
 from petswarm import clock
 from petswarm.control import all_robots_key, answer_relayed, guarded_handle, robot_key
+from petswarm.draws import Draws
 from petswarm.driving import Driver
 from petswarm.exchange import MessageProcessingManager
 from petswarm.formation import RESPONSES, FormationConfig, FormationError, NetworkFormation, Swarm
@@ -122,7 +122,8 @@ class Robot:
     def __init__(self, config: RobotConfig, radio: RadioClient) -> None:
         self.config = config
         self.rf = RfCommunicationManager(radio)
-        self.rng = np.random.default_rng([config.seed, config.robot_id])
+        # numpy's default_rng draws, without loading numpy.random into every robot process
+        self.rng = Draws([config.seed, config.robot_id])
         self.log = EventLog(sink=open(config.record, "a", encoding="utf-8") if config.record else None)  # noqa: SIM115
         self.sequence = SequenceManager(self.log, RobotState.FOLLOWING if config.user else RobotState.WAITING)
         self.mpm = MessageProcessingManager(self.log)

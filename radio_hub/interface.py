@@ -13,8 +13,7 @@ from __future__ import annotations
 from radio_hub.config import MediumConfig, airtime_us
 from radio_hub.keys import DEFAULT_ENDPOINT, DEFAULT_WORLD, Keys
 from radio_hub.light import IrConfig
-from radio_hub.mac import BROADCAST, MAX_PSDU, Frame, FrameError, FrameType, max_payload
-from radio_hub.medium import TxStatus
+from radio_hub.mac import BROADCAST, MAX_PSDU, Frame, FrameError, FrameType, TxStatus, max_payload
 from radio_hub.port import (
     MODEL_EPOCH_S,
     REQUEST_TIMEOUT_S,

@@ -30,16 +30,17 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import zenoh
 
 from radio_hub import wire
-from radio_hub.coordinator import MODEL_EPOCH_US, Coordinator
-from radio_hub.environment import EnvironmentConfig, process_usage
 from radio_hub.keys import Keys
 from radio_hub.port import HubUnavailable
 from radio_hub.zenoh_link import HubDownlink, ZenohLink, declare_hub_keys, reliable_publisher, reply, session_config
+
+if TYPE_CHECKING:
+    from radio_hub.environment import EnvironmentConfig
 
 DEAD_AFTER_S = 10.0
 """Wall seconds the hub waits for a granted node's idle before it takes the node as gone."""
@@ -166,6 +167,9 @@ class LockstepHub:
     ) -> None:
         """``expect``: model time starts once this many nodes have reported idle (a run's robots, its user and
         its orchestrator), so every node attaches in the first instant whatever order processes start in."""
+        # the hub's side is imported here: a lockstep node process (a robot) needs only LockstepLink
+        from radio_hub.coordinator import MODEL_EPOCH_US, Coordinator
+
         self.endpoint = endpoint
         self.keys = Keys(world)
         self.seed = seed
@@ -243,6 +247,8 @@ class LockstepHub:
             "nodes": len(self.nodes),
             "dead": self.dead,
         }
+        from radio_hub.environment import process_usage
+
         stats["process"] = process_usage()
         return stats
 

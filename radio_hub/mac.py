@@ -131,3 +131,13 @@ def max_payload(pan_compressed: bool = True) -> int:
 
 ACK_PSDU_LEN = 5
 """Frame control (2), sequence number (1), FCS (2)."""
+
+
+class TxStatus(enum.StrEnum):
+    """The MAC's answer to a data request (MCPS-DATA.confirm); here, not in ``medium``, so a robot process
+    that only reads the answer does not load the medium (numpy, propagation, chaos)."""
+
+    SUCCESS = "success"
+    NO_ACK = "no_ack"
+    CHANNEL_ACCESS_FAILURE = "channel_access_failure"
+    REFUSED = "refused"

@@ -26,7 +26,7 @@ import numpy as np
 
 from radio_hub.chaos import Chaos
 from radio_hub.config import CHANNELS, MediumConfig, airtime_us
-from radio_hub.mac import BROADCAST, MAX_PSDU, Frame, FrameError, FrameType
+from radio_hub.mac import BROADCAST, MAX_PSDU, Frame, FrameError, FrameType, TxStatus
 from radio_hub.propagation import (
     GilbertElliott,
     Position,
@@ -39,15 +39,6 @@ from radio_hub.propagation import (
 # Receptions are judged against every transmission that could still overlap them.
 _AIR_HORIZON_US = airtime_us(MAX_PSDU) * 2
 _ACK_AIRTIME_US = airtime_us(len(Frame(FrameType.ACK, 0).encode()))
-
-
-class TxStatus(enum.StrEnum):
-    """The MAC's answer to a data request (MCPS-DATA.confirm)."""
-
-    SUCCESS = "success"
-    NO_ACK = "no_ack"
-    CHANNEL_ACCESS_FAILURE = "channel_access_failure"
-    REFUSED = "refused"
 
 
 class RxOutcome(enum.StrEnum):

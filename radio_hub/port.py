@@ -13,7 +13,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import itertools
-import secrets
+import os
 from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -26,8 +26,7 @@ from radio_hub.ble import MAX_PAYLOAD as BLE_MAX_PAYLOAD
 from radio_hub.guard import Faults
 from radio_hub.keys import DEFAULT_ENDPOINT, DEFAULT_WORLD, check_name
 from radio_hub.light import RECEIVERS as IR_RECEIVERS
-from radio_hub.mac import BROADCAST, Frame, FrameError, FrameType
-from radio_hub.medium import TxStatus
+from radio_hub.mac import BROADCAST, Frame, FrameError, FrameType, TxStatus
 
 MODEL_EPOCH_S = 1_700_000_000.0
 """The wall-clock time model and lockstep runs report for model time 0, on both sides (a fixed date: records of
@@ -254,8 +253,10 @@ class RadioClient:
         self._down_seq = 0
         self._dsn = itertools.count()
         node_id = identity.node_id
-        self.instance = secrets.token_hex(8)
-        self.session_key = secrets.randbits(63) or 1
+        # os.urandom as secrets does, without secrets: it brings hmac, random and base64 (with them OpenSSL's
+        # _hashlib) into every node process, about 0.5 MB of RSS
+        self.instance = os.urandom(8).hex()
+        self.session_key = (int.from_bytes(os.urandom(8), "big") >> 1) or 1  # 63 random bits, never 0
         """Sent with every message: the hub refuses this id's messages with any other key while we are
         attached (someone else's session speaking for us)."""
         self.reattaches = 0
