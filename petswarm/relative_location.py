@@ -1,43 +1,44 @@
-"""Relative location by infrared: the IR module manager, the token schedule and the neighbour table.
+"""Relative location by infrared, the robot's side: the IR module manager, the token schedule's runtime and
+the neighbour table.
 
-Only one robot may shine at a time, and robots share no clock, so transmission passes round the swarm
-with a token carried by the radio (paper Fig. 7). One *round* belongs to one holder:
-
-1. the holder broadcasts the transmission-start sign (``IrStart``) and waits for every member's answer
-   (a message-processing step: deadline, retries of the missing); members switch to receive and open a
-   measurement window; the holder's neighbours send it their heading;
-2. the holder transmits IR for ``slot_s``, then switches its module off;
-3. it broadcasts the token (``Token``) naming the next holder and waits for the answers; each member
-   closes its window, estimates bearing and distance of the holder from the mean readings, and answers;
-4. it broadcasts ``Sync`` for the next round; the robot it names starts that round at step 1.
-
-A holder only starts after the previous one has switched off and said so, so two modules never shine
-at once while the radio works. When the token is lost (a Sync lost, the holder killed), nothing happens
-for ``regen_timeout_s``; then the master regenerates it with a higher round number, skipping members that
-stopped answering. A holder that hears the start sign of a higher round stops at once.
+The schedule's rules live in ``petswarm.token_schedule.TokenSchedule``, a sans-IO core (events and ``now``
+in, actions out; its docstring tells the rounds, the answer slots and the regeneration of a lost token).
+``IrTokenSchedule`` here is the thin asyncio runtime around it: it feeds the core the radio's messages, the
+formation's changes and its timers, and carries out the actions it returns (sends, IR mode switches, the
+measurement window, the table). It reads time only through ``petswarm.clock.now()`` and the loop's timers.
+``RelativeLocationManager`` (the table) and ``IrWindow`` (one measurement window) are plain objects too.
 """
 
 from __future__ import annotations
 
 import asyncio
 import math
-from collections.abc import Callable
-from dataclasses import dataclass, field
+from collections.abc import Callable, Coroutine
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from petswarm import clock
 from petswarm import messages as m
-from petswarm.decisions import reply_delay_s
-from petswarm.exchange import MessageProcessingManager, StepTiming
-from petswarm.ir_estimator import IrEstimate, estimate
+from petswarm import token_schedule as ts
+from petswarm.exchange import MessageProcessingManager
+from petswarm.ir_estimator import IrEstimate
 from petswarm.rf import Incoming, RfCommunicationManager
 from petswarm.sequence import EventLog
-from radio_hub.interface import BROADCAST, IrConfig, RadioClient
+from petswarm.token_schedule import ANSWER_SLOT_MS, TokenConfig, TokenSchedule, next_holder
+from radio_hub.interface import IrConfig, RadioClient
 
-ANSWER_SLOT_MS = 3
-"""Members answer the holder's start sign and token in slots of this length, in member order."""
+__all__ = [
+    "ANSWER_SLOT_MS",
+    "IrModuleManager",
+    "IrTokenSchedule",
+    "IrWindow",
+    "NeighbourFix",
+    "RelativeLocationManager",
+    "TokenConfig",
+    "next_holder",
+]
 
 
 @dataclass
@@ -53,30 +54,30 @@ class NeighbourFix:
 
 
 class RelativeLocationManager:
-    """Per neighbour, the latest IR fix and heading, for the controllers to read."""
+    """Per neighbour, the latest IR fix and heading, for the controllers to read. A plain object: every
+    change says when it happened."""
 
     def __init__(self) -> None:
         self.table: dict[int, NeighbourFix] = {}
 
-    def record_fix(self, addr: int, fix: IrEstimate) -> None:
-        """A new bearing and distance of ``addr``."""
+    def record_fix(self, addr: int, fix: IrEstimate, now: float) -> None:
+        """A new bearing and distance of ``addr``, taken at ``now``."""
         entry = self.table.setdefault(addr, NeighbourFix())
         entry.bearing_rad, entry.distance_m = float(fix.bearing_rad), float(fix.distance_m)
-        entry.fixed_at = clock.now()
+        entry.fixed_at = now
         entry.fixes += 1
 
-    def record_heading(self, addr: int, heading_deg: float) -> None:
-        """``addr`` told us its heading."""
+    def record_heading(self, addr: int, heading_deg: float, now: float) -> None:
+        """``addr`` told us its heading at ``now``."""
         entry = self.table.setdefault(addr, NeighbourFix())
-        entry.heading_deg, entry.heading_at = heading_deg, clock.now()
+        entry.heading_deg, entry.heading_at = heading_deg, now
 
     def clear(self) -> None:
         """Forget everyone (the swarm ended)."""
         self.table.clear()
 
-    def snapshot(self) -> dict[str, dict[str, Any]]:
-        """The table with ages in seconds, bearings in degrees; keys are short addresses as text."""
-        now = clock.now()
+    def snapshot(self, now: float) -> dict[str, dict[str, Any]]:
+        """The table with ages at ``now`` in seconds, bearings in degrees; keys are short addresses as text."""
         out = {}
         for addr, e in self.table.items():
             out[str(addr)] = {
@@ -90,72 +91,84 @@ class RelativeLocationManager:
         return out
 
 
+class IrWindow:
+    """One measurement window: the sweeps that arrive while it is open, and their mean once it closes."""
+
+    def __init__(self) -> None:
+        self._sweeps: list[np.ndarray] | None = None
+
+    @property
+    def is_open(self) -> bool:
+        """True while sweeps are being collected."""
+        return self._sweeps is not None
+
+    def open(self) -> None:
+        """Start collecting (afresh)."""
+        self._sweeps = []
+
+    def add(self, readings: np.ndarray) -> None:
+        """A sweep arrived: kept only while the window is open."""
+        if self._sweeps is not None:
+            self._sweeps.append(readings)
+
+    def close(self) -> tuple[np.ndarray | None, int]:
+        """Stop collecting; the mean readings (None when no sweep came) and the number of sweeps."""
+        sweeps, self._sweeps = self._sweeps, None
+        if not sweeps:
+            return None, 0
+        return np.mean(sweeps, axis=0), len(sweeps)
+
+
 class IrModuleManager:
     """Switches the IR module and gathers the sweeps of one measurement window."""
 
     def __init__(self, radio: RadioClient) -> None:
         self.radio = radio
         self.mode = "idle"
-        self._window: list[np.ndarray] | None = None
+        self.window = IrWindow()
+
+    def note(self, mode: str) -> bool:
+        """Take ``mode`` as the module's; True when the hub must be told (it was in another mode)."""
+        if mode == self.mode:
+            return False
+        # noted before the request goes: the hub applies one node's requests in order, so a later switch
+        # (say to idle after a cancellation) is never skipped
+        self.mode = mode
+        return True
 
     async def set_mode(self, mode: str) -> None:
         """Switch the module (a no-op when it is already in ``mode``)."""
-        if mode != self.mode:
-            # noted before the await: the request is on its way, and the hub applies one node's requests
-            # in order, so a later switch (say to idle after a cancellation) is never skipped
-            self.mode = mode
+        if self.note(mode):
             await self.radio.set_ir_mode(mode)
 
     def open_window(self) -> None:
         """Start collecting sweeps."""
-        self._window = []
+        self.window.open()
 
     def close_window(self) -> tuple[np.ndarray | None, int]:
         """Stop collecting; the mean readings (None when no sweep came) and the number of sweeps."""
-        window, self._window = self._window, None
-        if not window:
-            return None, 0
-        return np.mean(window, axis=0), len(window)
+        return self.window.close()
 
     async def run(self) -> None:
         """Take every sweep the hub sends; keep those inside an open window."""
         while True:
             sweep = await self.radio.ir_sample()
-            if self._window is not None:
-                self._window.append(sweep.readings)
+            self.window.add(sweep.readings)
 
 
-@dataclass(frozen=True)
-class TokenConfig:
-    """Timing of the token schedule and the estimator the robot uses."""
-
-    slot_s: float = 0.1
-    """How long each holder shines: ten sweeps at the module's 100 Hz."""
-    step: StepTiming = field(default_factory=lambda: StepTiming(0.05, 3))
-    estimator: str = "lsq"
-
-    @property
-    def regen_timeout_s(self) -> float:
-        """Silence after which the master regenerates a lost token: three times the longest a live
-        holder's round can take (shine, and both steps with every retry): 1.5 s at the defaults."""
-        worst_round = self.slot_s + 2 * (self.step.max_retries + 1) * self.step.deadline_s
-        return 3 * worst_round
-
-
-def next_holder(chain: tuple[int, ...], me: int, alive: set[int]) -> int:
-    """The next robot after ``me`` in member order that answered this round (``me`` if nobody did)."""
-    if me not in chain:
-        return chain[0] if chain else me  # a member that has not had a roster yet hands back to the master
-    start = chain.index(me)
-    for step in range(1, len(chain)):
-        candidate = chain[(start + step) % len(chain)]
-        if candidate in alive:
-            return candidate
-    return me
+IoStep = Coroutine[Any, Any, None]
 
 
 class IrTokenSchedule:
-    """The relative-location identification manager's schedule, run by every member of a swarm."""
+    """The token schedule's asyncio runtime, run by every member of a swarm: the shell of a ``TokenSchedule``.
+
+    Each event goes to the core with ``clock.now()``; the actions it returns are carried out in order. An
+    action that does I/O (a send, a mode switch) runs as a coroutine that reports its end to the core and
+    carries out what that brings on in the same task, as one sequential coroutine would; the first such
+    action of a batch runs in the caller's task, later ones in tasks of their own. Every wakeup the core
+    wants gets a loop timer of its own (cancelled when the core drops it), and a timer's wakeup is handled
+    in a task, one hop after the timer, as a coroutine's ``asyncio.sleep`` would be.
+    """
 
     def __init__(
         self,
@@ -173,222 +186,223 @@ class IrTokenSchedule:
         self.heading_deg = heading_deg
         self.on_answers = on_answers
         """Told, after each start sign this robot sent, who answered and who stayed silent."""
-        self.ir_config = IrConfig()  # the module's calibration (its datasheet), not the hub's truth
-        self.session = 0
-        self.chain: tuple[int, ...] = ()
-        self.neighbours: tuple[int, ...] = ()
-        self.is_master = False
-        self.round = 0
-        self.rounds_held = 0
-        self.fixes = 0
-        self.regenerations = 0
-        self.last_activity = clock.now()
-        self._window_of: tuple[int, int] | None = None
-        self._holding: asyncio.Task[None] | None = None
+        self.core = TokenSchedule(rf.radio.identity.short_addr, config, clock.now(), IrConfig())
+        self._timers: dict[int, asyncio.TimerHandle] = {}
+        self._tasks: set[asyncio.Task[None]] = set()
+        self._counted = (0, 0)
+        """The core's retries and duplicates already added to the message-processing manager's counts."""
+
+    # -- the core's state, read by the robot and the tests --------------------------------------------
 
     @property
     def me(self) -> int:
         """This robot's short address."""
-        return self.rf.radio.identity.short_addr
+        return self.core.me
 
     @property
     def active(self) -> bool:
         """True while this robot belongs to a swarm."""
-        return bool(self.session)
+        return self.core.active
+
+    @property
+    def session(self) -> int:
+        """The swarm's session (0: none)."""
+        return self.core.session
+
+    @property
+    def chain(self) -> tuple[int, ...]:
+        """The members in token order, master first."""
+        return self.core.chain
+
+    @property
+    def is_master(self) -> bool:
+        """True when this robot regenerates a lost token."""
+        return self.core.is_master
+
+    @property
+    def round(self) -> int:
+        """The highest round seen."""
+        return self.core.round
+
+    @property
+    def last_activity(self) -> float:
+        """When the schedule was last heard or moved (the master's silence clock)."""
+        return self.core.last_activity
+
+    # -- the formation's events -----------------------------------------------------------------------
 
     def join(self, session: int, chain: tuple[int, ...], neighbours: tuple[int, ...], is_master: bool) -> None:
         """Take part in the schedule of a swarm (the master starts the first round)."""
-        self.session, self.chain, self.neighbours, self.is_master = session, chain, neighbours, is_master
-        self.round = 0
-        self.last_activity = clock.now()
-        self.log.record("ir_schedule", session=session, chain=list(chain), master=is_master)
-        if is_master:
-            self._hold(1)
+        self._start(self.core.join(session, chain, neighbours, is_master, clock.now()))
 
     def update_members(self, chain: tuple[int, ...], neighbours: tuple[int, ...]) -> None:
         """The roster changed."""
-        self.chain, self.neighbours = chain, neighbours
+        self._start(self.core.update_members(chain, neighbours))
 
     def rejoin(self, chain: tuple[int, ...], neighbours: tuple[int, ...], is_master: bool) -> None:
-        """The master's role moved within the running swarm (a handover): the new chain and master flag.
-        The round count is kept (members ignore start signs of older rounds) and the token keeps passing
-        where it is; only who regenerates a lost token changes."""
-        self.chain, self.neighbours, self.is_master = chain, neighbours, is_master
-        self.last_activity = clock.now()
-        self.log.record("ir_schedule", session=self.session, chain=list(chain), master=is_master, rejoined=True)
+        """The master's role moved within the running swarm (a handover); see ``TokenSchedule.rejoin``."""
+        self._start(self.core.rejoin(chain, neighbours, is_master, clock.now()))
 
     async def leave(self) -> None:
         """The swarm is over: stop holding, module off, forget the table."""
-        self.session = 0
-        if self._holding is not None:
-            self._holding.cancel()
-        self.ir.close_window()
-        self._window_of = None
-        self.locations.clear()
-        await self.ir.set_mode("idle")
+        await self._run(self.core.leave(clock.now()))
 
-    # -- holding the token ------------------------------------------------------------------------
-
-    def _hold(self, round_: int) -> None:
-        if self._holding is not None and not self._holding.done():
-            self._holding.cancel()
-        self.round = round_
-        self._holding = asyncio.get_running_loop().create_task(self._round(round_))
-        self._holding.add_done_callback(self._round_ended)
-
-    def _round_ended(self, task: asyncio.Task[None]) -> None:
-        if not task.cancelled() and task.exception() is not None:
-            err = task.exception()
-            self.log.record("error", where="ir_round", error=f"{type(err).__name__}: {err}")
-
-    async def _round(self, round_: int) -> None:
-        session, others = self.session, set(self.chain) - {self.me}
-        self.last_activity = clock.now()
-
-        async def start(_: set[int] | None) -> None:
-            await self.rf.send(BROADCAST, m.IrStart(session, round_), ack=False)
-
-        begun = await self.mpm.step("ir_start", session, (m.IrStartAck,), start, others, self.config.step)
-        if self.round != round_ or not self.active:
-            return  # overtaken by a higher round while we waited
-        alive = set(begun.responses)
-        self.on_answers(alive, others - alive)
-        if others and not alive:
-            # nobody heard us: we may be the deaf one while the others pass the token; never shine blind
-            self.log.record("ir_unheard", round=round_)
-            self.last_activity = clock.now()
-            return
-        try:
-            await self.ir.set_mode("transmit")
-            await asyncio.sleep(self.config.slot_s)
-        finally:
-            await asyncio.shield(self.ir.set_mode("idle"))
-        self.rounds_held += 1
-        nxt = next_holder(self.chain, self.me, alive)
-
-        async def token(_: set[int] | None) -> None:
-            await self.rf.send(BROADCAST, m.Token(session, round_, nxt), ack=False)
-
-        await self.mpm.step("token", session, (m.TokenAck,), token, alive, self.config.step)
-        if self.round != round_ or not self.active:
-            return
-        await self.rf.send(BROADCAST, m.Sync(session, round_ + 1, nxt), ack=False)
-        self.last_activity = clock.now()
-        if nxt == self.me:
-            self._hold(round_ + 1)
-
-    # -- as a member --------------------------------------------------------------------------------
+    # -- the radio's events ---------------------------------------------------------------------------
 
     @staticmethod
     def handles(message: m.SwarmMessage) -> bool:
-        """True for the schedule's messages (requests only; answers go to the steps)."""
-        return isinstance(message, (m.IrStart, m.Token, m.Sync, m.Heading))
+        """True for the schedule's messages (requests only; answers go to ``offer``)."""
+        return TokenSchedule.handles(message)
 
     async def on_message(self, incoming: Incoming) -> None:
         """React to the holder's messages and neighbours' headings."""
-        msg = incoming.message
-        if not self.active or msg.session_id != self.session:
-            return
-        self.last_activity = clock.now()
-        if isinstance(msg, m.IrStart):
-            await self._on_start(incoming, msg)
-        elif isinstance(msg, m.Token):
-            await self._on_token(incoming, msg)
-        elif isinstance(msg, m.Sync):
-            if msg.holder == self.me and msg.round > self.round:
-                self._hold(msg.round)
-            self.round = max(self.round, msg.round)
-        elif isinstance(msg, m.Heading):
-            self.locations.record_heading(incoming.sender, msg.centideg / 100.0)
+        await self._run(self.core.receive(incoming.sender, incoming.message, clock.now()))
 
-    async def _on_start(self, incoming: Incoming, msg: m.IrStart) -> None:
-        if msg.round < self.round and self._window_of != (incoming.sender, msg.round):
-            return  # a stale start sign
-        holding = self._holding is not None and not self._holding.done()
-        if holding and (msg.round, incoming.sender) > (self.round, self.me):
-            self._holding.cancel()  # type: ignore[union-attr]  # a higher round holds: never shine together
-            self.log.record("ir_overtaken", round=msg.round, by=incoming.sender)
-        elif holding:
-            return  # the same round with a lower address yields to us: ties go to the higher address
-        self.round = max(self.round, msg.round)
-        if self._window_of != (incoming.sender, msg.round):
-            self._window_of = (incoming.sender, msg.round)
-            self.ir.open_window()
-            await self.ir.set_mode("receive")
-            if not self.active:
-                return
-        await asyncio.sleep(self._answer_slot(incoming.sender))
-        await self.rf.send(incoming.sender, m.IrStartAck(self.session, msg.round))
-        if incoming.sender in self.neighbours:
-            centideg = round(self.heading_deg() * 100) % 36000
-            await self.rf.send(incoming.sender, m.Heading(self.session, centideg))
+    def offer(self, incoming: Incoming) -> bool:
+        """An answer to this robot's start sign or token; False when no step of the schedule wants it."""
+        actions = self.core.offer(incoming, clock.now())
+        if actions is None:
+            return False
+        # the round goes on in a task of its own, as a step woken by its answer does
+        self._start(actions, later=True)
+        return True
 
-    async def _on_token(self, incoming: Incoming, msg: m.Token) -> None:
-        if self._window_of == (incoming.sender, msg.round):
-            self._measure(incoming.sender)
-        if msg.next == self.me and msg.round >= self.round:
-            self._expect_sync(msg.round + 1)
-        await asyncio.sleep(self._answer_slot(incoming.sender))
-        await self.rf.send(incoming.sender, m.TokenAck(self.session, msg.round))
-
-    def _expect_sync(self, round_: int) -> None:
-        """Named next: if the sync is lost, start our round anyway once the holder's token step is surely
-        over (it has stopped shining before it sent the token, so this never overlaps it)."""
-        wait = (self.config.step.max_retries + 2) * self.config.step.deadline_s
-
-        def fallback() -> None:
-            if self.active and self.round < round_:
-                self.log.record("sync_missed", round=round_)
-                self._hold(round_)
-
-        asyncio.get_running_loop().call_later(wait, fallback)
-
-    def _answer_slot(self, holder: int) -> float:
-        # every member answers the holder's broadcast at once otherwise, and their CSMA backoffs collide
-        others = tuple(a for a in self.chain if a != holder)
-        return reply_delay_s(self.me, ANSWER_SLOT_MS, others)
-
-    def _measure(self, holder: int) -> None:
-        readings, sweeps = self.ir.close_window()
-        self._window_of = None
-        fix = None if readings is None else estimate(readings, self.ir_config, self.config.estimator)
-        if fix is None:
-            self.log.record("ir_no_fix", holder=holder, sweeps=sweeps)
-            return
-        self.locations.record_fix(holder, fix)
-        self.fixes += 1
-        self.log.record(
-            "ir_fix",
-            holder=holder,
-            round=self.round,
-            sweeps=sweeps,
-            bearing_deg=round(math.degrees(fix.bearing_rad), 4),
-            distance_m=round(fix.distance_m, 5),
-        )
-
-    # -- a lost token -------------------------------------------------------------------------------
+    # -- time -----------------------------------------------------------------------------------------
 
     async def watch(self) -> None:
-        """The master regenerates the token after ``regen_timeout_s`` of silence."""
-        while True:
-            await asyncio.sleep(0.05)
-            if not self.rf.radio.hub_present:
-                self.last_activity = clock.now()  # no air, no token to lose
-                continue
-            silent = clock.now() - self.last_activity > self.config.regen_timeout_s
-
-            if self.active and self.is_master and silent:
-                self.regenerations += 1
-                self.log.record("token_regenerated", round=self.round + 1)
-                self._hold(self.round + 1)
+        """Run the core's timers (its watch for a lost token among them) until cancelled."""
+        try:
+            self._start(self.core.start(clock.now()))
+            await asyncio.Event().wait()
+        finally:
+            for timer in self._timers.values():
+                timer.cancel()
+            for task in list(self._tasks):
+                task.cancel()
 
     def status(self) -> dict[str, Any]:
         """For the robot's status answer."""
-        return {
-            "round": self.round,
-            "rounds_held": self.rounds_held,
-            "fixes": self.fixes,
-            "regenerations": self.regenerations,
-            "ir_mode": self.ir.mode,
-            "chain": list(self.chain),
-        }
+        return {**self.core.status(), "ir_mode": self.ir.mode}
+
+    # -- carrying out actions -------------------------------------------------------------------------
+
+    def _start(self, actions: list[ts.Action], later: bool = False) -> None:
+        """Carry out ``actions`` from plain code: I/O in tasks (all of it in one task, ``later``)."""
+        if later:
+            self._spawn(self._run(actions))
+            return
+        for step in self._do(actions):
+            self._spawn(step)
+
+    async def _run(self, actions: list[ts.Action]) -> None:
+        """Carry out ``actions``; the first I/O in this task, the rest in tasks of their own."""
+        steps = self._do(actions)
+        for step in steps[1:]:
+            self._spawn(step)
+        if steps:
+            await steps[0]
+
+    def _do(self, actions: list[ts.Action]) -> list[IoStep]:
+        """Carry out what needs no waiting, in order; the I/O as coroutines, in order."""
+        self._after_core()
+        steps: list[IoStep] = []
+        for action in actions:
+            steps += self._do_one(action)
+        return steps
+
+    def _do_one(self, action: ts.Action) -> list[IoStep]:
+        if isinstance(action, ts.Send):
+            return [self._send(action)]
+        if isinstance(action, ts.SendHeading):
+            return [self._send_heading(action)]
+        if isinstance(action, ts.SetIrMode):
+            if self.ir.note(action.mode):
+                return [self._switch(action)]
+            return [] if action.ref is None else self._do(self.core.mode_set(action.ref, clock.now()))
+        if isinstance(action, ts.CloseWindow):
+            readings, sweeps = self.ir.close_window()
+            return self._do(self.core.measured(action.holder, readings, sweeps, clock.now()))
+        self._apply(action)
+        return []
+
+    def _apply(self, action: ts.Action) -> None:
+        if isinstance(action, ts.OpenWindow):
+            self.ir.open_window()
+        elif isinstance(action, ts.DropWindow):
+            self.ir.close_window()
+        elif isinstance(action, ts.RecordFix):
+            self.locations.record_fix(action.addr, action.fix, action.at)
+        elif isinstance(action, ts.RecordHeading):
+            self.locations.record_heading(action.addr, action.heading_deg, action.at)
+        elif isinstance(action, ts.ForgetTable):
+            self.locations.clear()
+        elif isinstance(action, ts.Answers):
+            self.on_answers(action.answered, action.silent)
+        elif isinstance(action, ts.Log):
+            self.log.record(action.kind, **action.detail)
+
+    async def _send(self, action: ts.Send) -> None:
+        try:
+            await self.rf.send(action.dst, action.message, ack=action.ack)
+        except Exception as err:  # the hub went away mid-send: what waited for it is given up, never crashes
+            await self._failed(action.ref, "ir_send", err)
+            return
+        if action.ref is not None:
+            await self._run(self.core.sent(action.ref, clock.now()))
+
+    async def _send_heading(self, action: ts.SendHeading) -> None:
+        centideg = round(self.heading_deg() * 100) % 36000
+        try:
+            await self.rf.send(action.dst, m.Heading(action.session, centideg))
+        except Exception as err:  # as in _send
+            await self._failed(None, "ir_heading", err)
+
+    async def _switch(self, action: ts.SetIrMode) -> None:
+        try:
+            await self.ir.radio.set_ir_mode(action.mode)
+        except Exception as err:  # as in _send
+            await self._failed(action.ref, "ir_mode", err)
+            return
+        if action.ref is not None:
+            await self._run(self.core.mode_set(action.ref, clock.now()))
+
+    async def _failed(self, ref: int | None, where: str, err: Exception) -> None:
+        self.log.record("error", where=where, error=f"{type(err).__name__}: {err}")
+        if ref is not None:
+            await self._run(self.core.failed(ref, clock.now()))
+
+    # -- timers and tasks -----------------------------------------------------------------------------
+
+    def _after_core(self) -> None:
+        """Bring the loop's timers in line with the core's wakeups; add its new counts to the manager's."""
+        wanted = self.core.timers()
+        for wid in [wid for wid in self._timers if wid not in wanted]:
+            self._timers.pop(wid).cancel()
+        loop = asyncio.get_running_loop()
+        for wid, when in wanted.items():
+            if wid not in self._timers:
+                self._timers[wid] = loop.call_at(when, self._fire, wid, when)
+        retries, duplicates = self.core.retries, self.core.duplicates
+        self.mpm.retries += retries - self._counted[0]
+        self.mpm.duplicates += duplicates - self._counted[1]
+        self._counted = (retries, duplicates)
+
+    def _fire(self, wid: int, when: float) -> None:
+        self._timers.pop(wid, None)
+        self._spawn(self._wake(when))
+
+    async def _wake(self, when: float) -> None:
+        self.core.air = self.rf.radio.hub_present
+        # a lockstep loop may run a timer within its clock resolution before it is due: it is due
+        await self._run(self.core.handle_timer(max(clock.now(), when)))
+
+    def _spawn(self, step: IoStep) -> None:
+        task = asyncio.get_running_loop().create_task(step)
+        self._tasks.add(task)
+        task.add_done_callback(self._task_done)
+
+    def _task_done(self, task: asyncio.Task[None]) -> None:
+        self._tasks.discard(task)
+        if not task.cancelled() and task.exception() is not None:
+            err = task.exception()
+            self.log.record("error", where="ir_schedule", error=f"{type(err).__name__}: {err}")

@@ -200,7 +200,7 @@ class Robot:
 
     async def _on_message(self, incoming: Incoming) -> None:
         msg = incoming.message
-        if self.mpm.offer(incoming):
+        if self.mpm.offer(incoming) or self.schedule.offer(incoming):
             return
         if self.formation.handles(msg):
             self._spawn(self.formation.on_message(incoming))
@@ -407,7 +407,7 @@ class Robot:
                 ],
                 **self.driver.counters,
             },
-            "relative_location": self.locations.snapshot(),
+            "relative_location": self.locations.snapshot(clock.now()),
             "surround": None if self.surround is None else self.surround.status(),
         }
 
