@@ -294,8 +294,8 @@ class TokenSchedule:
         detail = {"session": self.session, "chain": list(chain), "master": is_master, "rejoined": True}
         return [Log("ir_schedule", detail)]
 
-    def leave(self, now: float) -> list[Action]:
-        """The swarm is over: stop holding, module off, forget the table."""
+    def leave(self, now: float) -> list[Action]:  # every event takes now, this one needs none
+        """The swarm is over: stop holding, module off, forget the table (answers already due still go)."""
         self.session = 0
         actions = self._drop_round()
         self._window_of = None
@@ -394,15 +394,16 @@ class TokenSchedule:
             actions.append(Log("ir_overtaken", {"round": msg.round, "by": holder}))
         self.round = max(self.round, msg.round)
         if self._window_of == (holder, msg.round):
-            return actions + self._after_slot(holder, now, self._answer_start(holder, msg.round))
+            self._after_slot(holder, now, self._answer_start(holder, msg.round))
+            return actions
         self._window_of = (holder, msg.round)
         ref = self._await(lambda at: self._receiving(holder, msg.round, at))
         return [*actions, OpenWindow(holder), SetIrMode("receive", ref)]
 
     def _receiving(self, holder: int, round_: int, now: float) -> list[Action]:
-        if not self.active:
-            return []
-        return self._after_slot(holder, now, self._answer_start(holder, round_))
+        if self.active:
+            self._after_slot(holder, now, self._answer_start(holder, round_))
+        return []
 
     def _answer_start(self, holder: int, round_: int) -> Callable[[float], list[Action]]:
         def answer(_: float) -> list[Action]:
@@ -425,7 +426,8 @@ class TokenSchedule:
         def answer(_: float) -> list[Action]:
             return [Send(holder, m.TokenAck(self.session, msg.round))]
 
-        return actions + self._after_slot(holder, now, answer)
+        self._after_slot(holder, now, answer)
+        return actions
 
     def _sync_missed(self, round_: int, now: float) -> list[Action]:
         """Named next and the Sync never came: start our round anyway; the holder's token step is surely over
@@ -434,11 +436,11 @@ class TokenSchedule:
             return []
         return [Log("sync_missed", {"round": round_}), *self._hold(round_, now)]
 
-    def _after_slot(self, holder: int, now: float, answer: Callable[[float], list[Action]]) -> list[Action]:
-        # every member answers the holder's broadcast at once otherwise, and their CSMA backoffs collide
+    def _after_slot(self, holder: int, now: float, answer: Callable[[float], list[Action]]) -> None:
+        """Answer the holder in this robot's slot: every member would answer its broadcast at once otherwise,
+        and their CSMA backoffs collide."""
         others = tuple(a for a in self.chain if a != holder)
         self._wake(now + reply_delay_s(self.me, ANSWER_SLOT_MS, others), answer)
-        return []
 
     # -- holding the token --------------------------------------------------------------------------
 
