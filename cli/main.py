@@ -99,6 +99,13 @@ def build_parser() -> argparse.ArgumentParser:
         default=10.0,
         help="lockstep: wall seconds a granted node may stay silent before it is taken as gone (default 10)",
     )
+    hub.add_argument(
+        "--start-within",
+        type=bounded(float, 1, 86400),
+        default=None,
+        help="lockstep: wall seconds to wait for the --expect nodes; then model time starts without the missing "
+        "ones, recorded as gone (default 60 + 1 per expected node)",
+    )
     _add_tls(hub, "hub")
 
     user = sub.add_parser(
@@ -529,6 +536,7 @@ def _hub(args: argparse.Namespace) -> int:
                 args.seed,
                 expect=args.expect,
                 dead_after_s=args.dead_after,
+                start_within_s=args.start_within,
                 pcap_path=args.pcap,
                 world_log=args.world_log,
             )

@@ -46,6 +46,10 @@ DEAD_AFTER_S = 10.0
 """Wall seconds the hub waits for a granted node's idle before it takes the node as gone."""
 CLOCK_RESOLUTION_S = time.get_clock_info("monotonic").resolution
 """asyncio runs every timer due within this of the loop's time in one go; the hub grants the same way."""
+START_WITHIN_BASE_S = 60.0
+START_WITHIN_PER_NODE_S = 1.0
+"""Model time starts when every expected node is there, or, if some never come (a process that died at start),
+after START_WITHIN_BASE_S + START_WITHIN_PER_NODE_S x expected nodes of wall time, without them (recorded)."""
 LEAVING_GRACE_S = 1.0
 """Wall seconds a busy node whose liveliness ended has for its last messages (and Detach) to arrive: zenoh
 orders a node's messages but not its liveliness against them."""
@@ -162,11 +166,14 @@ class LockstepHub:
         *,
         expect: int = 1,
         dead_after_s: float = DEAD_AFTER_S,
+        start_within_s: float | None = None,
         pcap_path: str | Path | None = None,
         world_log: str | Path | None = None,
     ) -> None:
         """``expect``: model time starts once this many nodes have reported idle (a run's robots, its user and
-        its orchestrator), so every node attaches in the first instant whatever order processes start in."""
+        its orchestrator), so every node attaches in the first instant whatever order processes start in; if some
+        have not come within ``start_within_s`` of wall time (default: 60 s + 1 s per expected node), it starts
+        without them and records how many were missing, rather than wait forever."""
         # the hub's side is imported here: a lockstep node process (a robot) needs only LockstepLink
         from radio_hub.coordinator import MODEL_EPOCH_US, Coordinator
 
@@ -175,6 +182,10 @@ class LockstepHub:
         self.seed = seed
         self.expect = expect
         self.dead_after_s = dead_after_s
+        self.start_within_s = (
+            START_WITHIN_BASE_S + START_WITHIN_PER_NODE_S * expect if start_within_s is None else start_within_s
+        )
+        self._opened_at = time.monotonic()
         self.coordinator = Coordinator(
             environment, seed, wall_epoch_us=MODEL_EPOCH_US, pcap_path=pcap_path, world_log=world_log
         )
@@ -195,6 +206,7 @@ class LockstepHub:
         """Open the router session and declare the hub's keys. Raises zenoh.ZError if it cannot listen."""
         session = zenoh.open(session_config("router", self.endpoint))
         self._session = session
+        self._opened_at = time.monotonic()
         self._decls = declare_hub_keys(session, self.keys, self._inbox.put, chaos=False)
         self._downlink.world_pub = session.declare_publisher(self.keys.world_state)
         self._decls.append(self._downlink.world_pub)
@@ -317,7 +329,7 @@ class LockstepHub:
     def _run_rounds(self) -> None:
         while self.nodes and all(node.idle for node in self.nodes.values()):
             if not self._started:
-                if len(self.nodes) < self.expect:
+                if len(self.nodes) < self.expect and not self._waited_long_enough():
                     return
                 self._started = True
                 # instant 0 opens like any other, with the environment's events (the first world tick) before
@@ -334,6 +346,16 @@ class LockstepHub:
             horizon = self.now_s + CLOCK_RESOLUTION_S
             due = {nid for nid, node in self.nodes.items() if node.next_s is not None and node.next_s < horizon}
             self._deliver(due)
+
+    def _waited_long_enough(self) -> bool:
+        """True once the start's wait is over: the missing nodes are recorded as gone before model time begins."""
+        if time.monotonic() - self._opened_at < self.start_within_s:
+            return False
+        missing = self.expect - len(self.nodes)
+        why = f"{missing} of {self.expect} expected nodes did not come within {self.start_within_s:g} s of wall time"
+        self.dead.append({"node": "missing", "model_time_s": 0.0, "why": why})
+        print(f"hub: model time starts without them: {why}", file=sys.stderr, flush=True)
+        return True
 
     def _deliver(self, due: set[str]) -> None:
         """The round's messages to every node concerned, each followed by its grant."""

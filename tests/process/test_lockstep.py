@@ -5,9 +5,13 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
+
+from cli.processes import Supervisor, free_tcp_port
+from radio_hub.interface import HubUnavailable, Keys, open_session, query_hub
 
 pytestmark = pytest.mark.process
 ROOT = Path(__file__).resolve().parents[2]
@@ -97,3 +101,36 @@ def test_twenty_surround_robot_processes_pass_the_cylinder_within_the_original_b
 def _with_exit_codes(summary: dict, record: Path) -> dict:
     """The printed summary, with the processes' exit codes that the record's summary.json adds at the end."""
     return {**summary, "exit_codes": json.loads((record / "summary.json").read_text()).get("exit_codes", {})}
+
+
+@pytest.mark.timeout(120)
+def test_a_node_that_never_comes_does_not_stall_the_start_forever(tmp_path: Path) -> None:
+    """A lockstep hub expecting two nodes, and only one robot process: after --start-within seconds model time
+    starts without the missing node, which the hub records as gone; the robot present runs on."""
+    endpoint, world = f"tcp/127.0.0.1:{free_tcp_port()}", "never-comes"
+    sup = Supervisor(tmp_path / "logs")
+    lockstep_hub = ["hub", "--listen", endpoint, "--world", world, "--clock", "lockstep", "--expect", "2"]
+    sup.spawn("hub", [*lockstep_hub, "--start-within", "3"])
+    sup.spawn("robot-1", ["robot", "--id", "1", "--hub", endpoint, "--world", world, "--clock", "lockstep"])
+    session = None
+    try:
+        deadline = time.monotonic() + 60
+        lockstep: dict = {}
+        while time.monotonic() < deadline:
+            time.sleep(0.5)
+            try:
+                session = session or open_session("client", endpoint)
+                lockstep = query_hub(session, Keys(world).stats, timeout=2.0)["lockstep"]
+            except HubUnavailable:
+                continue
+            if lockstep["model_time_s"] > 1.0:
+                break
+        assert lockstep.get("model_time_s", 0) > 1.0, (lockstep, sup.log_tail("hub"))
+        [missing] = lockstep["dead"]
+        assert missing["node"] == "missing" and missing["model_time_s"] == 0.0
+        assert "1 of 2 expected nodes did not come within 3 s" in missing["why"]
+        assert not sup.dead(), {name: sup.log_tail(name) for name in sup.dead()}
+    finally:
+        if session is not None:
+            session.close()
+        sup.stop_all()
