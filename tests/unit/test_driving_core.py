@@ -5,16 +5,18 @@ turn-about, Table 3 of swarm-middleware.md in both columns, and a slave steering
 from __future__ import annotations
 
 import ast
+import inspect
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import ModuleType
 from typing import Any
 
 import numpy as np
 import pytest
 
+from petswarm import driving_core, surround_core, user_link
 from petswarm import messages as m
-from petswarm import user_link
 from petswarm.driving_core import (
     CONTROL_PERIOD_S,
     LOST_AFTER_S,
@@ -135,9 +137,9 @@ def drives(actions: list[Any]) -> list[Any]:
 # -- the module is sans-IO ---------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("module", ["driving_core", "surround_core"])
-def test_the_cores_import_no_clock_no_event_loop_and_no_transport(module: str) -> None:
-    tree = ast.parse((Path(__file__).parents[2] / "petswarm" / f"{module}.py").read_text())
+@pytest.mark.parametrize("module", [driving_core, surround_core])
+def test_the_cores_import_no_clock_no_event_loop_and_no_transport(module: ModuleType) -> None:
+    tree = ast.parse(Path(inspect.getfile(module)).read_text())
     imported = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
     imported |= {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}
     names = {a.name for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) for a in n.names}
