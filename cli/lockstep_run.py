@@ -51,6 +51,7 @@ def run_lockstep(opts: RunOptions, scenario: Scenario | None) -> int:
         finally:
             clock["model_time_s"] = loop.time()
             loop.close()
+        ctx.watch.world_over = True  # the nodes leave by themselves now
         hub = query_hub(ctx.session, ctx.keys.stats, timeout=10.0)
         summary["hub_process"] = hub.get("process")
         summary["gone"] = hub.get("lockstep", {}).get("dead", [])

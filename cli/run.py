@@ -68,11 +68,13 @@ def progress(text: str) -> None:
 
 
 ALL_PAIRS_UP_TO = 10
-"""Up to this many robots a run passes only if every robot heard every other one. Beyond it the N(N-1) acked
-pongs a ping round asks for outgrow the 250 kbit/s channel (collisions and channel-access failures are the
-model working, not a fault), so a run asks that every robot heard some other one and reports the fraction of
-pairs heard (``pairs_heard_fraction``)."""
-HEARING_PROBLEMS = ("not every robot heard every other robot", "a robot heard no other robot")
+"""Up to this many robots a run passes only if every robot heard every other one (a pong from each). Beyond it
+the N(N-1) acked pongs a ping round asks for outgrow the 250 kbit/s channel: every robot answers a broadcast
+ping at once, and at 100 robots most pongs collide (collisions and channel-access failures are the model
+working, not a fault). So a larger run asks that every robot's radio received frames from other robots (a
+pong, or any frame the hub delivered to it), and reports the fraction of pairs whose pongs got through
+(``pairs_heard_fraction``)."""
+HEARING_PROBLEMS = ("not every robot heard every other robot", "a robot received no frame from another robot")
 """What the ping phase can find wrong; a scenario run has no ping phase and leaves them out."""
 STATS_TIMEOUT_S = 10.0
 """How long supervision waits for the hub's stats: a hub busy with 50 robots answers late, not never."""
@@ -486,7 +488,7 @@ def summarise(
     pairs = sum(len(set(n["heard_from"]) - {rid}) for rid, n in alive.items())
     if len(alive) > 1 and not all_pairs and opts.robots <= ALL_PAIRS_UP_TO:
         problems.append(HEARING_PROBLEMS[0])
-    elif opts.robots > ALL_PAIRS_UP_TO and any(not n["heard_from"] for n in alive.values()):
+    elif opts.robots > ALL_PAIRS_UP_TO and any(not (n["heard_from"] or n["delivered"]) for n in alive.values()):
         problems.append(HEARING_PROBLEMS[1])
     gaps = stats["hub"]["transport_gaps"] + sum(n["transport_gaps"] for n in nodes.values())
     if gaps:

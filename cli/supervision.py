@@ -57,6 +57,9 @@ class Supervision:
         self.progress: dict[str, Any] = {}
         """What the run last learnt (totals, phase): it goes into the summary written as the run goes."""
         self._written = 0.0
+        self.world_over = False
+        """Set once the run's world has ended (a lockstep run's model time is over): nodes then leave by
+        themselves, and a clean exit is no death."""
 
     def dead_robots(self) -> set[int]:
         """Ids of the robots that died during the run."""
@@ -66,8 +69,8 @@ class Supervision:
         """Record children that died since the last call; RunAborted when the run cannot carry on."""
         fatal = []
         for name, code in self.sup.unexpected_deaths().items():
-            if code == 0 and robot_of(name) is None:
-                continue  # a user walked its path and left: its work is done
+            if code == 0 and (robot_of(name) is None or self.world_over):
+                continue  # a user walked its path and left, or the world ended: its work is done
             death = self._record_death(name, code)
             if death["robot"] is None or self.fail_fast:
                 fatal.append(f"{name} died ({describe_code(code)}):\n{self.sup.log_tail(name)}")

@@ -43,6 +43,7 @@ def test_robot_processes_in_lockstep_do_exactly_what_the_model_time_run_does(tmp
     # the processes really were separate: each robot reports its own process's memory
     assert all(node["peak_rss_mb"] for node in lockstep["nodes"].values())
     assert set(lockstep["exit_codes"].values()) == {0}, lockstep["exit_codes"]  # every process ended cleanly
+    assert lockstep["deaths"] == []  # nodes leaving once model time is over are not deaths
     assert (tmp_path / "lockstep" / "air.pcap").read_bytes() == (tmp_path / "model" / "air.pcap").read_bytes()
 
 
