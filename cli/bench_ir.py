@@ -21,13 +21,17 @@ import math
 import sys
 import time
 from pathlib import Path
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from cli.bench_output import emit, save
 from petswarm.ir_estimator import METHODS, IrEstimates, estimate_many
+from radio_hub.lazy import lazy_numpy
 from radio_hub.light import IrConfig, receiver_readings
+
+if TYPE_CHECKING:
+    import numpy as np
+else:
+    np = lazy_numpy(__name__)
 
 DISTANCES_CM = tuple(range(40, 201, 20))
 ANGLES_DEG = tuple(range(0, 181, 30))

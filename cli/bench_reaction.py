@@ -16,12 +16,16 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from cli.bench_output import emit, save
 from cli.metrics import REACTION_OMEGA_RPS
+from radio_hub.lazy import lazy_numpy
+
+if TYPE_CHECKING:
+    import numpy as np
+else:
+    np = lazy_numpy(__name__)
 
 SCENARIO = Path(__file__).resolve().parents[1] / "scenarios" / "reaction.toml"
 

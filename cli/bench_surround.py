@@ -16,16 +16,18 @@ import math
 import sys
 import tempfile
 from pathlib import Path
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from cli.bench_output import emit, save
 from cli.metrics import driving_metrics, read_world
-from cli.model_run import execute
-from cli.run import RunOptions
-from petswarm.scenario import Scenario, load
-from petswarm.surround_sim import surround_figures
+from radio_hub.lazy import lazy_numpy
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from petswarm.scenario import Scenario
+else:
+    np = lazy_numpy(__name__)
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 DEFAULT_SCENARIOS = [str(SCENARIOS / "surround-cylinder.toml"), str(SCENARIOS / "surround-corridor.toml")]
@@ -54,6 +56,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def bench_surround(args: argparse.Namespace) -> int:
     """Run every scenario for ``--seeds`` seeds in model time; print, save JSON and the plot."""
+    # imported here, not at load: building the CLI's parser imports this module in every process,
+    # robots too, and these bring the hub's side and numpy (issue 13)
+    from petswarm.scenario import load
+    from petswarm.surround_sim import surround_figures
+
     results: dict[str, Any] = {"first_seed": args.seed, "runs": {}}
     try:  # every file is read before the long runs start
         scenarios = [load(path) for path in args.scenarios]
@@ -83,6 +90,9 @@ def bench_surround(args: argparse.Namespace) -> int:
 
 def model_time_run(scenario: Scenario, seed: int, record_dir: str | Path | None = None) -> list[dict[str, Any]]:
     """One ``--clock model`` run of ``scenario``: the world's states at 10 Hz, from the run's world.jsonl."""
+    from cli.model_run import execute  # the hub's side: see bench_surround
+    from cli.run import RunOptions
+
     if scenario.user is None:
         raise ValueError(f"scenario {scenario.name!r} has no user to surround")
     with tempfile.TemporaryDirectory(prefix="bench-surround-") as scratch:

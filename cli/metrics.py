@@ -15,9 +15,15 @@ import json
 import math
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
+from radio_hub.lazy import lazy_numpy
+
+if TYPE_CHECKING:
+    import numpy as np
+else:
+    np = lazy_numpy(__name__)
+
 
 REACTION_OMEGA_RPS = 0.3
 """A robot 'moves' in answer to a rotation once it turns at this rate: well above the controllers'

@@ -25,12 +25,16 @@ import math
 from collections import deque
 from dataclasses import dataclass
 from enum import IntEnum
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from petswarm.imu import GYRO_PERIOD_S
 from radio_hub.config import _build
+from radio_hub.lazy import lazy_numpy
+
+if TYPE_CHECKING:
+    import numpy as np
+else:
+    np = lazy_numpy(__name__)
 
 
 class Movement(IntEnum):

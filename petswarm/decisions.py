@@ -8,10 +8,15 @@ from __future__ import annotations
 
 from collections.abc import Collection, Iterable, Mapping
 from enum import Enum
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from petswarm.messages import Refusal
+from radio_hub.lazy import lazy_numpy
+
+if TYPE_CHECKING:
+    import numpy as np
+else:
+    np = lazy_numpy(__name__)
 
 SWARM_PANS = range(0x2000, 0xFFFE)
 """Swarm PAN IDs are drawn from here; the waiting PAN and the broadcast PAN lie outside it."""

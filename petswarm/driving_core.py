@@ -35,9 +35,7 @@ import zlib
 from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, Protocol
-
-import numpy as np
+from typing import TYPE_CHECKING, Any, Protocol
 
 from petswarm import messages as m
 from petswarm import user_link
@@ -59,7 +57,13 @@ from petswarm.pet_controller import PetControllerConfig, Ranges, UserObservation
 from petswarm.sequence import RobotState, SequenceManager, TransitionError
 from petswarm.slave_controller import RelativeFix, RelativeTracker, SlaveControllerConfig, slave_decision
 from radio_hub.interface import BROADCAST, OwnSensors
+from radio_hub.lazy import lazy_numpy
 from radio_hub.lf import LfConfig, wake_pattern
+
+if TYPE_CHECKING:
+    import numpy as np
+else:
+    np = lazy_numpy(__name__)
 
 WAKE_PERIOD_S = 3.0
 TRACK_PERIOD_S = 0.35
@@ -657,12 +661,13 @@ class DriverCore:
 
     def _decide(self, now: float, dt: float) -> MotorCommand:
         state = self.sequence.state
-        ranges = self._ranges()
+        if self.sensors is not None:  # the echoes' history grows every tick, read or not
+            self._echoes.observe(self.sensors)
         self.intent = MotorCommand()
         if state == RobotState.SLAVE_DRIVING:
-            return self._slave(now, dt, ranges)
+            return self._slave(now, dt, self._ranges())
         if state == RobotState.REMOTE_CONTROL:
-            return safety(self.remote if now < self.remote_until else MotorCommand(), ranges, self.config.pet)
+            return safety(self.remote if now < self.remote_until else MotorCommand(), self._ranges(), self.config.pet)
         if not self._tracking(state) or state in (RobotState.COMMAND_WAITING, RobotState.ORGANIZING):
             return MotorCommand()
         turn = self._turning(now)
@@ -674,6 +679,7 @@ class DriverCore:
             return MotorCommand()
         if state == RobotState.EMERGENCY:
             return MotorCommand()
+        ranges = self._ranges()  # read only when driving: an idle robot computes no arrays (issue 13)
         leading = self._user_behind()
         target = self._target_distance_of(self.mode) if state == RobotState.MASTER_DRIVING else None
         if leading and state == RobotState.LEADING and obstacle_ahead(ranges, self.config.pet):
@@ -867,12 +873,17 @@ class EchoRanges:
         )
         return Ranges(readings, receding_mps=self._receding(sensors))
 
-    def _receding(self, sensors: OwnSensors) -> tuple[float, ...]:
-        """Each echo's range rate over the last ~0.2 s (one 25 Hz step would turn 1 cm of ranging noise
-        into 0.35 m/s) plus the robot's own speed along the beam."""
+    def observe(self, sensors: OwnSensors) -> None:
+        """Keep ``sensors`` in the history the range rates are taken over (once per sample)."""
         history = self._history
         if not history or history[-1].t_us != sensors.t_us:
             history.append(sensors)
+
+    def _receding(self, sensors: OwnSensors) -> tuple[float, ...]:
+        """Each echo's range rate over the last ~0.2 s (one 25 Hz step would turn 1 cm of ranging noise
+        into 0.35 m/s) plus the robot's own speed along the beam."""
+        self.observe(sensors)
+        history = self._history
         oldest = history[0]
         dt = (sensors.t_us - oldest.t_us) / 1e6
         if dt < 0.1 or len(oldest.ranges_m) != len(sensors.ranges_m):

@@ -16,9 +16,7 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Callable
-from typing import Any, TypeVar
-
-import numpy as np
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from petswarm import clock
 from petswarm import messages as m
@@ -53,6 +51,12 @@ from petswarm.formation_core import (
 from petswarm.rf import Incoming, RfCommunicationManager
 from petswarm.sequence import EventLog, SequenceManager, StateChange
 from radio_hub.interface import BROADCAST
+from radio_hub.lazy import lazy_numpy
+
+if TYPE_CHECKING:
+    import numpy as np
+else:
+    np = lazy_numpy(__name__)
 
 __all__ = [
     "ANSWER_ATTEMPTS",

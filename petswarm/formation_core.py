@@ -27,9 +27,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Generator, Iterable
 from dataclasses import dataclass, field, replace
-from typing import Any, TypeVar
-
-import numpy as np
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from petswarm import messages as m
 from petswarm.decisions import Rival, choose_pan, may_join, reply_delay_s, rival_master, select_members
@@ -37,7 +35,13 @@ from petswarm.exchange import Step, StepResult, StepTiming
 from petswarm.rf import Incoming
 from petswarm.sequence import DRIVING, RobotState, SequenceManager, StateChange
 from radio_hub.interface import BROADCAST, TxResult
+from radio_hub.lazy import lazy_numpy
 from radio_hub.mac import max_payload
+
+if TYPE_CHECKING:
+    import numpy as np
+else:
+    np = lazy_numpy(__name__)
 
 PROTOCOLS = ("paper", "slotted")
 MAX_MEMBERS = 32

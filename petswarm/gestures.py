@@ -24,14 +24,22 @@ several start angles, both ways round). The best template wins if its correlatio
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Iterable
 from enum import StrEnum
+from typing import TYPE_CHECKING
 
-import numpy as np
+from radio_hub.lazy import lazy_numpy
+
+if TYPE_CHECKING:
+    import numpy as np
+else:
+    np = lazy_numpy(__name__)
+
 
 GRAVITY_MPS2 = 9.81
-_GRAVITY = np.array([0.0, 0.0, GRAVITY_MPS2])
+GRAVITY_READING = (0.0, 0.0, GRAVITY_MPS2)
 """What a level, still watch reads (specific force: up)."""
 TEMPLATE_SAMPLES = 40
 """Points a segment is resampled to: 10 per quarter of a circle, ample for one-period strokes."""
@@ -126,11 +134,12 @@ def synthesize(gesture: Gesture | str, rng: np.random.Generator, rate_hz: float 
     tau = np.linspace(0.0, 1.0, max(round(duration * rate_hz), 8)) ** warp
     motion = _acceleration(_path(gesture, tau, size, circle_start, circle_sign), dt)
     before, after = (round(rng.uniform(0.2, 0.6) * rate_hz) for _ in range(2))
-    world = np.vstack([np.zeros((before, 3)), motion, np.zeros((after, 3))]) + _GRAVITY
+    world = np.vstack([np.zeros((before, 3)), motion, np.zeros((after, 3))]) + np.array(GRAVITY_READING)
     tilt = _rotation(*rng.uniform(-MAX_TILT_RAD, MAX_TILT_RAD, size=3))
     return world @ tilt + NOISE_MPS2 * rng.standard_normal(world.shape)
 
 
+@functools.cache
 def _templates() -> list[tuple[Gesture, np.ndarray]]:
     """Noise-free, untilted, unit-energy traces of every gesture at nominal speed, resampled."""
     tau = np.linspace(0.0, 1.0, TEMPLATE_SAMPLES)
@@ -150,9 +159,6 @@ def _templates() -> list[tuple[Gesture, np.ndarray]]:
 def _normalised(trace: np.ndarray) -> np.ndarray:
     centred = trace - trace.mean(axis=0)
     return centred / max(float(np.linalg.norm(centred)), 1e-12)
-
-
-_TEMPLATES = _templates()
 
 
 def _active_segment(dynamic: np.ndarray, rate_hz: float) -> np.ndarray | None:
@@ -185,7 +191,7 @@ def match_scores(trace: np.ndarray, rate_hz: float = 50) -> dict[Gesture, float]
         return {}
     shape = _normalised(_resample(segment))
     scores: dict[Gesture, float] = {}
-    for gesture, template in _TEMPLATES:
+    for gesture, template in _templates():
         scores[gesture] = max(scores.get(gesture, -1.0), float(np.sum(shape * template)))
     return scores
 

@@ -23,11 +23,15 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from radio_hub.config import _build
+from radio_hub.lazy import lazy_numpy
+
+if TYPE_CHECKING:
+    import numpy as np
+else:
+    np = lazy_numpy(__name__)
 
 GRAVITY_MPS2 = 9.81
 ACCEL_PERIOD_S = 0.02

@@ -16,22 +16,27 @@ sigmas of ambient) gives no estimate. Saturated readings are handled, and flagge
 
 from __future__ import annotations
 
+import functools
+import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, NamedTuple
 
-import numpy as np
-from numpy.typing import ArrayLike
+from radio_hub.lazy import lazy_numpy
+from radio_hub.light import RECEIVERS, IrConfig, receiver_axes_rad
 
-from radio_hub.light import RECEIVER_AXES_RAD, RECEIVERS, IrConfig
+if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import ArrayLike
+else:
+    np = lazy_numpy(__name__)
 
 METHODS = ("paper", "lsq")
 """Estimator names accepted by ``estimate``."""
-SECTOR_RAD = np.pi / 6
+SECTOR_RAD = math.pi / 6  # the same float as np.pi / 6
 LSQ_ITERATIONS = 4
 """Reweighting rounds of the ``lsq`` fit: from the paper's start it settles in two or three."""
 LSQ_MIN_RECEIVERS = 3
 """Unsaturated receivers facing the source that the ``lsq`` fit needs; with fewer, it falls back."""
-_COS = np.cos(RECEIVER_AXES_RAD)
-_SIN = np.sin(RECEIVER_AXES_RAD)
 
 
 @dataclass(frozen=True)
@@ -165,23 +170,46 @@ def _paper(strengths: np.ndarray, saturated: np.ndarray) -> tuple[np.ndarray, np
     rows = np.arange(len(strengths))
     n = strengths.argmax(axis=1)
     # r-1, r0, r1 in one gather: the sweep with its ends wrapped round, then three receivers from n - 1 on
-    r_1, r0, r1 = strengths[:, _WRAPPED][rows[:, None], n[:, None] + _TRIO].T
+    r_1, r0, r1 = strengths[:, _tables().wrapped][rows[:, None], n[:, None] + _tables().trio].T
     a = (r1 + r_1 + 2 * r0) / (2 * np.cos(SECTOR_RAD) + 2)
     b = (r1 - r_1) / (2 * np.sin(SECTOR_RAD))
     strongest_saturated = saturated[rows, n] if np.count_nonzero(saturated) else np.zeros(len(rows), dtype=bool)
     return np.hypot(a, b), np.arctan2(b, a), n, strongest_saturated
 
 
-_WRAPPED = np.r_[RECEIVERS - 1, np.arange(RECEIVERS), 0]
-"""Receiver indices 11, 0, 1, ..., 11, 0: receiver n's neighbours are columns n and n + 2 of a wrapped sweep."""
-_TRIO = np.arange(3)
-_AXES = np.stack([_COS, _SIN])
-"""(2, 12): a source (a, b) = R (cos phi, sin phi) gives receiver k the response a cos_k + b sin_k."""
-_NORMAL = np.stack([_COS * _COS, _COS * _SIN, _SIN * _SIN], axis=1)
-"""(12, 3): weights @ this = the normal equations' sums (s_cc, s_cs, s_ss)."""
-_CROSS = np.array([2, 0])
-_FACING_ZERO = np.cos(RECEIVER_AXES_RAD) > 0
-"""The receivers a source at bearing 0 faces."""
+class _Tables(NamedTuple):
+    """The receivers' geometry as the fits use it, built at the first estimate (importing this module
+    imports no numpy)."""
+
+    cos: np.ndarray
+    sin: np.ndarray
+    wrapped: np.ndarray
+    """Receiver indices 11, 0, 1, ..., 11, 0: receiver n's neighbours are columns n and n + 2 of a wrapped sweep."""
+    trio: np.ndarray
+    axes: np.ndarray
+    """(2, 12): a source (a, b) = R (cos phi, sin phi) gives receiver k the response a cos_k + b sin_k."""
+    normal: np.ndarray
+    """(12, 3): weights @ this = the normal equations' sums (s_cc, s_cs, s_ss)."""
+    cross: np.ndarray
+    facing_zero: np.ndarray
+    """The receivers a source at bearing 0 faces."""
+
+
+@functools.cache
+def _tables() -> _Tables:
+    """The fits' tables, computed once."""
+    cos = np.cos(receiver_axes_rad())
+    sin = np.sin(receiver_axes_rad())
+    return _Tables(
+        cos=cos,
+        sin=sin,
+        wrapped=np.r_[RECEIVERS - 1, np.arange(RECEIVERS), 0],
+        trio=np.arange(3),
+        axes=np.stack([cos, sin]),
+        normal=np.stack([cos * cos, cos * sin, sin * sin], axis=1),
+        cross=np.array([2, 0]),
+        facing_zero=np.cos(receiver_axes_rad()) > 0,
+    )
 
 
 def lsq_fit(
@@ -208,7 +236,7 @@ def lsq_fit(
     floor2, relative = config.noise_floor_counts**2, config.relative_noise
     # the first round goes from the start's bearing as a bearing: the saturated fallback's is an axis or
     # between two, and receivers at exactly 90 degrees from it are in or out by the rounding of their cosine
-    gain = np.cos(RECEIVER_AXES_RAD - bearing[:, None])
+    gain = np.cos(receiver_axes_rad() - bearing[:, None])
     start_usable = gain > 0
     start_predicted = strength[:, None] * gain
     if not any_saturated and (noiseless or floor2 > 0) and np.count_nonzero(np.isfinite(strengths)) == strengths.size:
@@ -222,11 +250,11 @@ def lsq_fit(
             if round_ == 0:
                 usable, predicted = start_usable, start_predicted
             else:
-                predicted = ab @ _AXES
+                predicted = ab @ _tables().axes
                 usable = predicted > 0
                 if not ab.all():  # a fit of exactly (0, 0) has bearing atan2(0, 0) = 0, and faces as that does
                     zero = ~ab.any(axis=1)
-                    usable = np.where(zero[:, None], _FACING_ZERO, usable)
+                    usable = np.where(zero[:, None], _tables().facing_zero, usable)
                 if fitted is not None:  # rows still at their start stay on its receivers
                     usable = np.where(fitted[:, None], usable, start_usable)
                     predicted = np.where(fitted[:, None], predicted, start_predicted)
@@ -268,10 +296,10 @@ def _lsq_unsaturated(
 
     ab = _solve(weights(usable, predicted), strengths)
     for _ in range(LSQ_ITERATIONS - 1):
-        predicted = ab @ _AXES
+        predicted = ab @ _tables().axes
         usable = predicted > 0
         if np.count_nonzero(ab) != ab.size:  # a fit of exactly (0, 0) has bearing atan2(0, 0) = 0, and faces
-            usable = np.where(~ab.any(axis=1)[:, None], _FACING_ZERO, usable)  # as that one does
+            usable = np.where(~ab.any(axis=1)[:, None], _tables().facing_zero, usable)  # as that one does
         ab = _solve(weights(usable, predicted), strengths)
     a, b = ab.T
     return np.hypot(a, b), np.arctan2(b, a), np.zeros(len(strengths), dtype=bool)
@@ -279,15 +307,15 @@ def _lsq_unsaturated(
 
 def _solve(weight: np.ndarray, strengths: np.ndarray) -> np.ndarray:
     """(a, b) per row (N, 2) minimising sum_k w_k (r_k - a cos_k - b sin_k)^2: the 2x2 normal equations."""
-    sums = weight @ _NORMAL  # s_cc, s_cs, s_ss
-    y = (weight * strengths) @ _AXES.T  # y_c, y_s
+    sums = weight @ _tables().normal  # s_cc, s_cs, s_ss
+    y = (weight * strengths) @ _tables().axes.T  # y_c, y_s
     s_cs = sums[:, 1:2]
     det = sums[:, :1] * sums[:, 2:] - s_cs * s_cs
     # (a, b) = (s_ss y_c - s_cs y_s, s_cc y_s - s_cs y_c) / det
-    return (sums[:, _CROSS] * y - s_cs * y[:, ::-1]) / det
+    return (sums[:, _tables().cross] * y - s_cs * y[:, ::-1]) / det
 
 
 def saturated_bearing(saturated: np.ndarray) -> np.ndarray:
     """Fallback bearing when full-scale readings hide the strength: the circular mean of the saturated
     receivers' axes (they form an arc centred on the source, so this is within 15 degrees of it)."""
-    return np.arctan2(saturated @ _SIN, saturated @ _COS)
+    return np.arctan2(saturated @ _tables().sin, saturated @ _tables().cos)

@@ -15,9 +15,7 @@ import asyncio
 import math
 from collections.abc import Callable, Coroutine
 from dataclasses import dataclass
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from petswarm import clock
 from petswarm import messages as m
@@ -28,6 +26,12 @@ from petswarm.rf import Incoming, RfCommunicationManager
 from petswarm.sequence import EventLog
 from petswarm.token_schedule import ANSWER_SLOT_MS, TokenConfig, TokenSchedule, next_holder
 from radio_hub.interface import IrConfig, RadioClient
+from radio_hub.lazy import lazy_numpy
+
+if TYPE_CHECKING:
+    import numpy as np
+else:
+    np = lazy_numpy(__name__)
 
 __all__ = [
     "ANSWER_SLOT_MS",

@@ -34,11 +34,15 @@ import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from radio_hub.config import check_keys
+from radio_hub.lazy import lazy_numpy
+
+if TYPE_CHECKING:
+    import numpy as np
+else:
+    np = lazy_numpy(__name__)
 
 MIN_RANGE_M = 0.02
 """Sensed points closer than this are taken to be this far: a point at the centre has no direction, and
@@ -88,7 +92,7 @@ class SurroundConfig:
         positive += ("body_mass", "stiffness")
         for name in dataclasses.fields(self):
             value = getattr(self, name.name)
-            if not isinstance(value, int | float) or isinstance(value, bool) or not np.isfinite(value):
+            if not isinstance(value, int | float) or isinstance(value, bool) or not math.isfinite(value):
                 raise ValueError(f"{name.name} must be a finite number, not {value!r}")
             if name.name in positive and value <= 0:
                 raise ValueError(f"{name.name} must be > 0, not {value!r}")

@@ -30,8 +30,7 @@ The command is (vx, vy): the law assumes a fixed heading, so the robot never tur
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from petswarm.driving import EchoRanges
 from petswarm.motion import DriveLimits, MotorCommand
@@ -39,6 +38,12 @@ from petswarm.pet_controller import PetControllerConfig, safety
 from petswarm.surround import SurroundConfig, SurroundController
 from petswarm.surround_sensing import BeaconTracker, SensingConfig, beacon_fixes, echo_list, sense_lists
 from radio_hub.interface import BeaconSweep, IrConfig, OwnSensors
+from radio_hub.lazy import lazy_numpy
+
+if TYPE_CHECKING:
+    import numpy as np
+else:
+    np = lazy_numpy(__name__)
 
 STALE_AFTER_S = 0.2
 """No new sweep for this long (five periods of the hub's 25 Hz beacon sweeps): nothing is seen any more."""

@@ -19,11 +19,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from petswarm.ir_estimator import estimate_many
+from radio_hub.lazy import lazy_numpy
 from radio_hub.light import PERSON_BEACON_POWER, IrConfig
+
+if TYPE_CHECKING:
+    import numpy as np
+else:
+    np = lazy_numpy(__name__)
 
 
 @dataclass(frozen=True)

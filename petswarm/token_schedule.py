@@ -30,9 +30,7 @@ import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from petswarm import messages as m
 from petswarm.decisions import reply_delay_s
@@ -40,7 +38,13 @@ from petswarm.exchange import SendRequest, Step, StepTiming, WaitUntil
 from petswarm.ir_estimator import IrEstimate, estimate
 from petswarm.rf import Incoming
 from radio_hub.interface import BROADCAST
+from radio_hub.lazy import lazy_numpy
 from radio_hub.light import IrConfig
+
+if TYPE_CHECKING:
+    import numpy as np
+else:
+    np = lazy_numpy(__name__)
 
 ANSWER_SLOT_MS = 3
 """Members answer the holder's start sign and token in slots of this length, in member order."""

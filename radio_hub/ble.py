@@ -12,11 +12,15 @@ import heapq
 import itertools
 import math
 from dataclasses import dataclass, field
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from radio_hub.config import _build
+from radio_hub.lazy import lazy_numpy
+
+if TYPE_CHECKING:
+    import numpy as np
+else:
+    np = lazy_numpy(__name__)
 
 MAX_PAYLOAD = 512
 """The longest BLE message the air carries (the wearables' messages are a few dozen bytes)."""

@@ -30,12 +30,16 @@ from __future__ import annotations
 import difflib
 import itertools
 from dataclasses import asdict, dataclass, field
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from radio_hub.config import GilbertElliottConfig, check_keys
+from radio_hub.lazy import lazy_numpy
 from radio_hub.propagation import GilbertElliott
+
+if TYPE_CHECKING:
+    import numpy as np
+else:
+    np = lazy_numpy(__name__)
 
 KINDS = ("loss", "corrupt", "duplicate", "delay", "burst", "partition", "ir_blind", "ir_noise")
 JITTERS = ("uniform", "gaussian")

@@ -15,12 +15,16 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import Any
-
-import numpy as np
-from numpy.typing import ArrayLike
+from typing import TYPE_CHECKING, Any
 
 from radio_hub.config import _build
+from radio_hub.lazy import lazy_numpy
+
+if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import ArrayLike
+else:
+    np = lazy_numpy(__name__)
 
 PATTERN_BITS = 16
 """Length of a wake-up pattern (the LF wake-up receivers of this kind correlate a 16-bit Manchester pattern)."""

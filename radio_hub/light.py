@@ -15,20 +15,39 @@ saturation are added in that unit.
 from __future__ import annotations
 
 import dataclasses
+import functools
+import math
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import Any
-
-import numpy as np
-from numpy.typing import ArrayLike
+from typing import TYPE_CHECKING, Any
 
 from radio_hub.config import _build
+from radio_hub.lazy import lazy_numpy
+
+if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import ArrayLike
+else:
+    np = lazy_numpy(__name__)
 
 RECEIVERS = 12
 """Phototransistors per IR module."""
-RECEIVER_SPACING_RAD = np.pi / 6
-RECEIVER_AXES_RAD = np.arange(RECEIVERS) * RECEIVER_SPACING_RAD
-"""Axis of receiver k relative to the robot's heading: k x 30 degrees, counter-clockwise."""
+RECEIVER_SPACING_RAD = math.pi / 6  # the same float as np.pi / 6
+
+
+@functools.cache
+def receiver_axes_rad() -> np.ndarray:
+    """Axis of receiver k relative to the robot's heading: k x 30 degrees, counter-clockwise.
+
+    Also ``RECEIVER_AXES_RAD``, built at its first read so that importing this module imports no numpy."""
+    return np.arange(RECEIVERS) * RECEIVER_SPACING_RAD
+
+
+def __getattr__(name: str) -> Any:
+    """Array constants, built at first read (a robot that only pings never reads them)."""
+    if name == "RECEIVER_AXES_RAD":
+        return receiver_axes_rad()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 @dataclass
@@ -130,7 +149,7 @@ def receiver_gains(bearing_rad: ArrayLike) -> np.ndarray:
 
     Shape: the bearing's shape plus a last axis of 12.
     """
-    relative = np.asarray(bearing_rad, dtype=float)[..., None] - RECEIVER_AXES_RAD
+    relative = np.asarray(bearing_rad, dtype=float)[..., None] - receiver_axes_rad()
     return np.clip(np.cos(relative), 0.0, None)
 
 
@@ -209,11 +228,15 @@ def beacon_gains(peak_light: ArrayLike, config: IrConfig) -> np.ndarray:
     limit = AGC_HEADROOM * config.saturation_counts - config.ambient_counts
     # gain 2^-k fits when 2^-k peak <= limit, that is (scaling by a power of two being exact) when
     # peak <= limit 2^k: the first of those thresholds at or above the peak is the gain's index
-    step = np.searchsorted(limit / _GAINS, peak, side="left")
-    return _GAINS[np.minimum(step, len(_GAINS) - 1)]
+    gains = _gains()
+    step = np.searchsorted(limit / gains, peak, side="left")
+    return gains[np.minimum(step, len(gains) - 1)]
 
 
-_GAINS = np.array(BEACON_GAINS)
+@functools.cache
+def _gains() -> np.ndarray:
+    """``BEACON_GAINS`` as an array."""
+    return np.array(BEACON_GAINS)
 
 
 # == who is transmitting ==============================================================================

@@ -17,16 +17,20 @@ import os
 from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Any, Protocol
-
-import numpy as np
+from typing import TYPE_CHECKING, Any, Protocol
 
 from radio_hub import wire
 from radio_hub.ble import MAX_PAYLOAD as BLE_MAX_PAYLOAD
 from radio_hub.guard import Faults
 from radio_hub.keys import DEFAULT_ENDPOINT, DEFAULT_WORLD, check_name
+from radio_hub.lazy import lazy_numpy
 from radio_hub.light import RECEIVERS as IR_RECEIVERS
 from radio_hub.mac import BROADCAST, Frame, FrameError, FrameType, TxStatus
+
+if TYPE_CHECKING:
+    import numpy as np
+else:
+    np = lazy_numpy(__name__)
 
 MODEL_EPOCH_S = 1_700_000_000.0
 """The wall-clock time model and lockstep runs report for model time 0, on both sides (a fixed date: records of
@@ -107,16 +111,61 @@ class TxResult:
         return self.status == TxStatus.SUCCESS
 
 
-@dataclass(frozen=True)
 class OwnSensors:
     """A robot's own body sensors at model time ``t_us``: ultrasonic ranges (m, nan = no echo) at
-    ``angles_rad`` from its heading, AHRS yaw (rad), wheel odometry (vx, vy, omega in its frame)."""
+    ``angles_rad`` from its heading, AHRS yaw (rad), wheel odometry (vx, vy, omega in its frame).
 
-    t_us: int
-    ranges_m: np.ndarray
-    angles_rad: np.ndarray
-    yaw_rad: float
-    odometry: tuple[float, float, float]
+    As they come off the air (``of_wire``), the ranges stay bytes and the angles a getter until first
+    read: the hub sends them to every robot at 25 Hz, and one that only pings never reads them (and so
+    never imports numpy for them)."""
+
+    __slots__ = ("_angles_rad", "_ranges_m", "odometry", "t_us", "yaw_rad")
+
+    def __init__(
+        self,
+        t_us: int,
+        ranges_m: np.ndarray,
+        angles_rad: np.ndarray,
+        yaw_rad: float,
+        odometry: tuple[float, float, float],
+    ) -> None:
+        self.t_us = t_us
+        self._ranges_m: np.ndarray | bytes = ranges_m
+        self._angles_rad: np.ndarray | Callable[[], np.ndarray] = angles_rad
+        self.yaw_rad = yaw_rad
+        self.odometry = odometry
+
+    @classmethod
+    def of_wire(
+        cls,
+        t_us: int,
+        ranges: bytes,
+        angles: Callable[[], np.ndarray],
+        yaw_rad: float,
+        odometry: tuple[float, float, float],
+    ) -> OwnSensors:
+        """Sensors of ``ranges`` as sent (little-endian float32) and ``angles`` as given when first read."""
+        sensors = cls.__new__(cls)
+        sensors.t_us = t_us
+        sensors._ranges_m = ranges
+        sensors._angles_rad = angles
+        sensors.yaw_rad = yaw_rad
+        sensors.odometry = odometry
+        return sensors
+
+    @property
+    def ranges_m(self) -> np.ndarray:
+        """Ultrasonic ranges (m, nan = no echo), one per sensor of the ring."""
+        if isinstance(self._ranges_m, bytes):
+            self._ranges_m = np.frombuffer(self._ranges_m, dtype="<f4").astype(float)
+        return self._ranges_m
+
+    @property
+    def angles_rad(self) -> np.ndarray:
+        """Each ultrasonic sensor's axis from the heading (rad)."""
+        if callable(self._angles_rad):
+            self._angles_rad = self._angles_rad()
+        return self._angles_rad
 
 
 class BeaconSweep:
@@ -244,7 +293,9 @@ class RadioClient:
         self.on_sensors: list[Callable[[OwnSensors], None]] = []
         self.on_relayed: Callable[[wire.Relayed], None] | None = None
         """Where control messages relayed by the hub go (model and lockstep runs); None: counted as malformed."""
-        self._ultrasonic_rad = np.zeros(0)
+        self._ultrasonic_deg: tuple[float, ...] = ()
+        """The ultrasonic ring's axes (degrees from the heading), as the hub gave them on attaching."""
+        self._ultrasonic_rad: np.ndarray | None = None
         self._pending: dict[int, asyncio.Future[Any]] = {}
         self._pending_types: dict[int, str] = {}
 
@@ -471,7 +522,8 @@ class RadioClient:
             position=(attached.position[0], attached.position[1]),
             heading_deg=attached.heading_deg,
         )
-        self._ultrasonic_rad = np.radians(np.asarray(attached.ultrasonic_deg, dtype=float))
+        self._ultrasonic_deg = tuple(attached.ultrasonic_deg)
+        self._ultrasonic_rad = None
 
     def _put(self, msg: wire.Message) -> None:
         msg.n, msg.s = next(self._up_seq), self.session_key
@@ -585,16 +637,20 @@ class RadioClient:
             return
         self._enqueue("ir", self._ir, IrSweep(np.frombuffer(msg.readings, dtype="<f4").astype(float), msg.t_us))
 
+    def _ultrasonic_angles(self) -> np.ndarray:
+        """The ring's axes in radians, one array shared by every sample until the next attach."""
+        if self._ultrasonic_rad is None:
+            self._ultrasonic_rad = np.radians(np.asarray(self._ultrasonic_deg, dtype=float))
+        return self._ultrasonic_rad
+
     def _on_sensors(self, msg: wire.Sensors) -> None:
-        if len(msg.ranges) != 4 * len(self._ultrasonic_rad):
-            self.malformed += 1
-            return
-        ranges = np.frombuffer(msg.ranges, dtype="<f4").astype(float)
-        if len(ranges) != len(self._ultrasonic_rad):
+        if len(msg.ranges) != 4 * len(self._ultrasonic_deg):  # 4 bytes a float32: a range per sensor
             self.malformed += 1
             return
         odometry = (float(msg.odometry[0]), float(msg.odometry[1]), float(msg.odometry[2]))
-        self.sensors = OwnSensors(msg.t_us, ranges, self._ultrasonic_rad, float(msg.yaw), odometry)
+        self.sensors = OwnSensors.of_wire(
+            msg.t_us, bytes(msg.ranges), self._ultrasonic_angles, float(msg.yaw), odometry
+        )
         for callback in self.on_sensors:
             callback(self.sensors)
 

@@ -3,10 +3,15 @@
 from __future__ import annotations
 
 import math
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from radio_hub.config import GilbertElliottConfig, PathLossConfig, RangeConfig
+from radio_hub.lazy import lazy_numpy
+
+if TYPE_CHECKING:
+    import numpy as np
+else:
+    np = lazy_numpy(__name__)
 
 Position = tuple[float, float]
 

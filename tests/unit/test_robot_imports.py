@@ -29,6 +29,9 @@ ROBOT_ENTRIES = {
     "robot middleware": "import petswarm.robot",
     "robot process (wall clock)": "import cli.main; import petswarm.robot",
     "robot process (lockstep)": "import cli.main; import petswarm.robot; import cli.lockstep_node",
+    "robot command line read": (
+        "import cli.main\ncli.main.robot_config(cli.main.build_parser().parse_args(['robot', '--id', '3']))"
+    ),
 }
 
 
@@ -71,3 +74,59 @@ def test_other_commands_keep_openssl() -> None:
     """The hub, runs and benches may need TLS or OpenSSL's hashes: only robot processes go without."""
     loaded = loaded_after("from cli.lean import leave_out_openssl\nassert not leave_out_openssl(['hub'])\nimport ssl")
     assert "_ssl" in loaded
+
+
+PLAIN_ROBOT = (
+    "import sys\n"
+    "from cli.lean import leave_out_openssl\n"
+    "argv = ['robot', '--id', '3']\n"
+    "assert leave_out_openssl(argv)\n"
+    "import cli.main, petswarm.robot, cli.lockstep_node\n"
+    "config = cli.main.robot_config(cli.main.build_parser().parse_args(argv))\n"
+    "from petswarm.driving_core import CONTROL_PERIOD_S, DriverCore\n"
+    "from petswarm.sequence import EventLog, SequenceManager\n"
+    "from radio_hub.interface import OwnSensors\n"
+    "class Formation:\n"
+    "    swarm = None\n"
+    "    me = 3\n"
+    "class Fixes:\n"
+    "    table = {}\n"
+    "def ring():\n"
+    "    import numpy\n"
+    "    return numpy.linspace(0.0, 6.28, 8, endpoint=False)\n"
+    "core = DriverCore(3, SequenceManager(EventLog()), Formation(), Fixes(), now=0.0)\n"
+    "core.start(0.0)\n"
+    "ticks = 0\n"
+    "for k in range(1, 76):  # 3 s of the hub's 25 Hz sensors, as they come off the air\n"
+    "    t = k * 0.04\n"
+    "    core.sensors_sample(OwnSensors.of_wire(int(t * 1e6), bytes(32), ring, 0.0, (0.0, 0.0, 0.0)), t)\n"
+    "    while (when := core.next_timer()) is not None and when <= t:\n"
+    "        core.handle_timer(when)\n"
+    "        ticks += len(core.actions())\n"
+    "assert ticks > 3 / CONTROL_PERIOD_S, ticks  # the control loop ran: a Drive every period at least\n"
+)
+
+
+def test_a_plain_robot_imports_no_numpy_until_it_needs_it() -> None:
+    """A robot that only pings (no swarm, no user) reads its command line, builds its middleware and steps
+    its driver through 3 s of own-body sensors without numpy (issue 13: about 13 MB of its RSS)."""
+    loaded = loaded_after(PLAIN_ROBOT)
+    assert {"petswarm.robot", "petswarm.driving_core", "radio_hub.port"} <= loaded
+    assert sorted(m for m in loaded if m == "numpy" or m.startswith("numpy.")) == []
+
+
+def test_numpy_comes_in_when_a_robot_estimates_or_reads_its_echoes() -> None:
+    """The lazy numpy is numpy: an IR estimate and the echoes' ranges load it and compute as before."""
+    code = (
+        PLAIN_ROBOT
+        + "assert 'numpy' not in sys.modules\n"
+        + "from petswarm import driving_core, ir_estimator\n"
+        + "from radio_hub.light import IrConfig\n"
+        + "fix = ir_estimator.estimate([0.0] * 3 + [300.0] + [0.0] * 8, IrConfig(), 'paper')\n"
+        + "assert fix is not None and abs(fix.bearing_rad - 3.14159265 / 2) < 1e-6, fix\n"
+        + "import numpy\n"
+        + "assert ir_estimator.np is numpy  # the first use put the real module in place\n"
+        + "ranges = driving_core.EchoRanges().ranges(core.sensors)\n"
+        + "assert [r for _, r in ranges.readings] == [0.0] * 8, ranges\n"
+    )
+    assert "numpy" in loaded_after(code)
