@@ -120,7 +120,8 @@ def test_numpy_comes_in_when_a_robot_estimates_or_reads_its_echoes() -> None:
     code = (
         PLAIN_ROBOT
         + "assert 'numpy' not in sys.modules\n"
-        + "from petswarm import driving_core, ir_estimator\n"
+        + "import petswarm.driving_core as driving_core\n"
+        + "import petswarm.ir_estimator as ir_estimator\n"
         + "from radio_hub.light import IrConfig\n"
         + "fix = ir_estimator.estimate([0.0] * 3 + [300.0] + [0.0] * 8, IrConfig(), 'paper')\n"
         + "assert fix is not None and abs(fix.bearing_rad - 3.14159265 / 2) < 1e-6, fix\n"
