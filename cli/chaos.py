@@ -1,10 +1,10 @@
 """``petswarm chaos``: faults in a running hub's air, and robots killed, paused or resumed.
 
-Faults act inside the emulated medium, where a real radio would suffer them (see radio_hub/chaos.py);
+Faults act inside the emulated medium, where a real radio would suffer them (see radio_hub/air/chaos.py);
 the hub logs every change with its model and wall time. Killing, pausing and resuming act on the robot
 process itself (it must run on this host, as this user): SIGKILL, SIGSTOP and SIGCONT, sent only to a process
 registered as that robot of that world in the private runtime directory and still running its command line
-(cli/runtime.py).
+(petswarm/lab/runtime.py).
 """
 
 from __future__ import annotations
@@ -18,10 +18,10 @@ from typing import Any
 
 import msgpack
 
-from cli.args import int_auto
-from cli.hub_session import with_hub
-from cli.runtime import NotOurRobot, robot_pid
-from radio_hub.chaos import BURST_DEFAULTS, JITTERS, MAX_DELAY_MS, describe_change, describe_fault, parse_fault
+from petswarm.lab.arguments import int_auto
+from petswarm.lab.hub_session import with_hub
+from petswarm.lab.runtime import NotOurRobot, robot_pid
+from radio_hub.air.chaos import BURST_DEFAULTS, JITTERS, MAX_DELAY_MS, describe_change, describe_fault, parse_fault
 from radio_hub.interface import Keys, query_hub
 
 SIGNALS = {"kill": signal.SIGKILL, "pause": signal.SIGSTOP, "resume": signal.SIGCONT}
@@ -239,7 +239,7 @@ def _ask_hub(session: Any, keys: Keys, request: dict[str, Any]) -> dict[str, Any
 
 
 def _signal_robot(keys: Keys, args: argparse.Namespace) -> int:
-    """Signal a robot process of this host, only after checking it is ours (cli/runtime.py); the pid never
+    """Signal a robot process of this host, only after checking it is ours (petswarm/lab/runtime.py); the pid never
     comes from the network. 2 with the reason when the target is refused or gone."""
     sig = SIGNALS[args.action]
     try:

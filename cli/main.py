@@ -10,7 +10,12 @@ import signal
 import sys
 from typing import TYPE_CHECKING, Any
 
-from cli.args import bounded, int_auto, position, readable_file, robot_id, seed, surround_config
+from petswarm.lab.arguments import bounded, robot_id, seed
+from petswarm.lab.robot_command import add_hub as _add_hub
+from petswarm.lab.robot_command import add_node_clock as _add_node_clock
+from petswarm.lab.robot_command import add_robot_arguments, robot_config
+from petswarm.lab.robot_command import add_tls as _add_tls
+from petswarm.lab.robot_command import add_world as _add_world
 
 if TYPE_CHECKING:
     from petswarm.robot import RobotConfig
@@ -124,108 +129,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_node_clock(user)
 
     robot = sub.add_parser("robot", help="run one robot process attached to a hub")
-    _add_node_clock(robot)
-    robot.add_argument(
-        "--id",
-        type=robot_id,
-        required=True,
-        help="robot id 1-65533, also its short address; 'auto' claims the lowest free one",
-    )
-    _add_hub(robot)
-    robot.add_argument("--pan", type=int_auto, default=0x1000, help="PAN ID to start on (default 0x1000)")
-    robot.add_argument("--channel", type=bounded(int, 11, 26), default=11, help="802.15.4 channel 11-26 (default 11)")
-    robot.add_argument(
-        "--pos",
-        type=position,
-        default=None,
-        help="position x,y in metres; write --pos=-1,2 when x is negative (default: a 1.5 m grid by id, five to a row)",
-    )
-    robot.add_argument(
-        "--ping-interval",
-        type=bounded(float, 0, 3600),
-        default=0.0,
-        help="broadcast a ping every this many seconds (default 0: never)",
-    )
-    robot.add_argument("--seed", type=seed, default=0, help="seed of the robot's own random choices (default 0)")
-    robot.add_argument(
-        "--user",
-        type=bounded(int, 0, 65535),
-        default=0,
-        help="start connected to this user, following (default 0: a waiting robot)",
-    )
-    robot.add_argument(
-        "--region-rssi",
-        type=bounded(int, -120, 0),
-        default=-70,
-        help="as master: the available region, in dBm heard (default -70, about 10 m)",
-    )
-    robot.add_argument(
-        "--step-deadline",
-        type=bounded(float, 0.005, 10),
-        default=0.1,
-        help="seconds each organizing step waits for answers before retrying (default 0.1)",
-    )
-    robot.add_argument(
-        "--step-retries",
-        type=bounded(int, 0, 50),
-        default=5,
-        help="retries of an organizing step before it gives up on the missing (default 5)",
-    )
-    robot.add_argument("--record", metavar="FILE", help="append every event to this JSON-lines file as it happens")
-    robot.add_argument(
-        "--heading",
-        type=bounded(float, -360, 360),
-        default=0.0,
-        help="heading in degrees, counter-clockwise from +x (default 0); orients the IR receivers",
-    )
-    robot.add_argument(
-        "--ir-estimator",
-        choices=("paper", "lsq"),
-        default="lsq",
-        help="relative location from IR: equations (1)-(3) or the least-squares fit (default lsq)",
-    )
-    robot.add_argument(
-        "--ir-slot", type=bounded(float, 0.01, 5), default=0.1, help="seconds each token holder shines (default 0.1)"
-    )
-    robot.add_argument(
-        "--ir-deadline",
-        type=bounded(float, 0.005, 10),
-        default=0.05,
-        help="seconds the token holder waits for the start sign's and the token's answers (default 0.05)",
-    )
-    robot.add_argument(
-        "--ir-retries",
-        type=bounded(int, 0, 50),
-        default=3,
-        help="retries of those two steps before the holder moves on without the missing (default 3)",
-    )
-
-    robot.add_argument(
-        "--protocol",
-        choices=("paper", "slotted"),
-        default="paper",
-        help="organizing protocol when this robot is master (default paper)",
-    )
-    robot.add_argument(
-        "--formation",
-        choices=("swarm", "surround"),
-        default="swarm",
-        help="swarm: the leader-follower middleware; surround: the surround law on IR beacons and echoes "
-        "(default swarm)",
-    )
-    robot.add_argument(
-        "--surround-human",
-        default="user",
-        metavar="ID",
-        help="surround: node id of the human's IR beacon (default %(default)s)",
-    )
-    robot.add_argument(
-        "--surround-config",
-        type=surround_config,
-        default=None,
-        metavar="JSON",
-        help="surround: law settings as a JSON object, e.g. '{\"stiffness\": 8}' (default: the documented gains)",
-    )
+    add_robot_arguments(robot)
 
     swarm = sub.add_parser("swarm", help="ask a running robot to organize or disperse a swarm (the watch's requests)")
     swarm_sub = swarm.add_subparsers(dest="action", required=True, metavar="ACTION")
@@ -316,7 +220,7 @@ def build_parser() -> argparse.ArgumentParser:
     from cli.chaos import add_arguments as add_chaos_arguments
 
     add_chaos_arguments(sub, _add_hub, robot_id, bounded)
-    from cli.certs import add_arguments as add_certs_arguments
+    from petswarm.lab.certs import add_arguments as add_certs_arguments
 
     add_certs_arguments(sub, bounded)
 
@@ -381,71 +285,27 @@ def build_parser() -> argparse.ArgumentParser:
     borg.add_argument("--seed", type=seed, default=1, help="seed of the hub and the robots (default %(default)s)")
     borg.add_argument("--out", default="bench-results", help="directory for JSON and plots (default %(default)s)")
     borg.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
-    from cli.bench_ir import add_arguments as add_bench_ir_arguments
+    from petswarm.bench.ir import add_arguments as add_bench_ir_arguments
 
     add_bench_ir_arguments(bench_sub.add_parser("ir", help="IR relative-location accuracy per estimator"))
-    from cli.bench_reaction import add_arguments as add_bench_reaction_arguments
+    from petswarm.bench.reaction import add_arguments as add_bench_reaction_arguments
 
     add_bench_reaction_arguments(
         bench_sub.add_parser("reaction", help="reaction time of master and slaves to the user's rotation (CDFs)")
     )
-    from cli.bench_surround import add_arguments as add_bench_surround_arguments
+    from petswarm.bench.surround import add_arguments as add_bench_surround_arguments
 
     add_bench_surround_arguments(
         bench_sub.add_parser(
             "surround", help="surround scenarios in model time through each robot's own pipeline (seeds, plot)"
         )
     )
-    from cli.bench_scale import add_arguments as add_bench_scale_arguments
+    from petswarm.bench.scale import add_arguments as add_bench_scale_arguments
 
     add_bench_scale_arguments(
         bench_sub.add_parser("scale", help="wall time per model second, memory and digests vs robots, per clock")
     )
     return parser
-
-
-def _add_world(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--world", default="default", help="key prefix shared by a hub and its nodes (default %(default)s)")
-
-
-def _add_hub(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--hub", default="tcp/127.0.0.1:7447", help="the hub's zenoh endpoint (default %(default)s)")
-    _add_world(p)
-    _add_tls(p, "client")
-
-
-def _add_tls(p: argparse.ArgumentParser, side: str) -> None:
-    """TLS files and a zenoh config file (README "Trust model"); none of them on loopback."""
-    tls = p.add_argument_group("transport security (a hub on another host; see README 'Trust model')")
-    if side == "hub":
-        tls.add_argument("--tls-cert", type=readable_file, metavar="PEM", help="the hub's certificate: listen on TLS")
-        tls.add_argument("--tls-key", type=readable_file, metavar="PEM", help="the hub certificate's private key")
-        tls.add_argument(
-            "--tls-ca",
-            type=readable_file,
-            metavar="PEM",
-            help="ask every client for a certificate signed by this CA (mutual TLS) and enforce the access "
-            "control: robot-N and user-N publish only on their own keys, operator asks and commands, "
-            "nobody but the hub publishes on down/**",
-        )
-        tls.add_argument(
-            "--acl-ids",
-            type=bounded(int, 1, 65533),
-            default=64,
-            help="certificates robot-1..robot-N and user-1..user-N get node rights (default %(default)s)",
-        )
-    else:
-        tls.add_argument("--tls-ca", type=readable_file, metavar="PEM", help="check the hub's certificate with this CA")
-        tls.add_argument(
-            "--tls-cert",
-            type=readable_file,
-            metavar="PEM",
-            help="this process's certificate (common name robot-N, user-N or operator) for a hub asking for one",
-        )
-        tls.add_argument("--tls-key", type=readable_file, metavar="PEM", help="that certificate's private key")
-    tls.add_argument(
-        "--zenoh-config", type=readable_file, metavar="FILE", help="a zenoh JSON5 config file the session starts from"
-    )
 
 
 def _use_security(args: argparse.Namespace) -> str | None:
@@ -459,8 +319,8 @@ def _use_security(args: argparse.Namespace) -> str | None:
         return "--tls-ca asks clients for certificates: the hub needs its own (--tls-cert and --tls-key)"
     if args.command == "hub" and files["tls_cert"] and not args.listen.startswith("tls/"):
         return f"--tls-cert needs a tls/ endpoint to listen on, not {args.listen!r} (e.g. tls/0.0.0.0:7447)"
-    from radio_hub.trust import TransportSecurity
-    from radio_hub.zenoh_link import use_security
+    from radio_hub.link.trust import TransportSecurity
+    from radio_hub.link.zenoh_link import use_security
 
     use_security(
         TransportSecurity(
@@ -494,19 +354,9 @@ def main(argv: list[str] | None = None) -> int:
         return 0
 
 
-def _add_node_clock(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--clock",
-        choices=("wall", "lockstep"),
-        default="wall",
-        help="wall (default): run on the wall clock; lockstep: on model time granted by a `petswarm hub "
-        "--clock lockstep` (the node waits for that hub at start)",
-    )
-
-
 def _hub(args: argparse.Namespace) -> int:
     from petswarm.scenario import ScenarioError, load
-    from radio_hub.hub import RadioHub, environment_from_dict, load_config, ready_line
+    from radio_hub.shell.hub import RadioHub, environment_from_dict, load_config, ready_line
 
     try:
         environment = load_config(args.config) if args.config else None
@@ -527,7 +377,7 @@ def _hub(args: argparse.Namespace) -> int:
         hub: Any
         if args.clock == "lockstep":
             from radio_hub.environment import EnvironmentConfig
-            from radio_hub.lockstep import LockstepHub
+            from radio_hub.shell.lockstep import LockstepHub
 
             hub = LockstepHub(
                 args.listen,
@@ -576,9 +426,9 @@ def _hub(args: argparse.Namespace) -> int:
 
 
 def _user(args: argparse.Namespace) -> int:
+    from petswarm.managers.sequence import EventLog
     from petswarm.scenario import ScenarioError, load
-    from petswarm.sequence import EventLog
-    from petswarm.user import UserConfig, run_user
+    from petswarm.wearables.user import UserConfig, run_user
 
     try:
         scenario = load(args.scenario)
@@ -593,7 +443,7 @@ def _user(args: argparse.Namespace) -> int:
     sink = open(args.record, "a") if args.record else None  # noqa: SIM115 (closed below)
     try:
         if args.clock == "lockstep":
-            from cli.lockstep_node import run_node
+            from petswarm.lab.lockstep_node import run_node
 
             return run_node("user", args.hub, args.world, lambda link: run_user(config, EventLog(sink=sink), link=link))
         return asyncio.run(run_user(config, EventLog(sink=sink)))
@@ -603,10 +453,10 @@ def _user(args: argparse.Namespace) -> int:
 
 
 def _robot(args: argparse.Namespace) -> int:
-    from cli.runtime import NotOurRobot, register, unregister
+    from petswarm.lab.runtime import NotOurRobot, register, unregister
 
     config = robot_config(args)
-    try:  # so that petswarm chaos kill|pause|resume can tell this process is ours (cli/runtime.py)
+    try:  # so that petswarm chaos kill|pause|resume can tell this process is ours (petswarm/lab/runtime.py)
         entry = register(config.world, config.robot_id) if config.robot_id else None
     except (OSError, NotOurRobot) as err:
         print(f"petswarm robot: not registered for petswarm chaos: {err}", file=sys.stderr)
@@ -621,7 +471,7 @@ def _run_robot(args: argparse.Namespace, config: RobotConfig) -> int:
     from petswarm.robot import run_robot
 
     if args.clock == "lockstep":
-        from cli.lockstep_node import run_node
+        from petswarm.lab.lockstep_node import run_node
 
         if config.robot_id == 0:
             print(
@@ -633,40 +483,9 @@ def _run_robot(args: argparse.Namespace, config: RobotConfig) -> int:
     return asyncio.run(run_robot(config))
 
 
-def robot_config(args: argparse.Namespace) -> RobotConfig:
-    """The robot a ``petswarm robot`` command line describes (also how a model-time run builds its robots)."""
-    from petswarm.exchange import StepTiming
-    from petswarm.formation import FormationConfig
-    from petswarm.relative_location import TokenConfig
-    from petswarm.robot import RobotConfig
-    from petswarm.surround import SurroundConfig
-    from petswarm.surround_pilot import SurroundDriverConfig
-
-    timing = StepTiming(args.step_deadline, args.step_retries)
-    formation = FormationConfig(protocol=args.protocol, step=timing, min_rssi_dbm=args.region_rssi)
-    return RobotConfig(
-        robot_id=args.id,
-        endpoint=args.hub,
-        world=args.world,
-        pan_id=args.pan,
-        channel=args.channel,
-        position=args.pos,
-        ping_interval=args.ping_interval,
-        seed=args.seed,
-        user=args.user,
-        formation=formation,
-        token=TokenConfig(
-            slot_s=args.ir_slot, step=StepTiming(args.ir_deadline, args.ir_retries), estimator=args.ir_estimator
-        ),
-        heading_deg=args.heading,
-        record=args.record,
-        formation_mode=args.formation,
-        surround=SurroundDriverConfig(law=args.surround_config or SurroundConfig(), human_id=args.surround_human),
-    )
-
-
 def _run(args: argparse.Namespace) -> int:
-    from cli.run import RunOptions, default_ping_interval, run
+    from petswarm.lab.launch import run
+    from petswarm.lab.run import RunOptions, default_ping_interval
 
     if args.clock != "model" and args.robots > MAX_PROCESS_ROBOTS:
         print(
@@ -697,19 +516,19 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _experiment(args: argparse.Namespace) -> int:
-    from cli.experiment import experiment_command
+    from petswarm.lab.experiment import experiment_command
 
     return experiment_command(args)
 
 
 def _watch(args: argparse.Namespace) -> int:
-    from cli.watch import watch_command
+    from petswarm.lab.watch import watch_command
 
     return watch_command(args)
 
 
 def _certs(args: argparse.Namespace) -> int:
-    from cli.certs import certs_command
+    from petswarm.lab.certs import certs_command
 
     return certs_command(args)
 
@@ -723,20 +542,20 @@ def _chaos(args: argparse.Namespace) -> int:
 
 def _report(args: argparse.Namespace) -> int:
 
-    from cli.report import report_command
+    from petswarm.lab.report import report_command
 
     return report_command(args)
 
 
 def _swarm(args: argparse.Namespace) -> int:
 
-    from cli.swarm import swarm_command
+    from petswarm.lab.swarm import swarm_command
 
     return swarm_command(args)
 
 
 def _stats(args: argparse.Namespace) -> int:
-    from cli.hub_session import with_hub
+    from petswarm.lab.hub_session import with_hub
     from radio_hub.interface import Keys, query_hub
 
     def show(session: Any) -> int:
@@ -775,32 +594,32 @@ def hub_line(hub: dict[str, Any]) -> str:
 
 def _bench(args: argparse.Namespace) -> int:
     if args.bench == "ir":
-        from cli.bench_ir import bench_ir
+        from petswarm.bench.ir import bench_ir
 
         return bench_ir(args)
     if args.bench == "reaction":
-        from cli.bench_reaction import bench_reaction
+        from petswarm.bench.reaction import bench_reaction
 
         return bench_reaction(args)
     if args.bench == "surround":
-        from cli.bench_surround import bench_surround
+        from petswarm.bench.surround import bench_surround
 
         return bench_surround(args)
     if args.bench == "scale":
-        from cli.bench_scale import bench_scale
+        from petswarm.bench.scale import bench_scale
 
         return bench_scale(args)
     if args.bench == "organize":
-        from cli.bench_organize import bench_organize
+        from petswarm.bench.organize import bench_organize
 
         return bench_organize(args)
-    from cli.bench_hub import bench_hub
+    from petswarm.bench.hub import bench_hub
 
     return bench_hub(args)
 
 
 def _slave_counts(text: str) -> list[int]:
-    from cli.bench_organize import slave_counts  # imported here: it brings zenoh, which --help does not need
+    from petswarm.bench.organize import slave_counts  # imported here: it brings zenoh, which --help does not need
 
     return slave_counts(text)
 

@@ -121,7 +121,7 @@ class ModelClockLoop(asyncio.SelectorEventLoop):
 
 
 class LockstepSync(Protocol):
-    """What a lockstep loop tells the hub when every task waits (``radio_hub.lockstep.LockstepLink``)."""
+    """What a lockstep loop tells the hub when every task waits (``radio_hub.shell.lockstep.LockstepLink``)."""
 
     def idle(self, next_timer: float | None) -> None:
         """Report: all handled, nothing ready, the next timer due at ``next_timer`` (model seconds)."""

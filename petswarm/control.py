@@ -15,15 +15,13 @@ from typing import TYPE_CHECKING, Any
 
 import msgpack
 
-from petswarm.user_link import robot_node
+from petswarm.wearables.user_link import robot_node
 from radio_hub.interface import HubUnavailable, Keys
 
 if TYPE_CHECKING:
     import zenoh
 
-    from radio_hub.guard import Faults
-    from radio_hub.port import RadioClient
-    from radio_hub.wire import Relayed
+    from radio_hub.interface import Faults, RadioClient, Relayed
 
 HUB_NODE = "hub"
 """The name the hub's relay gives the hub itself."""

@@ -22,17 +22,17 @@ import zenoh
 
 from petswarm import clock
 from petswarm.control import all_robots_key, answer_relayed, guarded_handle, robot_key
+from petswarm.controllers.driving import Driver
+from petswarm.controllers.surround_driver import SurroundDriver
+from petswarm.controllers.surround_pilot import SurroundDriverConfig
 from petswarm.draws import Draws
-from petswarm.driving import Driver
-from petswarm.exchange import MessageProcessingManager
-from petswarm.formation import RESPONSES, FormationConfig, FormationError, NetworkFormation, Swarm
-from petswarm.messages import Blob, Ping, Pong, SwarmMessage
-from petswarm.relative_location import IrModuleManager, IrTokenSchedule, RelativeLocationManager, TokenConfig
-from petswarm.rf import Incoming, RfCommunicationManager
-from petswarm.sequence import EventLog, RobotState, SequenceManager, TransitionError
-from petswarm.surround_driver import SurroundDriver
-from petswarm.surround_pilot import SurroundDriverConfig
-from petswarm.user_link import robot_node
+from petswarm.managers.exchange import MessageProcessingManager
+from petswarm.managers.formation import RESPONSES, FormationConfig, FormationError, NetworkFormation, Swarm
+from petswarm.managers.messages import Blob, Ping, Pong, SwarmMessage
+from petswarm.managers.relative_location import IrModuleManager, IrTokenSchedule, RelativeLocationManager, TokenConfig
+from petswarm.managers.rf import Incoming, RfCommunicationManager
+from petswarm.managers.sequence import EventLog, RobotState, SequenceManager, TransitionError
+from petswarm.wearables.user_link import robot_node
 from radio_hub.interface import (
     BROADCAST,
     DEFAULT_ENDPOINT,

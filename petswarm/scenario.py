@@ -29,12 +29,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from petswarm.formation_shapes import Mode, Shape
-from petswarm.gestures import Gesture
-from petswarm.motion import wrap
-from petswarm.surround import SurroundConfig
-from radio_hub.chaos import check_timed_fault
-from radio_hub.config import check_keys
+from petswarm.controllers.formation_shapes import Mode, Shape
+from petswarm.controllers.motion import wrap
+from petswarm.controllers.surround import SurroundConfig
+from petswarm.wearables.gestures import Gesture
+from radio_hub.datasheet import check_keys
+from radio_hub.interface import check_timed_fault
 
 REQUESTS = ("follow", "lead", "remote", "cancel", "organize", "disperse", "mode", "return", "gesture")
 """Watch requests: select a main operation, cancel it, organize/disperse a swarm, change driving mode,
@@ -44,7 +44,7 @@ REQUEST_ARGS: dict[str, tuple[str, ...]] = {
     "mode": ("mode", "change_master"),
     "gesture": ("gesture",),
 }
-"""What each watch request takes besides ``at`` and ``request`` (as petswarm/driving.py reads them)."""
+"""What each watch request takes besides ``at`` and ``request`` (as petswarm/controllers/driving.py reads them)."""
 _CHOICES = {"shape": tuple(Shape), "mode": tuple(Mode), "gesture": tuple(Gesture)}
 TOP_KEYS = ("name", "description", "duration_s", "seed", "hub", "obstacles", "user", "robots", "faults", "surround")
 ROBOTS_KEYS = ("count", "formation", "positions")
@@ -152,7 +152,7 @@ class Scenario:
         return {k: v for k, v in self.surround.items() if k != "enabled"}
 
     def hub_tables(self) -> dict[str, Any]:
-        """The hub's config tables with the obstacles, as ``radio_hub.hub.environment_from_dict`` takes them."""
+        """The hub's config tables with the obstacles, as ``radio_hub.shell.hub.environment_from_dict`` takes them."""
         return {**self.hub, "obstacles": self.obstacles}
 
 
@@ -206,12 +206,14 @@ def parse(data: dict[str, Any], path: Path | None = None) -> Scenario:
 
 def _hub_tables(table: Any, obstacles: list[Any]) -> dict[str, Any]:
     """``[hub]`` and ``[[obstacles]]``, checked here as the hub will read them, so a typo fails before a run starts."""
-    from radio_hub.world import parse_obstacle
+    from radio_hub.interface import parse_obstacle
 
     for i, obstacle in enumerate(obstacles):
         parse_obstacle(obstacle, f"[[obstacles]][{i}]")
-    from radio_hub.config import MediumConfig
-    from radio_hub.hub import environment_from_dict  # imported here: it brings zenoh, which parsing rarely needs
+    from radio_hub.interface import (
+        MediumConfig,
+        environment_from_dict,  # imported here: it brings zenoh, which parsing rarely needs
+    )
 
     # no [hub.obstacles]: a scenario's obstacles are its own [[obstacles]]
     check_keys(table, ("world", "ble", "lf", "ir", "medium", *MediumConfig().to_dict()), "[hub]")

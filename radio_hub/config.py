@@ -167,7 +167,7 @@ class MediumConfig:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> MediumConfig:
         """Build from nested tables; unknown keys raise ValueError naming them."""
-        return _build(cls, data, "").validate()
+        return build_config(cls, data, "").validate()
 
     @classmethod
     def from_file(cls, path: str | Path) -> MediumConfig:
@@ -200,7 +200,10 @@ def check_keys(table: Any, known: Iterable[str], where: str) -> None:
     raise ValueError(f"{where}: {'; '.join(parts)}; known: {', '.join(names) or 'none'}")
 
 
-def _build(cls: type, data: dict[str, Any], where: str) -> Any:
+def build_config(cls: type, data: dict[str, Any], where: str) -> Any:
+    """A ``cls`` settings dataclass from ``data``, a TOML/JSON table that ``where`` names in errors (e.g.
+    ``ir.``): refuses unknown keys and values of the wrong type; nested tables are built the same way.
+    """
     table = f"[{where.rstrip('.')}]" if where else "the top level"
     fields = {f.name: f for f in dataclasses.fields(cls)}
     check_keys(data, fields, table)
@@ -208,7 +211,7 @@ def _build(cls: type, data: dict[str, Any], where: str) -> Any:
     for name, value in data.items():
         default = getattr(cls(), name)
         if dataclasses.is_dataclass(default):
-            kwargs[name] = _build(type(default), value, f"{where}{name}.")
+            kwargs[name] = build_config(type(default), value, f"{where}{name}.")
         elif isinstance(default, bool) and not isinstance(value, bool):
             raise ValueError(f"{where}{name}: expected true or false")
         else:

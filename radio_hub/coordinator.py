@@ -7,8 +7,8 @@ nothing is held for them, the held messages from nodes are taken in a fixed orde
 order each node sent them), the environment advances to the instant, and what it answers starts the next
 round. When a round brings nothing, time moves on to the earliest due timer or environment event.
 
-Both drivers keep exactly these rules: ``--clock model`` (``cli.model_run.MemoryAir``: every node on one
-loop, "every node idle" is the loop having nothing ready) and ``--clock lockstep`` (``radio_hub.lockstep``:
+Both drivers keep exactly these rules: ``--clock model`` (``petswarm.lab.model_run.MemoryAir``: every node on one
+loop, "every node idle" is the loop having nothing ready) and ``--clock lockstep`` (``radio_hub.shell.lockstep``:
 node processes report idle over zenoh and are granted the next instant). So a node sees the same messages at
 the same instants in the same order in both, and equal seeds give equal digests. Pure: no I/O, no clock.
 """
@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from radio_hub.environment import Environment, EnvironmentConfig
-from radio_hub.port import MODEL_EPOCH_S
+from radio_hub.link.port import MODEL_EPOCH_S
 
 MODEL_EPOCH_US = round(MODEL_EPOCH_S * 1e6)
 

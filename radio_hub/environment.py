@@ -6,7 +6,7 @@ queries, and ``advance``, which carries out everything due by then (medium outco
 sensors, IR sweeps, beacons, BLE deliveries). ``next_event_us`` says when the next one is due. Messages for
 a node leave through ``Downlink.send`` already encoded.
 
-Two drivers exist: the hub process (``radio_hub.hub``, zenoh and the wall clock) and the model-time run
+Two drivers exist: the hub process (``radio_hub.shell.hub``, zenoh and the wall clock) and the model-time run
 (``runner.model``, every node in one process on a ``ModelClockLoop``). There is one schedule, this one.
 """
 
@@ -27,19 +27,19 @@ from typing import Any, Protocol
 import msgpack
 import numpy as np
 
-from radio_hub import wire
-from radio_hub.ble import BleAir, BleConfig
-from radio_hub.chaos import describe_change
+from radio_hub.air.chaos import describe_change
+from radio_hub.air.mac import Frame, FrameError, FrameType
+from radio_hub.air.medium import Medium, Output, RadioNode, Reception, Transmission, TxReport, TxStatus
+from radio_hub.air.pcap import PcapWriter
 from radio_hub.config import MediumConfig, check_keys
 from radio_hub.guard import Faults
-from radio_hub.ir_air import IrAir
-from radio_hub.keys import check_name
-from radio_hub.lf import LfConfig, antenna_positions, lf_rssi
-from radio_hub.light import PERSON_BEACON_POWER, IrConfig
-from radio_hub.mac import Frame, FrameError, FrameType
-from radio_hub.medium import Medium, Output, RadioNode, Reception, Transmission, TxReport, TxStatus
-from radio_hub.pcap import PcapWriter
-from radio_hub.world import Obstacle, World, WorldConfig, parse_obstacle
+from radio_hub.link import wire
+from radio_hub.link.keys import check_name
+from radio_hub.physics.ble import BleAir, BleConfig
+from radio_hub.physics.ir_air import IrAir
+from radio_hub.physics.lf import LfConfig, antenna_positions, lf_rssi
+from radio_hub.physics.light import PERSON_BEACON_POWER, IrConfig
+from radio_hub.physics.world import Obstacle, World, WorldConfig, parse_obstacle
 
 SENSORS_EVERY = 2
 """World ticks per robot sensor message (50 Hz ticks: sensors at 25 Hz)."""

@@ -20,8 +20,8 @@ from typing import Any
 
 import pytest
 
-from cli.processes import free_tcp_port
 from petswarm import control
+from petswarm.lab.processes import free_tcp_port
 from radio_hub.interface import HubUnavailable, Keys, open_session, query_hub
 
 from .engine import (
@@ -63,7 +63,7 @@ def stack(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Stack]:
         built.compose("--progress", "plain", "build", timeout=900)
         FIGURES["build_first_s"] = time.monotonic() - t
         images.append(docker("image", "inspect", "--format", "{{.Id}}", built.image).stdout.strip())
-        source = built.dir / "cli/args.py"  # a source change, in the copy
+        source = built.dir / "petswarm/lab/arguments.py"  # a source change, in the copy
         source.write_text(source.read_text() + "\n# a source change\n")
         t = time.monotonic()
         warm = built.compose("--progress", "plain", "build", timeout=300)

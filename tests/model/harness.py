@@ -1,6 +1,7 @@
 """Model-time test harness: real ``Robot`` objects on the hub's own environment, in this process, on model time.
 
-The pieces are ``cli.model_run``'s (the ones ``petswarm run --clock model`` uses): a ``ModelClockLoop`` drives a
+The pieces are ``petswarm.lab.model_run``'s (the ones ``petswarm run --clock model`` uses): a ``ModelClockLoop`` drives
+a
 ``MemoryAir`` (the hub's pure ``radio_hub.environment.Environment``), and every robot is the object a robot process
 runs, attached through a ``MemoryLink``. Nothing sleeps in wall time: when every task waits, model time jumps to
 the next timer. The same seed and the same test give the same run on any machine, loaded or idle, so a bound
@@ -24,7 +25,7 @@ loop, runs the coroutine with a ``ModelWorld``, then stops every robot and close
 command line) and a user walking a scenario's plan (``user``); control commands (``command``); chaos faults
 (``fault``, ``clear``, ``chaos``); model time (``now``, ``advance``, ``until``); a robot's end (``kill``: as
 SIGKILL, ``stop``: as SIGTERM); and what happened (``events``, ``status``, ``stats``). Whole scenario runs go
-through ``run_scenario`` (``cli.model_run.execute``, the ``petswarm run SCENARIO --clock model`` path).
+through ``run_scenario`` (``petswarm.lab.model_run.execute``, the ``petswarm run SCENARIO --clock model`` path).
 """
 
 from __future__ import annotations
@@ -36,7 +37,8 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any, TypeVar
 
-from cli.model_run import (
+from petswarm.clock import ModelClockLoop
+from petswarm.lab.model_run import (
     ENDPOINT,
     MemoryAir,
     RunningRobot,
@@ -46,12 +48,11 @@ from cli.model_run import (
     start_robot,
     start_user,
 )
-from cli.run import RunOptions
-from petswarm.clock import ModelClockLoop
+from petswarm.lab.run import RunOptions
+from petswarm.managers.sequence import EventLog
 from petswarm.robot import DEFAULT_PAN, Robot, RobotConfig
 from petswarm.scenario import Scenario, UserPlan, load
-from petswarm.sequence import EventLog
-from petswarm.user import UserConfig
+from petswarm.wearables.user import UserConfig
 from radio_hub.environment import EnvironmentConfig, environment_from_dict
 
 T = TypeVar("T")
@@ -139,7 +140,7 @@ class ModelWorld:
         return self.air.chaos(request)
 
     def fault(self, kind: str, **spec: Any) -> int:
-        """Add a fault (``radio_hub.chaos``: loss, partition, ir_blind...) now; its id. Refused: ValueError."""
+        """Add a fault (``radio_hub.air.chaos``: loss, partition, ir_blind...) now; its id. Refused: ValueError."""
         answer = self.chaos({"op": "add", "fault": {"kind": kind, **spec}})
         if "error" in answer:
             raise ValueError(answer["error"])

@@ -1,4 +1,4 @@
-"""Driving with the user (petswarm/driving.py) in model time: the scenario files end to end through
+"""Driving with the user (petswarm/controllers/driving.py) in model time: the scenario files end to end through
 ``petswarm run SCENARIO --clock model`` (the hub's environment, every robot and the user as the objects their
 processes run), and small worlds of the harness.
 
@@ -17,7 +17,7 @@ from typing import Any
 
 import pytest
 
-from cli.metrics import read_world
+from petswarm.lab.metrics import read_world
 from petswarm.scenario import load, parse
 
 from .harness import SCENARIOS, ModelWorld, record_events, run_model_time, run_scenario

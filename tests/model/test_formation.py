@@ -1,4 +1,4 @@
-"""Network formation (petswarm/formation.py, paper section 3.4, Fig. 8, Tables 1-2) in model time: real robots
+"""Network formation (petswarm/managers/formation.py, paper section 3.4, Fig. 8, Tables 1-2) in model time: real robots
 on the hub's air, each answering the master's scan, joining query and notice by its own state.
 
 Table 1, may a waiting robot join? Connection first (a robot connected to any user refuses), then the region
@@ -16,7 +16,7 @@ from typing import Any
 
 import pytest
 
-from petswarm.formation import FormationConfig
+from petswarm.managers.formation import FormationConfig
 from petswarm.robot import DEFAULT_PAN
 
 from .harness import LOSSLESS, ModelWorld, run_model_time

@@ -1,4 +1,4 @@
-"""IR relative location over the token schedule (petswarm/relative_location.py, paper Fig. 7) in model time: a
+"""IR relative location over the token schedule (petswarm/managers/relative_location.py, paper Fig. 7) in model time: a
 swarm of four real robots on the hub's IR light; one module may shine at a time, the token passes by radio.
 
 Moved from tests/process/test_relative_location.py (the same bounds), plus the holder's death measured against
@@ -12,8 +12,8 @@ from typing import Any
 
 import pytest
 
-from petswarm.exchange import StepTiming
-from petswarm.relative_location import TokenConfig
+from petswarm.managers.exchange import StepTiming
+from petswarm.managers.relative_location import TokenConfig
 from petswarm.robot import Robot
 
 from .harness import LOSSLESS, ModelWorld, run_model_time

@@ -12,8 +12,8 @@ from typing import Any
 import pytest
 import zenoh
 
-from cli.processes import Supervisor, free_tcp_port
 from petswarm import control
+from petswarm.lab.processes import Supervisor, free_tcp_port
 from radio_hub.interface import HubUnavailable, Keys, open_session, query_hub
 
 LOSSLESS = {"range": {"success_ratio_rx": 1.0}, "path_loss": {"shadowing_sigma_db": 0.0}}

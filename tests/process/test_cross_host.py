@@ -20,7 +20,7 @@ from typing import Any
 
 import pytest
 
-from cli.processes import Supervisor
+from petswarm.lab.processes import Supervisor
 
 pytestmark = pytest.mark.process
 

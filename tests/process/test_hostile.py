@@ -18,9 +18,9 @@ from typing import Any
 import msgpack
 import zenoh
 
-from radio_hub import wire
-from radio_hub.mac import Frame, FrameType
-from radio_hub.zenoh_link import reliable_publisher, session_config
+from radio_hub.air.mac import Frame, FrameType
+from radio_hub.link import wire
+from radio_hub.link.zenoh_link import reliable_publisher, session_config
 
 ROBOTS = (1, 2, 3)
 FAKE_ATTACHES = 2000

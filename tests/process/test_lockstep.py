@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from cli.processes import Supervisor, free_tcp_port
+from petswarm.lab.processes import Supervisor, free_tcp_port
 from radio_hub.interface import HubUnavailable, Keys, open_session, query_hub
 
 pytestmark = pytest.mark.process

@@ -10,8 +10,8 @@ from typing import Any
 
 import pytest
 
-from radio_hub.mac import Frame, FrameError, FrameType
-from radio_hub.pcap import LINKTYPE_IEEE802_15_4_WITHFCS, PcapFile, read_pcap
+from radio_hub.air.mac import Frame, FrameError, FrameType
+from radio_hub.air.pcap import LINKTYPE_IEEE802_15_4_WITHFCS, PcapFile, read_pcap
 
 pytestmark = pytest.mark.process
 

@@ -8,8 +8,8 @@ import msgpack
 import pytest
 
 from petswarm import control
-from radio_hub import wire
-from radio_hub.mac import Frame, FrameType
+from radio_hub.air.mac import Frame, FrameType
+from radio_hub.link import wire
 
 from .conftest import LOSSLESS
 

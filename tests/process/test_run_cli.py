@@ -99,7 +99,7 @@ def test_absurd_arguments_get_clear_errors():
 
 
 def test_a_run_leaves_a_record_with_manifest_events_and_summary(tmp_path):
-    from cli.records import read_events
+    from petswarm.lab.records import read_events
 
     record = tmp_path / "rec"
     proc = subprocess.run(
@@ -123,7 +123,7 @@ def test_a_run_leaves_a_record_with_manifest_events_and_summary(tmp_path):
 
 
 def test_a_run_killed_outright_still_leaves_a_readable_record(tmp_path):
-    from cli.records import read_events
+    from petswarm.lab.records import read_events
 
     record = tmp_path / "killed"
     proc = _started_run(2, "--organize", "1", "--record", str(record))

@@ -14,8 +14,8 @@ from typing import Any
 
 import pytest
 
-from cli.processes import free_tcp_port
-from cli.supervision import DEATHS_ONLY
+from petswarm.lab.processes import free_tcp_port
+from petswarm.lab.supervision import DEATHS_ONLY
 
 pytestmark = pytest.mark.process
 

@@ -17,11 +17,11 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from cli.certs import make_certificates
-from cli.processes import Supervisor, free_tcp_port
-from radio_hub import zenoh_link
+from petswarm.lab.certs import make_certificates
+from petswarm.lab.processes import Supervisor, free_tcp_port
 from radio_hub.interface import HubUnavailable, Keys, open_session, query_hub
-from radio_hub.trust import OPERATOR, TransportSecurity
+from radio_hub.link import zenoh_link
+from radio_hub.link.trust import OPERATOR, TransportSecurity
 from tests.process import test_cross_host as cross
 
 pytestmark = pytest.mark.process

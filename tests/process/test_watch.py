@@ -13,7 +13,7 @@ from typing import Any
 
 import pytest
 
-from cli.processes import Supervisor
+from petswarm.lab.processes import Supervisor
 
 from .world_samples import write_record
 

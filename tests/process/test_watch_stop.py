@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from cli.processes import free_tcp_port
+from petswarm.lab.processes import free_tcp_port
 
 from .world_samples import write_record
 

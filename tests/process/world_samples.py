@@ -1,4 +1,4 @@
-"""World frames in the hub's format (cli/watch_frames.py) for tests of ``petswarm watch``: a user walking
+"""World frames in the hub's format (petswarm/lab/watch_frames.py) for tests of ``petswarm watch``: a user walking
 east with a swarm around it, one robot shining IR at a time, obstacles, and radio events now and then."""
 
 from __future__ import annotations

@@ -6,9 +6,9 @@ from typing import Any
 
 import numpy as np
 
+from radio_hub.air.mac import BROADCAST, Frame, FrameType
+from radio_hub.air.medium import Medium, Output, RadioNode, Reception, TxReport
 from radio_hub.config import MediumConfig
-from radio_hub.mac import BROADCAST, Frame, FrameType
-from radio_hub.medium import Medium, Output, RadioNode, Reception, TxReport
 
 PAN = 0x1000
 LOSSLESS: dict[str, Any] = {"range": {"success_ratio_rx": 1.0}, "path_loss": {"shadowing_sigma_db": 0.0}}

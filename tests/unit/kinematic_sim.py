@@ -1,6 +1,6 @@
 """A small pure kinematic simulation for the controllers' tests: ideal bodies, sparse noisy sensing.
 
-Every body moves exactly by ``petswarm.motion`` (acceleration-limited commands, exact arcs). The robots see
+Every body moves exactly by ``petswarm.controllers.motion`` (acceleration-limited commands, exact arcs). The robots see
 only what the real ones would: the user through an LF fix and the belt's activity, each other through IR
 fixes with the relative heading; fixes come every ``fix_period_s`` with Gaussian noise, and the master's
 broadcast velocity reaches the slaves one tick late. All randomness comes from the Generator passed in.
@@ -13,10 +13,20 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from petswarm.formation_shapes import Mode, Shape, master_target_distance, neighbours, slots
-from petswarm.motion import STOP, DriveLimits, MotorCommand, Pose, accelerate, compose, integrate, relative, wrap
-from petswarm.pet_controller import PetControllerConfig, Ranges, UserObservation, follow, lead
-from petswarm.slave_controller import RelativeFix, RelativeTracker, SlaveControllerConfig, slave_decision
+from petswarm.controllers.formation_shapes import Mode, Shape, master_target_distance, neighbours, slots
+from petswarm.controllers.motion import (
+    STOP,
+    DriveLimits,
+    MotorCommand,
+    Pose,
+    accelerate,
+    compose,
+    integrate,
+    relative,
+    wrap,
+)
+from petswarm.controllers.pet_controller import PetControllerConfig, Ranges, UserObservation, follow, lead
+from petswarm.controllers.slave_controller import RelativeFix, RelativeTracker, SlaveControllerConfig, slave_decision
 
 DT = 0.05
 ROBOT_RADIUS_M = 0.15

@@ -1,4 +1,5 @@
-"""The belt's IMU emulation (petswarm/imu.py) and activity recognition on it (petswarm/activity.py)."""
+"""The belt's IMU emulation (petswarm/wearables/imu.py) and activity recognition on it
+(petswarm/wearables/activity.py)."""
 
 from __future__ import annotations
 
@@ -8,8 +9,8 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from petswarm.activity import Activity, ActivityConfig, ActivityRecognizer, Movement
-from petswarm.imu import ACCEL_PERIOD_S, GRAVITY_MPS2, GYRO_PERIOD_S, BeltImu, ImuConfig, step_frequency_hz
+from petswarm.wearables.activity import Activity, ActivityConfig, ActivityRecognizer, Movement
+from petswarm.wearables.imu import ACCEL_PERIOD_S, GRAVITY_MPS2, GYRO_PERIOD_S, BeltImu, ImuConfig, step_frequency_hz
 
 Profile = Callable[[float], float]
 TURN_START_S = 3.0

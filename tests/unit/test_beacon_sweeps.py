@@ -5,8 +5,8 @@ from __future__ import annotations
 from collections import defaultdict
 from typing import Any
 
-from radio_hub import wire
 from radio_hub.environment import Environment, EnvironmentConfig
+from radio_hub.link import wire
 
 
 class Recorder:

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from cli.bench_reaction import plot_cdfs, summarise, table
+from petswarm.bench.reaction import plot_cdfs, summarise, table
 
 
 def _trial(master: float | None, slaves: dict[str, float | None]) -> dict:

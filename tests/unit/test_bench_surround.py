@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from cli.bench_surround import model_time_run, summarise
 from cli.main import main
+from petswarm.bench.surround import model_time_run, summarise
 from petswarm.scenario import load
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -2,8 +2,8 @@
 
 import pytest
 
-from radio_hub.chaos import parse_fault
-from radio_hub.medium import TxStatus
+from radio_hub.air.chaos import parse_fault
+from radio_hub.air.medium import TxStatus
 
 from .helpers import NO_BACKOFF, data, medium, place, receptions, reports, run_to_idle
 
@@ -78,9 +78,9 @@ def test_bad_fault_specs_are_refused_with_a_reason(spec, reason):
 def test_ir_blinding_and_noise_reach_only_the_chosen_receiver():
     import numpy as np
 
-    from radio_hub.chaos import Chaos
-    from radio_hub.ir_air import IrAir
-    from radio_hub.light import IrConfig
+    from radio_hub.air.chaos import Chaos
+    from radio_hub.physics.ir_air import IrAir
+    from radio_hub.physics.light import IrConfig
 
     config = IrConfig().noise_free()
     air = IrAir(config, np.random.default_rng(1))

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from radio_hub.chaos import parse_fault
-from radio_hub.medium import Medium, Output, Reception, TxStatus
+from radio_hub.air.chaos import parse_fault
+from radio_hub.air.medium import Medium, Output, Reception, TxStatus
 
 from .helpers import NO_BACKOFF, data, medium, place, receptions, reports, run_to_idle
 

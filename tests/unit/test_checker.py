@@ -3,7 +3,7 @@
 import itertools
 import json
 
-from cli.checker import check_counters, check_events, check_ir, check_record
+from petswarm.lab.checker import check_counters, check_events, check_ir, check_record
 
 GOOD_NODE = {"heard": 10, "delivered": 6, "collided": 2, "lost": 1, "filtered": 1}
 

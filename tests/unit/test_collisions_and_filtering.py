@@ -2,9 +2,9 @@
 
 import pytest
 
+from radio_hub.air.mac import BROADCAST
+from radio_hub.air.medium import Medium, RxOutcome, TxStatus
 from radio_hub.config import airtime_us
-from radio_hub.mac import BROADCAST
-from radio_hub.medium import Medium, RxOutcome, TxStatus
 
 from .helpers import PAN, data, medium, place, receptions, reports, run_to_idle
 

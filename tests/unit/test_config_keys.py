@@ -8,10 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from cli.experiment import load as load_experiment
+from petswarm.lab.experiment import load as load_experiment
 from petswarm.scenario import ScenarioError
 from petswarm.scenario import load as load_scenario
-from radio_hub.hub import load_config
+from radio_hub.shell.hub import load_config
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -122,7 +122,7 @@ def test_an_experiment_names_a_misspelt_key_of_its_hub_config(tmp_path: Path) ->
 def test_the_surround_config_option_names_the_nearest_key() -> None:
     import argparse
 
-    from cli.args import surround_config
+    from petswarm.lab.arguments import surround_config
 
     with pytest.raises(argparse.ArgumentTypeError, match=re.escape("'stifness' (did you mean 'stiffness'?)")):
         surround_config('{"stifness": 8}')

@@ -12,9 +12,19 @@ import math
 import numpy as np
 import pytest
 
-from petswarm.formation_shapes import Mode, Shape, slots
-from petswarm.motion import STOP, DriveLimits, MotorCommand, Pose, accelerate, compose, integrate, relative, wrap
-from petswarm.pet_controller import (
+from petswarm.controllers.formation_shapes import Mode, Shape, slots
+from petswarm.controllers.motion import (
+    STOP,
+    DriveLimits,
+    MotorCommand,
+    Pose,
+    accelerate,
+    compose,
+    integrate,
+    relative,
+    wrap,
+)
+from petswarm.controllers.pet_controller import (
     PetControllerConfig,
     Ranges,
     UserObservation,
@@ -24,7 +34,7 @@ from petswarm.pet_controller import (
     obstacle_ahead,
     safety,
 )
-from petswarm.slave_controller import (
+from petswarm.controllers.slave_controller import (
     RelativeFix,
     RelativeTracker,
     SlaveControllerConfig,

@@ -6,8 +6,8 @@ ACK wait 864 us, airtime (6 + PSDU) x 32 us; an ACK PSDU is 5 bytes (352 us on a
 
 import numpy as np
 
+from radio_hub.air.medium import RxOutcome, TxStatus
 from radio_hub.config import airtime_us
-from radio_hub.medium import RxOutcome, TxStatus
 
 from .helpers import NO_BACKOFF, data, medium, place, receptions, reports, run_to_idle
 

@@ -1,4 +1,4 @@
-"""The driver's sans-IO core (petswarm/driving_core.py) stepped by hand: events with an explicit ``now`` in,
+"""The driver's sans-IO core (petswarm/controllers/driving_core.py) stepped by hand: events with an explicit ``now`` in,
 actions out, no event loop and no clock. The user's modes (spec pet-bot-wearable.md), the lost user, the
 turn-about, Table 3 of swarm-middleware.md in both columns, and a slave steering to its slot."""
 
@@ -15,9 +15,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from petswarm import driving_core, surround_core, user_link
-from petswarm import messages as m
-from petswarm.driving_core import (
+from petswarm.controllers import driving_core, surround_core
+from petswarm.controllers.driving_core import (
     CONTROL_PERIOD_S,
     LOST_AFTER_S,
     REMOTE_HOLD_S,
@@ -37,9 +36,11 @@ from petswarm.driving_core import (
     Telemetry,
     user_id,
 )
-from petswarm.formation_shapes import Mode
-from petswarm.motion import MotorCommand
-from petswarm.sequence import EventLog, RobotState, SequenceManager, TransitionError
+from petswarm.controllers.formation_shapes import Mode
+from petswarm.controllers.motion import MotorCommand
+from petswarm.managers import messages as m
+from petswarm.managers.sequence import EventLog, RobotState, SequenceManager, TransitionError
+from petswarm.wearables import user_link
 from radio_hub.interface import BROADCAST, OwnSensors
 
 BELT = "user-1"

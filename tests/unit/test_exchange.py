@@ -4,12 +4,12 @@ import asyncio
 
 import pytest
 
-from petswarm.exchange import MessageProcessingManager, SendRequest, Step, StepOver, StepTiming, WaitUntil
-from petswarm.messages import JoinAvailable, Joined
-from petswarm.rf import Incoming
-from petswarm.sequence import EventLog
+from petswarm.managers.exchange import MessageProcessingManager, SendRequest, Step, StepOver, StepTiming, WaitUntil
+from petswarm.managers.messages import JoinAvailable, Joined
+from petswarm.managers.rf import Incoming
+from petswarm.managers.sequence import EventLog
+from radio_hub.air.mac import Frame, FrameType
 from radio_hub.interface import RxFrame
-from radio_hub.mac import Frame, FrameType
 
 TIMING = StepTiming(deadline_s=0.02, max_retries=3)
 

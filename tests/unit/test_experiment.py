@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from cli.experiment import judge, load
+from petswarm.lab.experiment import judge, load
 
 ROOT = Path(__file__).resolve().parents[2]
 FEWER = "only 1 of the 3 robots available joined the swarm"
@@ -27,8 +27,8 @@ def test_a_run_passes_on_what_its_experiment_requires() -> None:
 
 
 def test_the_waivable_problems_are_worded_as_the_run_words_them() -> None:
-    # the experiment knows them by their wording: if cli/run.py rewords one, this says so
-    source = (ROOT / "cli" / "run.py").read_text()
+    # the experiment knows them by their wording: if petswarm/lab/run.py rewords one, this says so
+    source = (ROOT / "petswarm" / "lab" / "run.py").read_text()
     assert "not every robot heard every other robot" in source
     assert "robots available joined the swarm" in source
 
@@ -44,7 +44,7 @@ def test_the_lost_fraction_of_a_30_percent_loss_fault_reads_about_0_3() -> None:
     """Five robots in the emulated air under a 30 % loss fault, each broadcasting a ping and answering every
     ping with an acknowledged unicast pong (the robots' traffic): receptions are counted at every receiver in
     range, and most of them are filtered (a pong is for one robot), which the fraction must count too."""
-    from cli.experiment import _aggregate
+    from petswarm.lab.experiment import _aggregate
     from tests.unit.helpers import data, medium, place, run_to_idle
 
     m = medium(seed=3)

@@ -7,12 +7,12 @@ from typing import Any
 
 import numpy as np
 
-from petswarm import messages as m
-from petswarm.formation import ANSWER_ATTEMPTS, FormationConfig, NetworkFormation
-from petswarm.rf import Incoming
-from petswarm.sequence import EventLog, RobotState, SequenceManager
+from petswarm.managers import messages as m
+from petswarm.managers.formation import ANSWER_ATTEMPTS, FormationConfig, NetworkFormation
+from petswarm.managers.rf import Incoming
+from petswarm.managers.sequence import EventLog, RobotState, SequenceManager
+from radio_hub.air.mac import BROADCAST, Frame, FrameType
 from radio_hub.interface import RxFrame, TxResult, TxStatus
-from radio_hub.mac import BROADCAST, Frame, FrameType
 
 WAITING_PAN = 0x1000
 ME, MASTER, USER = 3, 9, 7

@@ -13,9 +13,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from petswarm import messages as m
-from petswarm.exchange import SendRequest, StepOver, StepResult
-from petswarm.formation_core import (
+from petswarm.managers import messages as m
+from petswarm.managers.exchange import SendRequest, StepOver, StepResult
+from petswarm.managers.formation_core import (
     ANSWER_ATTEMPTS,
     MEMBER_MISSES,
     Action,
@@ -37,10 +37,10 @@ from petswarm.formation_core import (
     Swarm,
     SwarmChanged,
 )
-from petswarm.rf import Incoming
-from petswarm.sequence import EventLog, RobotState, SequenceManager, StateChange
+from petswarm.managers.rf import Incoming
+from petswarm.managers.sequence import EventLog, RobotState, SequenceManager, StateChange
+from radio_hub.air.mac import Frame, FrameType
 from radio_hub.interface import BROADCAST, RxFrame, TxResult, TxStatus
-from radio_hub.mac import Frame, FrameType
 
 WAITING_PAN = 0x1000
 SWARM_PAN = 0x2345
@@ -517,7 +517,7 @@ def test_the_core_imports_no_clock_no_loop_and_no_zenoh():
     import ast
     import inspect
 
-    import petswarm.formation_core as core_module
+    import petswarm.managers.formation_core as core_module
 
     imported = set()
     for node in ast.walk(ast.parse(inspect.getsource(core_module))):

@@ -3,9 +3,17 @@
 import numpy as np
 import pytest
 
-from petswarm.decisions import SWARM_PANS, Rival, choose_pan, may_join, reply_delay_s, rival_master, select_members
-from petswarm.messages import Refusal
-from petswarm.sequence import EventLog, RobotState, SequenceManager, TransitionError
+from petswarm.managers.decisions import (
+    SWARM_PANS,
+    Rival,
+    choose_pan,
+    may_join,
+    reply_delay_s,
+    rival_master,
+    select_members,
+)
+from petswarm.managers.messages import Refusal
+from petswarm.managers.sequence import EventLog, RobotState, SequenceManager, TransitionError
 
 
 @pytest.mark.parametrize(
@@ -104,9 +112,9 @@ def test_a_former_master_that_became_a_candidate_has_no_user_and_no_driving_stat
 
 
 def test_the_largest_roster_and_query_fit_one_inter_pan_frame():
-    from petswarm.formation import MAX_LISTED, MAX_MEMBERS
-    from petswarm.messages import JoinNotice, JoinQuery, Roster, Scan, ScanReply
-    from radio_hub.mac import max_payload
+    from petswarm.managers.formation import MAX_LISTED, MAX_MEMBERS
+    from petswarm.managers.messages import JoinNotice, JoinQuery, Roster, Scan, ScanReply
+    from radio_hub.air.mac import max_payload
 
     worst = 0xFFFD  # short addresses of three msgpack bytes
     limit = max_payload(pan_compressed=False)
@@ -121,8 +129,8 @@ def test_the_largest_roster_and_query_fit_one_inter_pan_frame():
 
 
 def test_a_handover_of_a_16_robot_swarm_fits_one_inter_pan_frame():
-    from petswarm.messages import DriveState, MasterHandover, decode
-    from radio_hub.mac import max_payload
+    from petswarm.managers.messages import DriveState, MasterHandover, decode
+    from radio_hub.air.mac import max_payload
 
     msg = MasterHandover(0xFFFF, 0xFFFF, (0xFFFD,) * 16, "following", "column", 0.6, 1, 1, "user-someone")
     assert len(msg.encode()) <= max_payload(pan_compressed=False) and decode(msg.encode()) == msg

@@ -7,7 +7,7 @@ from itertools import combinations
 
 import pytest
 
-from petswarm.formation_shapes import (
+from petswarm.controllers.formation_shapes import (
     Mode,
     Shape,
     choose_master,
@@ -144,7 +144,7 @@ def test_mode_change_needs_a_slot_and_a_distance_for_every_member() -> None:
 
 
 def test_kept_slots_turn_the_places_into_the_new_masters_frame_and_the_chain_follows_distance() -> None:
-    from petswarm.formation_shapes import handover_chain, kept_slots
+    from petswarm.controllers.formation_shapes import handover_chain, kept_slots
 
     column = dict(zip((11, 12, 13), slots("column", 3, 0.6), strict=True))  # robot 11 leads, 13 at the tail
     kept = kept_slots(column, 13)

@@ -1,11 +1,11 @@
-"""Watch gestures (petswarm/gestures.py): synthesis, recognition, commands and combination."""
+"""Watch gestures (petswarm/wearables/gestures.py): synthesis, recognition, commands and combination."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from petswarm.gestures import COMMANDS, GRAVITY_MPS2, Gesture, combine, match_scores, recognize, synthesize
+from petswarm.wearables.gestures import COMMANDS, GRAVITY_MPS2, Gesture, combine, match_scores, recognize, synthesize
 
 RUNS = 200
 

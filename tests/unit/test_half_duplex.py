@@ -8,8 +8,8 @@ from itertools import pairwise
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from radio_hub.air.medium import Medium, RxOutcome, TxStatus
 from radio_hub.config import airtime_us
-from radio_hub.medium import Medium, RxOutcome, TxStatus
 
 from .helpers import NO_BACKOFF, data, medium, place, receptions, reports, run_to_idle
 

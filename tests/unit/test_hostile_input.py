@@ -12,9 +12,10 @@ import msgpack
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from radio_hub import chaos, wire
+from radio_hub.air import chaos
+from radio_hub.air.mac import Frame, FrameType
 from radio_hub.environment import GONE_KEPT, Environment, EnvironmentConfig
-from radio_hub.mac import Frame, FrameType
+from radio_hub.link import wire
 
 UP_TYPES = [
     wire.Attach,

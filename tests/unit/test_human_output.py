@@ -67,7 +67,7 @@ def test_every_command_that_prints_figures_has_json(argv: list[str]) -> None:
 
 
 def test_swarm_status_prints_in_words() -> None:
-    from cli.swarm import describe
+    from petswarm.lab.swarm import describe
 
     text = describe("status", STATUS)
     assert "{" not in text and "[" not in text and len(text.splitlines()) <= 12, text
@@ -77,7 +77,7 @@ def test_swarm_status_prints_in_words() -> None:
 
 
 def test_a_fault_holds_only_its_own_fields_and_reads_in_words() -> None:
-    from radio_hub.chaos import describe_change, describe_fault, parse_fault
+    from radio_hub.air.chaos import describe_change, describe_fault, parse_fault
 
     partition = parse_fault(1, {"kind": "partition", "group": ["robot-3"]}).to_dict()
     assert partition == {"fault_id": 1, "kind": "partition", "group": ("robot-3",)}  # no p = 1.0, no sigma = 0.0
@@ -105,7 +105,7 @@ def test_the_hub_line_of_stats_rounds_the_lags() -> None:
 
 
 def test_the_user_is_not_named_twice() -> None:
-    from petswarm.user import user_name
+    from petswarm.wearables.user import user_name
 
     assert user_name("user") == "user" and user_name("user-2") == "user-2" and user_name("7") == "user 7"
 
@@ -118,7 +118,7 @@ def _summary(**extra: Any) -> dict[str, Any]:
 
 
 def test_a_scenario_summary_has_no_empty_heard_from_column(capsys: Any) -> None:
-    from cli.run import _print
+    from petswarm.lab.run import _print
 
     _print(_summary(scenario="reaction", problems=[]), as_json=False)
     out = capsys.readouterr().out
@@ -129,7 +129,7 @@ def test_a_scenario_summary_has_no_empty_heard_from_column(capsys: Any) -> None:
 
 
 def test_report_prints_its_plots_once_and_json_on_request(tmp_path: Path, capsys: Any) -> None:
-    from cli.report import report_command
+    from petswarm.lab.report import report_command
     from tests.unit.test_report_world import _run_record
 
     run = tmp_path / "run"

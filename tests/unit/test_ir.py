@@ -8,8 +8,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from petswarm.ir_estimator import METHODS, distance_from_strength, estimate, estimate_many
-from radio_hub.light import (
+from petswarm.managers.ir_estimator import METHODS, distance_from_strength, estimate, estimate_many
+from radio_hub.physics.light import (
     RECEIVER_AXES_RAD,
     IrConfig,
     IrMode,

@@ -1,4 +1,4 @@
-"""The LF field (radio_hub/lf.py) and the user's fix from it (petswarm/lf_location.py)."""
+"""The LF field (radio_hub/physics/lf.py) and the user's fix from it (petswarm/wearables/lf_location.py)."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from petswarm.lf_location import UserFix, locate, locate_from_rssi, rssi_to_distance
-from radio_hub.lf import LfConfig, antenna_positions, lf_rssi, mean_rssi_dbm, wake_pattern, wakes
+from petswarm.wearables.lf_location import UserFix, locate, locate_from_rssi, rssi_to_distance
+from radio_hub.physics.lf import LfConfig, antenna_positions, lf_rssi, mean_rssi_dbm, wake_pattern, wakes
 
 CONFIG = LfConfig()
 CLEAN = CONFIG.noise_free()

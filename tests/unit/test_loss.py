@@ -5,8 +5,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from radio_hub.air.propagation import GilbertElliott, lqi_from_rssi, mean_rssi_dbm, reception_probability
 from radio_hub.config import GilbertElliottConfig, MediumConfig, PathLossConfig, RangeConfig
-from radio_hub.propagation import GilbertElliott, lqi_from_rssi, mean_rssi_dbm, reception_probability
 
 from .helpers import data, medium, place, receptions, run_to_idle
 

@@ -6,8 +6,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from radio_hub.air.mac import ACK_PSDU_LEN, BROADCAST, MAX_PSDU, Frame, FrameError, FrameType, fcs, max_payload
 from radio_hub.config import airtime_us
-from radio_hub.mac import ACK_PSDU_LEN, BROADCAST, MAX_PSDU, Frame, FrameError, FrameType, fcs, max_payload
 
 
 def test_fcs_is_crc16_kermit():

@@ -8,10 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from cli.digest import record_digest
 from cli.main import main
 from petswarm import clock
 from petswarm.clock import MODEL_EPOCH_S, ModelClockLoop, ModelTimeStalled
+from petswarm.lab.digest import record_digest
 
 
 def test_sleeping_moves_model_time_by_exactly_the_sleep_and_no_wall_time_passes() -> None:

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from petswarm.motion import (
+from petswarm.controllers.motion import (
     STOP,
     DriveLimits,
     MotorCommand,

@@ -8,10 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from radio_hub.hub import RadioHub
-from radio_hub.mac import ACK_PSDU_LEN, Frame, FrameType
-from radio_hub.medium import Transmission
-from radio_hub.pcap import (
+from radio_hub.air.mac import ACK_PSDU_LEN, Frame, FrameType
+from radio_hub.air.medium import Transmission
+from radio_hub.air.pcap import (
     LINKTYPE_IEEE802_15_4_WITHFCS,
     PCAP_MAGIC,
     PCAP_MAGIC_NS,
@@ -20,6 +19,7 @@ from radio_hub.pcap import (
     parse_pcap,
     read_pcap,
 )
+from radio_hub.shell.hub import RadioHub
 
 from .helpers import PAN, data, medium, place, run_to_idle
 

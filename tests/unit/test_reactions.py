@@ -1,4 +1,4 @@
-"""Reaction times to the user's rotations, from the ground truth (cli/metrics.py), and how they are printed."""
+"""Reaction times to the user's rotations, from the ground truth (petswarm/lab/metrics.py), and how they are printed."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ from typing import Any
 
 import pytest
 
-from cli.metrics import describe_driving, reactions
+from petswarm.lab.metrics import describe_driving, reactions
 
 USER_TURNS_AT = 1.0
 

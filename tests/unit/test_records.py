@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from cli.records import RunRecord, runs_dir
-from cli.run import RunOptions
+from petswarm.lab.records import RunRecord, runs_dir
+from petswarm.lab.run import RunOptions
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -38,7 +38,7 @@ def test_example_configs_load():
 
 
 def test_example_experiments_load():
-    from cli.experiment import load
+    from petswarm.lab.experiment import load
 
     for path in (ROOT / "examples").glob("experiment-*.toml"):
         assert load(path)["seeds"]

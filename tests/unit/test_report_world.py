@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from cli.report import report_command
+from petswarm.lab.report import report_command
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 SLAVE_OFFSET_M = 0.2  # robot 2 trails its reference by exactly this much, so its formation error is known

@@ -16,19 +16,19 @@ NOT_ON_A_ROBOT = (
     "aiohttp",  # the live view's web server
     "websockets",
     "http.server",
-    "cli.watch",
-    "cli.report",
+    "petswarm.lab.watch",
+    "petswarm.lab.report",
     "numpy.random",  # petswarm.draws gives a robot numpy's draws
-    "radio_hub.medium",  # the hub's side of the air
+    "radio_hub.air.medium",  # the hub's side of the air
     "radio_hub.coordinator",
     "radio_hub.environment",
-    "radio_hub.world",
+    "radio_hub.physics.world",
 )
 
 ROBOT_ENTRIES = {
     "robot middleware": "import petswarm.robot",
     "robot process (wall clock)": "import cli.main; import petswarm.robot",
-    "robot process (lockstep)": "import cli.main; import petswarm.robot; import cli.lockstep_node",
+    "robot process (lockstep)": "import cli.main; import petswarm.robot; import petswarm.lab.lockstep_node",
     "robot command line read": (
         "import cli.main\ncli.main.robot_config(cli.main.build_parser().parse_args(['robot', '--id', '3']))"
     ),
@@ -51,14 +51,14 @@ def test_a_robot_process_does_not_load_plotting_web_or_hub_modules(entry: str) -
 
 def test_the_probe_sees_a_module_that_is_loaded() -> None:
     """The check above could pass vacuously if the probe saw nothing: it must see what is imported."""
-    assert {"petswarm.robot", "zenoh", "radio_hub.port"} <= loaded_after("import petswarm.robot")
+    assert {"petswarm.robot", "zenoh", "radio_hub.link.port"} <= loaded_after("import petswarm.robot")
 
 
 LEAN_ROBOT = (
     "import sys\n"
     "from cli.lean import leave_out_openssl\n"
     "assert leave_out_openssl(['robot', '--id', '3'])\n"
-    "import cli.main, petswarm.robot, cli.lockstep_node, asyncio, hashlib\n"
+    "import cli.main, petswarm.robot, petswarm.lab.lockstep_node, asyncio, hashlib\n"
     "assert asyncio.run(asyncio.sleep(0, 'ran')) == 'ran'\n"
     "assert hashlib.sha256(b'x').hexdigest().startswith('2d711642')\n"
 )
@@ -81,10 +81,10 @@ PLAIN_ROBOT = (
     "from cli.lean import leave_out_openssl\n"
     "argv = ['robot', '--id', '3']\n"
     "assert leave_out_openssl(argv)\n"
-    "import cli.main, petswarm.robot, cli.lockstep_node\n"
+    "import cli.main, petswarm.robot, petswarm.lab.lockstep_node\n"
     "config = cli.main.robot_config(cli.main.build_parser().parse_args(argv))\n"
-    "from petswarm.driving_core import CONTROL_PERIOD_S, DriverCore\n"
-    "from petswarm.sequence import EventLog, SequenceManager\n"
+    "from petswarm.controllers.driving_core import CONTROL_PERIOD_S, DriverCore\n"
+    "from petswarm.managers.sequence import EventLog, SequenceManager\n"
     "from radio_hub.interface import OwnSensors\n"
     "class Formation:\n"
     "    swarm = None\n"
@@ -111,7 +111,7 @@ def test_a_plain_robot_imports_no_numpy_until_it_needs_it() -> None:
     """A robot that only pings (no swarm, no user) reads its command line, builds its middleware and steps
     its driver through 3 s of own-body sensors without numpy (issue 13: about 13 MB of its RSS)."""
     loaded = loaded_after(PLAIN_ROBOT)
-    assert {"petswarm.robot", "petswarm.driving_core", "radio_hub.port"} <= loaded
+    assert {"petswarm.robot", "petswarm.controllers.driving_core", "radio_hub.link.port"} <= loaded
     assert sorted(m for m in loaded if m == "numpy" or m.startswith("numpy.")) == []
 
 
@@ -120,9 +120,9 @@ def test_numpy_comes_in_when_a_robot_estimates_or_reads_its_echoes() -> None:
     code = (
         PLAIN_ROBOT
         + "assert 'numpy' not in sys.modules\n"
-        + "import petswarm.driving_core as driving_core\n"
-        + "import petswarm.ir_estimator as ir_estimator\n"
-        + "from radio_hub.light import IrConfig\n"
+        + "import petswarm.controllers.driving_core as driving_core\n"
+        + "import petswarm.managers.ir_estimator as ir_estimator\n"
+        + "from radio_hub.physics.light import IrConfig\n"
         + "fix = ir_estimator.estimate([0.0] * 3 + [300.0] + [0.0] * 8, IrConfig(), 'paper')\n"
         + "assert fix is not None and abs(fix.bearing_rad - 3.14159265 / 2) < 1e-6, fix\n"
         + "import numpy\n"

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from cli.run import ALL_PAIRS_UP_TO, HEARING_PROBLEMS, RunOptions, default_ping_interval, summarise
+from petswarm.lab.run import ALL_PAIRS_UP_TO, HEARING_PROBLEMS, RunOptions, default_ping_interval, summarise
 
 
 def _summary(robots: int, heard: dict[int, list[int]], delivered: dict[int, int] | None = None) -> dict:

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from petswarm import surround_sim as sim
-from petswarm.surround import (
+from petswarm.bench import surround_sim as sim
+from petswarm.controllers.surround import (
     Obstacles,
     SurroundConfig,
     SurroundController,

@@ -1,4 +1,5 @@
-"""The surround driver's sans-IO core (petswarm/surround_core.py) stepped by hand with an explicit ``now``."""
+"""The surround driver's sans-IO core (petswarm/controllers/surround_core.py) stepped by hand with an explicit
+``now``."""
 
 from __future__ import annotations
 
@@ -7,10 +8,10 @@ from typing import Any
 
 import numpy as np
 
-from petswarm.driving_core import Drive, Log, Telemetry
-from petswarm.motion import MotorCommand
-from petswarm.surround_core import BEACON_RETRY_S, TELEMETRY_EVERY, SetIrMode, SurroundCore
-from petswarm.surround_pilot import SurroundDriverConfig
+from petswarm.controllers.driving_core import Drive, Log, Telemetry
+from petswarm.controllers.motion import MotorCommand
+from petswarm.controllers.surround_core import BEACON_RETRY_S, TELEMETRY_EVERY, SetIrMode, SurroundCore
+from petswarm.controllers.surround_pilot import SurroundDriverConfig
 from radio_hub.interface import BeaconSweep, OwnSensors
 
 NO_BEACONS = BeaconSweep(0, {}, {})

@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from petswarm.surround_sensing import BeaconTracker, SensingConfig, beacon_points, echo_points, sense
-from radio_hub.light import IrConfig, receiver_gains, strength_at
-from radio_hub.light import sense as light_sense
+from petswarm.controllers.surround_sensing import BeaconTracker, SensingConfig, beacon_points, echo_points, sense
+from radio_hub.physics.light import IrConfig, receiver_gains, strength_at
+from radio_hub.physics.light import sense as light_sense
 
 
 def _sweep(x: float, y: float, config: IrConfig, rng: np.random.Generator) -> np.ndarray:
@@ -122,8 +122,8 @@ def test_a_scenarios_surround_table_is_checked_and_passes_the_law_settings() -> 
 
 
 def test_the_persons_beacon_reaches_every_robot_of_the_swarm_and_is_located_with_its_own_calibration() -> None:
-    from radio_hub.ir_air import IrAir
-    from radio_hub.light import PERSON_BEACON_POWER, IrMode
+    from radio_hub.physics.ir_air import IrAir
+    from radio_hub.physics.light import PERSON_BEACON_POWER, IrMode
 
     ir = IrConfig().noise_free()
     air = IrAir(ir, np.random.default_rng(1))
@@ -145,8 +145,8 @@ def test_the_persons_beacon_reaches_every_robot_of_the_swarm_and_is_located_with
 def test_the_agc_keeps_the_persons_beacon_readable_where_the_surround_robots_hold(distance_m: float) -> None:
     """Without the per-channel AGC the person's beacon saturated every facing receiver within 0.74 m, and
     robots 0.3-0.5 m from him read him 0.24-0.44 m too far: the distance of saturation, not his."""
-    from radio_hub.ir_air import IrAir
-    from radio_hub.light import PERSON_BEACON_POWER, IrMode
+    from radio_hub.physics.ir_air import IrAir
+    from radio_hub.physics.light import PERSON_BEACON_POWER, IrMode
 
     ir = IrConfig()
     air = IrAir(ir, np.random.default_rng(7))
@@ -171,7 +171,7 @@ def test_the_agc_keeps_the_persons_beacon_readable_where_the_surround_robots_hol
 
 
 def test_the_agc_steps_down_by_twos_until_the_peak_is_under_the_headroom() -> None:
-    from radio_hub.light import AGC_HEADROOM, BEACON_GAINS, beacon_gain
+    from radio_hub.physics.light import AGC_HEADROOM, BEACON_GAINS, beacon_gain
 
     ir = IrConfig()
     limit = AGC_HEADROOM * ir.saturation_counts - ir.ambient_counts

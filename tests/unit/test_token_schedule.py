@@ -1,4 +1,4 @@
-"""The IR token schedule's sans-IO core (petswarm/token_schedule.py) stepped by hand: no event loop, explicit
+"""The IR token schedule's sans-IO core (petswarm/managers/token_schedule.py) stepped by hand: no event loop, explicit
 ``now``. First single robots event by event (answer slots, the holder's round, a lost Sync, being overtaken,
 the measurement window, leaving), then a few cores on a small instant air (``Air``) for the token's order
 along the chain, a holder's death, a lost token and a member leaving.
@@ -15,13 +15,13 @@ from typing import Any
 import numpy as np
 import pytest
 
-from petswarm import messages as m
-from petswarm import token_schedule as ts
-from petswarm.rf import Incoming
-from petswarm.token_schedule import ANSWER_SLOT_MS, WATCH_PERIOD_S, TokenConfig, TokenSchedule
+from petswarm.managers import messages as m
+from petswarm.managers import token_schedule as ts
+from petswarm.managers.rf import Incoming
+from petswarm.managers.token_schedule import ANSWER_SLOT_MS, WATCH_PERIOD_S, TokenConfig, TokenSchedule
+from radio_hub.air.mac import Frame, FrameType
 from radio_hub.interface import BROADCAST, RxFrame
-from radio_hub.light import IrConfig, receiver_readings
-from radio_hub.mac import Frame, FrameType
+from radio_hub.physics.light import IrConfig, receiver_readings
 
 SESSION = 9
 CONFIG = TokenConfig()

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from cli.runtime import is_robot_command
-from radio_hub.trust import OPERATOR, TransportSecurity, access_control, tls_settings
+from petswarm.lab.runtime import is_robot_command
+from radio_hub.link.trust import OPERATOR, TransportSecurity, access_control, tls_settings
 
 
 def _allowed(acl: dict, subject: str, flow: str, message: str) -> set[str]:

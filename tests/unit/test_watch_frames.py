@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from cli.watch_frames import DEFAULT_RADIUS_M, ReplayClock, check_frame, parse_replay, with_events_since
+from petswarm.lab.watch_frames import DEFAULT_RADIUS_M, ReplayClock, check_frame, parse_replay, with_events_since
 
 
 def _frame(t_us: int = 0, **extra) -> dict:

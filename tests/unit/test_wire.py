@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from petswarm import messages
-from radio_hub import wire
+from petswarm.managers import messages
+from radio_hub.link import wire
 
 
 @pytest.mark.parametrize(

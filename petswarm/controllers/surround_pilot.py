@@ -1,0 +1,144 @@
+"""One surround robot's brain, pure: a body-sensor sample and the latest beacon sweep in, a motor command out.
+
+The robot process's ``surround_driver`` feeds it from the hub (real time); ``petswarm/bench/surround.py`` feeds it
+from the hub's world and IR models stepped in model time. Both run this very code, so what the model-time
+bench shows is what a robot process does, less its scheduling.
+
+Each step (on every body-sensor sample, 25 Hz, with the model time between samples as dt; the hub sweeps
+beacons with the body sensors, ``radio_hub.environment.BEACONS_EVERY``, so a step takes in the sweep of its own
+instant, and steps on without one when a sample comes alone):
+1. the beacon tracker (``surround_sensing.BeaconTracker``) moves every tracked beacon on by dt, and takes
+   in a new sweep's fixes when one came (a robot that gets no sweep for ``STALE_AFTER_S`` forgets them all,
+   and steps on its echoes alone, so it still keeps off walls and slows to a stop);
+2. the tracked beacons and the ultrasonic echoes become neighbours, obstacles and the human
+   (``surround_sensing.sense``);
+3. the surround law (``surround.SurroundController``) turns them into a velocity, with the fresh odometry as
+   the law's own velocity;
+4. the Pet-Bot's safety stage on the ultrasonic ring (``SAFETY``) has the last word.
+
+Why every sensor sample: stepping only per sweep (50 ms) made the swarm bounce (the repulsion Q / d^2 is
+stiff near contact, and a 50 ms step behind it oscillates); stepping faster than odometry comes (50 Hz on
+often stale samples) lost the velocity increments of the stale steps; stepping on the last command instead of
+the odometry let the law's velocity drift from the real one (pushes, the drive's ramp) into contacts.
+
+The formation forms round a person: the pilot sends nothing until it first sees the human's beacon, then runs
+the law from then on, whether it sees him or not (without him, f_G is zero and the local forces keep it
+with its neighbours). Robots started before their human would otherwise gather where he is about to stand.
+The command is (vx, vy): the law assumes a fixed heading, so the robot never turns.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+from petswarm.controllers.driving import EchoRanges
+from petswarm.controllers.motion import DriveLimits, MotorCommand
+from petswarm.controllers.pet_controller import PetControllerConfig, safety
+from petswarm.controllers.surround import SurroundConfig, SurroundController
+from petswarm.controllers.surround_sensing import BeaconTracker, SensingConfig, beacon_fixes, echo_list, sense_lists
+from radio_hub.interface import BeaconSweep, IrConfig, OwnSensors, lazy_numpy
+
+if TYPE_CHECKING:
+    import numpy as np
+else:
+    np = lazy_numpy(__name__)
+
+STALE_AFTER_S = 0.2
+"""No new sweep for this long (five periods of the hub's 25 Hz beacon sweeps): nothing is seen any more."""
+SENSOR_PERIOD_S = 0.04
+"""The hub sends body sensors at 25 Hz: the first step's dt."""
+
+SAFETY = PetControllerConfig(stop_distance_m=0.04, limits=DriveLimits(max_speed=1.5, max_omega=1.5))
+"""The safety stage for a swarm packed a few cm apart: stop 4 cm short (the Pet-Bot's 25 cm would freeze it).
+Measured (corridor, seed 1): contacts 21 without it, 1 with it; 2 cm with a harder brake gave 9."""
+
+
+@dataclass(frozen=True)
+class SurroundDriverConfig:
+    """The law's gains, how the robot reads its sensors, and whose beacon is the human's."""
+
+    law: SurroundConfig = field(default_factory=SurroundConfig)
+    human_id: str = "user"
+    """The node id of the human's beacon (the user process's id)."""
+    ir: IrConfig = field(default_factory=IrConfig)
+    """The IR module's calibration (the estimator's, never the hub's truth)."""
+    estimator: str = "lsq"
+    person_radius_m: float = SensingConfig.person_radius_m
+
+    @property
+    def sensing(self) -> SensingConfig:
+        """The sensing settings: the robot's radius is the law's."""
+        return SensingConfig(robot_radius_m=self.law.robot_radius_m, person_radius_m=self.person_radius_m)
+
+
+class SurroundPilot:
+    """One robot in the surround formation, without I/O: ``step`` per body-sensor sample."""
+
+    def __init__(self, config: SurroundDriverConfig) -> None:
+        self.config = config
+        self.controller = SurroundController(config.law)
+        self.tracker = BeaconTracker()
+        self.command = np.zeros(2)
+        self.engaged = False
+        """True once the human's beacon was seen: the robot drives from then on."""
+        self.counters = {"steps": 0, "stale_steps": 0, "human_seen": 0, "echoes_dropped": 0, "beacons": 0}
+        self._echoes = EchoRanges()
+        self._sensing = config.sensing
+        self._last_us: int | None = None
+        self._sweep_t_us = 0
+        self._sweep_at = -float("inf")
+        self._ring_angles: np.ndarray | None = None
+        self._ring_trig: tuple[list[float], list[float]] = ([], [])
+
+    def step(self, sensors: OwnSensors, sweep: BeaconSweep, now_s: float) -> tuple[float, float] | None:
+        """The motor command (vx, vy) for this sample, or None to send nothing (no human seen yet, or a sample
+        from before the last one: the hub restarted and its clock began again). ``sweep`` is the latest beacon
+        sweep (a new one when its time changed); ``now_s`` the receiver's clock, to tell when sweeps stopped."""
+        dt = SENSOR_PERIOD_S if self._last_us is None else (sensors.t_us - self._last_us) / 1e6
+        self._last_us = sensors.t_us
+        if dt <= 0:
+            return None
+        self._track(sensors, sweep, dt, now_s)
+        return self._drive(sensors, dt)
+
+    def _track(self, sensors: OwnSensors, sweep: BeaconSweep, dt: float, now_s: float) -> None:
+        own_velocity = np.array(sensors.odometry[:2], dtype=float)
+        self.tracker.predict(own_velocity, dt)
+        if sweep.t_us != self._sweep_t_us:
+            self._sweep_t_us, self._sweep_at = sweep.t_us, now_s
+            config = self.config
+            names, readings, gains = sweep.arrays()
+            seen, xy = beacon_fixes(names, readings, gains, config.ir, config.estimator, config.human_id)
+            self.tracker.update_many(seen, xy, own_velocity)
+        elif now_s - self._sweep_at > STALE_AFTER_S:
+            self.tracker.clear()
+            self.counters["stale_steps"] += 1
+
+    def _drive(self, sensors: OwnSensors, dt: float) -> tuple[float, float] | None:
+        config = self.config
+        tracker = self.tracker
+        echoes = echo_list(sensors.ranges_m.tolist(), *self._ring(sensors.angles_rad), config.law.robot_radius_m)
+        neighbours, obstacles, human, dropped = sense_lists(
+            tracker.names, tracker.positions, echoes, config.human_id, self._sensing
+        )
+        if not self.engaged and human is None:
+            return None
+        self.engaged = True
+        velocity = (float(sensors.odometry[0]), float(sensors.odometry[1]))
+        vx, vy = self.controller.step_plain(neighbours, obstacles, human, velocity, dt)
+        # the law's repulsion acts on IR estimates up to a sweep old; the ultrasonic ring is the last word
+        safe = safety(MotorCommand(vx, vy, 0.0), self._echoes.ranges(sensors), SAFETY)
+        self.command = np.array([safe.vx, safe.vy])
+        self.counters["steps"] += 1
+        self.counters["human_seen"] += human is not None
+        self.counters["echoes_dropped"] += dropped
+        self.counters["beacons"] = len(tracker.names)
+        return safe.vx, safe.vy
+
+    def _ring(self, angles_rad: np.ndarray) -> tuple[list[float], list[float]]:
+        """The cosines and sines of the ultrasonic sensors' angles, worked out again only when the ring changes."""
+        if self._ring_angles is not angles_rad:
+            self._ring_angles = angles_rad
+            self._ring_trig = (np.cos(angles_rad).tolist(), np.sin(angles_rad).tolist())
+        return self._ring_trig

@@ -1,0 +1,316 @@
+"""What a surround robot senses, in its own frame: neighbours and the human from IR beacons, obstacles from
+ultrasonic echoes. Pure: readings in, points out (the robot process's ``surround_driver`` is the shell).
+
+- Every beacon the IR module demodulates (one sweep of 12 readings per source) goes through the IR
+  estimator (``ir_estimator.estimate_many``) to a distance and bearing, hence a point (x forward, y left).
+  The human's beacon (his node id) gives the human G; every other beacon is a neighbour robot.
+- The human is an obstacle too (the spec: keep him out of collisions): his obstacle point is the surface
+  of his body facing the robot, his estimated centre brought ``person_radius_m`` closer, as the
+  simulation (``surround_sim``) senses him.
+- An ultrasonic echo at range r (measured from the robot's skin) on the sensor at angle a is the point
+  (robot_radius + r) (cos a, sin a) from the robot's centre: where the echo came from.
+- Echoes also come off neighbours and the human, who are already in the law (a neighbour as its centre,
+  the human as his surface point). Counting them again would double their repulsion, and only when they
+  happen to sit in one of the eight cones, so an echo that lies within a beacon's body (its radius plus
+  ``echo_match_m``) is dropped as explained by that beacon. What is left is walls and other obstacles.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from petswarm.managers.ir_estimator import estimate_many
+from radio_hub.datasheet import PERSON_BEACON_POWER, IrConfig
+from radio_hub.interface import lazy_numpy
+
+if TYPE_CHECKING:
+    import numpy as np
+else:
+    np = lazy_numpy(__name__)
+
+
+@dataclass(frozen=True)
+class SensingConfig:
+    """The robot's knowledge of bodies around it, used to read its sensors.
+
+    - ``robot_radius_m`` 0.1: the surround paper's robots (a neighbour's body is taken to be as big as one's own).
+    - ``person_radius_m`` 0.25: a person seen from above, shoulders included (the world's default user disc);
+      a smaller guess would let robots brush him, a larger one only keeps them a little further off.
+    - ``echo_match_m`` 0.1: slack on a beacon's body when deciding an echo came off it: the IR estimate's
+      distance error (about 1-3 % out to 1 m, a few cm) and the cone's 15 degree half width (an echo from
+      the side of a robot 0.3 m away reads up to ~4 cm off its surface), with margin.
+    """
+
+    robot_radius_m: float = 0.1
+    person_radius_m: float = 0.25
+    echo_match_m: float = 0.1
+
+    def __post_init__(self) -> None:
+        for name in ("robot_radius_m", "person_radius_m", "echo_match_m"):
+            value = getattr(self, name)
+            if not isinstance(value, int | float) or not np.isfinite(value) or value < 0:
+                raise ValueError(f"{name} must be a finite number >= 0, not {value!r}")
+
+
+@dataclass(frozen=True)
+class SurroundSensing:
+    """One control step's view, in the robot's frame: neighbour centres (k, 2), obstacle points (m, 2) (echoes
+    not explained by a beacon, and the human's body), and the human's centre (None when his beacon is unseen)."""
+
+    neighbours: np.ndarray
+    obstacles: np.ndarray
+    human: np.ndarray | None
+    echoes_dropped: int = 0
+    """Echoes taken to come off a neighbour or the human."""
+
+
+def beacon_points(
+    beacons: dict[str, np.ndarray],
+    ir: IrConfig,
+    method: str = "lsq",
+    person: str | None = None,
+    gains: dict[str, float] | None = None,
+) -> dict[str, np.ndarray]:
+    """Each visible beacon's estimated position (2,) in the robot's frame; sources without signal are left out.
+    ``person``: the node id of the human's beacon, ``PERSON_BEACON_POWER`` times as bright as a robot's
+    module, so its distance comes from the correspondingly brighter calibration. ``gains``: the gain each
+    beacon's channel was read at (its AGC's; missing ones 1): a reading at gain g is the light of a source
+    g times as bright, so each gain has its own calibration."""
+    if not beacons:
+        return {}
+    names = list(beacons)
+    gains = gains or {}
+    readings = np.array([np.asarray(beacons[n], dtype=float) for n in names], dtype=float)
+    seen, xy = beacon_fixes(names, readings, [gains.get(n, 1.0) for n in names], ir, method, person)
+    return dict(zip(seen, xy, strict=True))
+
+
+def beacon_fixes(
+    names: list[str],
+    readings: np.ndarray,
+    gains: list[float],
+    ir: IrConfig,
+    method: str = "lsq",
+    person: str | None = None,
+) -> tuple[list[str], np.ndarray]:
+    """``beacon_points`` of one sweep as arrays: ``readings`` (k, 12) of the beacons ``names`` read at
+    ``gains``, all through one estimate (each with its own calibration); returns the names of those with a
+    signal, in the order given, and their positions (m, 2)."""
+    if not names:
+        return [], np.zeros((0, 2))
+    brightness = [(PERSON_BEACON_POWER if n == person else 1.0) * g for n, g in zip(names, gains, strict=True)]
+    found = estimate_many(readings, ir, method, brightness)
+    xy = np.empty((len(names), 2))
+    np.multiply(np.cos(found.bearing_rad), found.distance_m, out=xy[:, 0])
+    np.multiply(np.sin(found.bearing_rad), found.distance_m, out=xy[:, 1])
+    valid = found.valid
+    if np.count_nonzero(valid) == len(names):
+        return list(names), xy
+    return [n for n, v in zip(names, valid.tolist(), strict=True) if v], xy[valid]
+
+
+TRACK_ALPHA = 0.5
+"""The alpha-beta tracker's position gain: each sweep's fix moves the track half way (IR noise ~1-2 cm at 1 m)."""
+TRACK_BETA = 0.17
+"""Its velocity gain, alpha^2 / (2 - alpha): Benedict and Bordner's choice for that alpha (less lag on a
+manoeuvring target than the critically damped 0.09, which a swarm pushing and braking is)."""
+
+
+class BeaconTracker:
+    """Each beacon's position and velocity in the robot's frame, between and across sweeps (designed for 20 Hz
+    sweeps under 25 Hz steps; the hub sweeps with the body sensors, 25 Hz, so a lost or late sweep is bridged).
+
+    Why: stepping at 25 Hz on 20 Hz sweeps, a tracker that takes beacons to stand still between sweeps sees
+    a neighbour driving beside it at v fall back by v x 40 ms and jump ahead at the next sweep; the law
+    differences that sawtooth into a centroid rate of +-v, which the damping B = 6.4 turns into +-6 m/s^2,
+    more than the acceleration limit: the clipped noise swamped the surround force, and in a model-time run
+    of the cylinder scenario the swarm ended 8 m behind its human (1.6 m with this tracker). Here each beacon
+    keeps a velocity of its own (an alpha-beta filter on its fixes, in the robot's non-turning frame), so a
+    neighbour driving along stays put relative to us.
+
+    The tracks are kept as arrays (one row per beacon, in the order they were first seen), so a step costs
+    a few array operations whatever the number of beacons.
+    """
+
+    def __init__(self, alpha: float = TRACK_ALPHA, beta: float = TRACK_BETA) -> None:
+        if not 0 < alpha <= 1 or not 0 <= beta < 2:
+            raise ValueError(f"alpha must be in (0, 1] and beta in [0, 2), not {alpha}, {beta}")
+        self.alpha, self.beta = alpha, beta
+        self._names: list[str] = []
+        self._rows: dict[str, int] = {}
+        self._position = np.zeros((0, 2))
+        self._velocity = np.zeros((0, 2))
+        """Each beacon's own velocity (not relative to us), in our frame."""
+        self._since_fix = 0.0
+
+    @property
+    def points(self) -> dict[str, np.ndarray]:
+        """The tracked beacons' positions now, in the robot's frame."""
+        return dict(zip(self._names, self._position, strict=True))
+
+    @property
+    def names(self) -> list[str]:
+        """The tracked beacons, in the order of ``positions``."""
+        return list(self._names)
+
+    @property
+    def positions(self) -> np.ndarray:
+        """The tracked beacons' positions now (k, 2), in the order of ``names``."""
+        return self._position
+
+    def predict(self, own_velocity: np.ndarray, dt: float) -> None:
+        """Move every track ``dt`` seconds on: it drives at its velocity, we at ``own_velocity`` (odometry)."""
+        if not dt >= 0:
+            raise ValueError(f"dt must be >= 0, not {dt!r}")
+        if self._names:
+            # a new array, never written in place: points handed out before stay as they were
+            self._position = self._position + (self._velocity - np.asarray(own_velocity, dtype=float)) * dt
+        self._since_fix += dt
+
+    def update(self, fixes: dict[str, np.ndarray], own_velocity: np.ndarray) -> None:
+        """A sweep's fixes: tracks of beacons in it are corrected, new ones start at rest relative to us, and
+        beacons missing from it are dropped (out of sight)."""
+        names = list(fixes)
+        xy = np.array([np.asarray(fixes[n], dtype=float) for n in names], dtype=float).reshape(-1, 2)
+        self.update_many(names, xy, own_velocity)
+
+    def update_many(self, names: list[str], xy: np.ndarray, own_velocity: np.ndarray) -> None:
+        """``update`` with the fixes as arrays: ``names`` (k) and their positions ``xy`` (k, 2)."""
+        own = np.asarray(own_velocity, dtype=float)
+        period = self._since_fix
+        self._since_fix = 0.0
+        if period > 0 and names and names == self._names:  # the same beacons as last sweep: every track goes on
+            innovation = np.asarray(xy, dtype=float).reshape(-1, 2) - self._position
+            self._position = self._position + self.alpha * innovation
+            self._velocity = self._velocity + self.beta * innovation / period
+            return
+        fix_row = {n: i for i, n in enumerate(names)}
+        old = self._rows
+        kept = [n for n in self._names if n in fix_row]  # tracks go on in their order, new ones after
+        new = [n for n in names if n not in old]
+        order = kept + new
+        fixed = xy[[fix_row[n] for n in order]] if order != names else np.asarray(xy, dtype=float)
+        if period <= 0 or not kept:
+            position, velocity = fixed, np.tile(own, (len(order), 1))
+        else:
+            k = len(kept)
+            if kept == self._names:  # every track goes on, in its row
+                tracked, moving = self._position, self._velocity
+            else:
+                rows = [old[n] for n in kept]
+                tracked, moving = self._position[rows], self._velocity[rows]
+            innovation = fixed[:k] - tracked
+            position = tracked + self.alpha * innovation
+            velocity = moving + self.beta * innovation / period
+            if new:
+                position = np.concatenate([position, fixed[k:]])
+                velocity = np.concatenate([velocity, np.tile(own, (len(new), 1))])
+        self._names, self._rows = order, {n: i for i, n in enumerate(order)}
+        self._position, self._velocity = position.reshape(-1, 2), velocity.reshape(-1, 2)
+
+    def clear(self) -> None:
+        """Forget every beacon (the sweeps stopped)."""
+        self._names, self._rows = [], {}
+        self._position, self._velocity = np.zeros((0, 2)), np.zeros((0, 2))
+
+
+def echo_points(ranges_m: np.ndarray, angles_rad: np.ndarray, robot_radius_m: float) -> np.ndarray:
+    """The points (m, 2) the echoes came from, from the robot's centre; sensors without an echo (nan) give none."""
+    ranges = np.asarray(ranges_m, dtype=float)
+    angles = np.asarray(angles_rad, dtype=float)
+    if ranges.shape != angles.shape:
+        raise ValueError(f"ranges_m {ranges.shape} and angles_rad {angles.shape} must match")
+    points = echo_list(ranges.tolist(), np.cos(angles).tolist(), np.sin(angles).tolist(), robot_radius_m)
+    return np.array(points, dtype=float).reshape(-1, 2)
+
+
+def echo_list(
+    ranges: list[float], cos: list[float], sin: list[float], robot_radius_m: float
+) -> list[tuple[float, float]]:
+    """``echo_points`` in plain floats, given the cosines and sines of the sensors' angles (a robot's ring is
+    fixed, so it works them out once): a pilot step handles eight echoes, where numpy's per-call overhead is
+    most of the cost."""
+    points = []
+    for r, c, s in zip(ranges, cos, sin, strict=True):
+        if math.isfinite(r):
+            reach = robot_radius_m + r
+            points.append((c * reach, s * reach))
+    return points
+
+
+def sense(
+    beacon_xy: dict[str, np.ndarray],
+    echoes: np.ndarray,
+    human_id: str,
+    config: SensingConfig,
+) -> SurroundSensing:
+    """Sort beacons into neighbours and the human, add the human's body to the obstacles, and drop the echoes
+    that a beacon explains."""
+    names = list(beacon_xy)
+    xy = np.array([np.asarray(beacon_xy[n], dtype=float) for n in names], dtype=float).reshape(-1, 2)
+    return sense_many(names, xy, echoes, human_id, config)
+
+
+def sense_many(
+    names: list[str], xy: np.ndarray, echoes: np.ndarray, human_id: str, config: SensingConfig
+) -> SurroundSensing:
+    """``sense`` with the beacons as arrays: ``names`` (k) at ``xy`` (k, 2)."""
+    xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+    echoes = np.asarray(echoes, dtype=float).reshape(-1, 2)
+    neighbours, obstacles, human, dropped = sense_lists(names, xy, echoes.tolist(), human_id, config)
+    return SurroundSensing(
+        np.array(neighbours, dtype=float).reshape(-1, 2),
+        np.array(obstacles, dtype=float).reshape(-1, 2),
+        None if human is None else np.array(human),
+        dropped,
+    )
+
+
+Point = tuple[float, float]
+
+
+def sense_lists(
+    names: list[str], xy: np.ndarray, echoes: list[Point], human_id: str, config: SensingConfig
+) -> tuple[list[list[float]], list[Point], list[float] | None, int]:
+    """``sense_many`` in plain floats (what a pilot step runs): the beacons ``names`` at ``xy`` (k, 2), the
+    echo points; returns the neighbours, the obstacle points, the human (or None) and how many echoes a
+    beacon explained."""
+    rows = xy.tolist()
+    at = names.index(human_id) if human_id in names else None
+    human = None if at is None else rows[at]
+    neighbours = rows if at is None else rows[:at] + rows[at + 1 :]
+    obstacles = echoes
+    if echoes and rows:
+        # an echo within a beacon's body (its radius plus the slack) came off it
+        radius = config.robot_radius_m + config.echo_match_m
+        person = config.person_radius_m + config.echo_match_m
+        reaches = [person if j == at else radius for j in range(len(rows))]
+        obstacles = [p for p in echoes if not _explained(p, rows, reaches)]
+    dropped = len(echoes) - len(obstacles)
+    if at is not None:
+        obstacles = [*obstacles, _surface_toward_me(xy[at], config.person_radius_m)]
+    return neighbours, obstacles, human, dropped
+
+
+def _explained(point: Point, centres: list[list[float]], reaches: list[float]) -> bool:
+    """Whether ``point`` lies within one of the bodies (centre and reach)."""
+    x, y = point
+    for (cx, cy), reach in zip(centres, reaches, strict=True):
+        gx, gy = x - cx, y - cy
+        if math.sqrt(gx * gx + gy * gy) <= reach:
+            return True
+    return False
+
+
+def _surface_toward_me(centre: np.ndarray, radius: float) -> Point:
+    """The point of a disc's surface nearest the robot; a centre estimated inside the disc's radius (the robot
+    pressed against him, or a short estimate) puts it a hair in front of the robot, pushing straight away."""
+    distance = math.sqrt(float(centre.dot(centre)))  # numpy's dot, as ever: its rounding is the record's
+    if distance <= 1e-9:
+        return (0.0, 0.0)
+    reach = max(distance - radius, 0.01)
+    x, y = centre.tolist()
+    scale = reach / distance
+    return (x * scale, y * scale)

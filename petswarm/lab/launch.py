@@ -1,0 +1,36 @@
+"""Start a run: ``run(opts)`` picks the clock (wall, model, lockstep) and the kind of run (robots pinging and
+organizing, or a scenario) and hands over to the module that runs it. It is the only module that imports
+them all, and none of them imports it, so the runs form no import cycle.
+"""
+
+from __future__ import annotations
+
+import sys
+
+from petswarm.lab.run import RunOptions, ping_and_organize, supervise
+
+
+def run(opts: RunOptions) -> int:
+    """Run the emulation; returns the process exit code."""
+    scenario = None
+    if opts.scenario:
+        from petswarm.scenario import ScenarioError, load
+
+        try:
+            scenario = load(opts.scenario)
+        except ScenarioError as err:
+            print(f"petswarm run: {err}", file=sys.stderr)
+            return 2
+    if opts.clock == "model":
+        from petswarm.lab.model_run import run_model
+
+        return run_model(opts, scenario)
+    if opts.clock == "lockstep":
+        from petswarm.lab.lockstep_run import run_lockstep
+
+        return run_lockstep(opts, scenario)
+    if scenario is not None:
+        from petswarm.lab.run_scenario import run_scenario
+
+        return run_scenario(opts, scenario)
+    return supervise(opts, "run", lambda _record: [], ping_and_organize)

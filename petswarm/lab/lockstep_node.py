@@ -1,0 +1,64 @@
+"""A node process on lockstep time: wait for the hub in wall time, then run on model time the hub grants."""
+
+from __future__ import annotations
+
+import signal
+import sys
+import time
+from collections.abc import Callable, Coroutine
+from typing import Any
+
+import zenoh
+
+from petswarm.clock import LockstepLoop
+from radio_hub.interface import HubUnavailable, Keys, LockstepLink, open_session
+
+HUB_WAIT_S = 30.0
+"""Wall seconds a lockstep node waits for its hub at start."""
+
+
+def open_link(endpoint: str, world: str, timeout: float = HUB_WAIT_S) -> LockstepLink:
+    """A lockstep link on a client session to ``endpoint``, once the hub serves its world (retried in wall
+    time: model time has not begun). A router that listens may not have declared the hub's keys yet, and what
+    a node sends before that is lost, its first idle too, which would leave the hub waiting for it for ever."""
+    deadline = time.monotonic() + timeout
+    keys = Keys(world)
+    while True:
+        try:
+            session = open_session("client", endpoint)
+        except HubUnavailable:
+            session = None
+        if session is not None and _hub_serves(session, keys, max(deadline - time.monotonic(), 0.5)):
+            return LockstepLink(session, keys, owns_session=True)
+        if session is not None:
+            session.close()
+        if time.monotonic() >= deadline:
+            raise HubUnavailable(f"no lockstep hub serves world {world!r} on {endpoint} within {timeout:g} s")
+        time.sleep(0.2)
+
+
+def _hub_serves(session: zenoh.Session, keys: Keys, timeout: float) -> bool:
+    """True once the hub's liveliness token is seen (it is declared after every key the hub serves)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if any(reply.ok is not None for reply in session.liveliness().get(keys.hub_alive, timeout=1.0)):
+            return True
+        time.sleep(0.1)
+    return False
+
+
+def run_node(name: str, endpoint: str, world: str, main: Callable[[LockstepLink], Coroutine[Any, Any, int]]) -> int:
+    """Run ``main(link)`` on a ``LockstepLoop``; returns its exit code (2 when no hub answers)."""
+    try:
+        link = open_link(endpoint, world)
+    except HubUnavailable as err:
+        print(f"{name}: {err}", file=sys.stderr)
+        return 2
+    loop = LockstepLoop()
+    try:
+        return loop.run_until_complete(main(link))
+    finally:
+        loop.close()  # which puts SIGTERM back to its default action
+        # The node's work is done and its record written: the SIGTERM a run sends its nodes at the end must not
+        # kill it while the interpreter and the zenoh session close, or it would report death by signal (-15).
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)

@@ -1,0 +1,530 @@
+"""``petswarm run --clock model``: the hub's environment and every robot and user in one process, on model time.
+
+The environment (``radio_hub.environment``) is driven by a ``ModelClockLoop``: its next event is a timer on
+the loop, and every node's ``RadioClient`` reaches it through a ``MemoryLink`` instead of zenoh. The robots and
+the user are the very objects a robot or user process runs (built from the same command lines), so the only
+difference from a wall-clock run is what carries messages and what moves time: nothing sleeps, a run goes as
+fast as the CPU allows, and the same seed and options give the same run (``digest``) on any machine, loaded or
+idle. Messages between a node and the environment take no time; the air's own timing (airtime, backoffs,
+ACKs) is modelled in the environment as in the hub.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextvars
+import functools
+import math
+import time
+import weakref
+from collections.abc import Callable, Coroutine
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from petswarm.clock import MODEL_EPOCH_S, ModelClockLoop
+from petswarm.control import RelayControl
+from petswarm.lab.checker import check_record
+from petswarm.lab.digest import record_digest
+from petswarm.lab.metrics import driving_metrics, read_world
+from petswarm.lab.records import RunRecord
+from petswarm.lab.run import (
+    HEARING_PROBLEMS,
+    FaultTimeline,
+    RunOptions,
+    _print,
+    organize_and_disperse,
+    organize_shortfall,
+    ping_robot_argv,
+    progress,
+    statuses,
+    summarise,
+)
+from petswarm.managers.sequence import EventLog
+from petswarm.robot import Robot, RobotConfig
+from petswarm.scenario import Scenario
+from petswarm.wearables.user import UserConfig, run_user
+from radio_hub.interface import (
+    MODEL_EPOCH_US,
+    Coordinator,
+    EnvironmentConfig,
+    HubUnavailable,
+    RadioClient,
+    RadioIdentity,
+    environment_from_dict,
+    load_config,
+)
+
+ENDPOINT = "memory"
+"""What a model run records as its hub endpoint: there is no socket."""
+CONTROL_IDENTITY = RadioIdentity("run", 0, 0, 0, kind="control")
+"""The run's orchestrator as a node of the world: it only relays (commands to robots, questions to the hub)."""
+
+
+class MemoryAir:
+    """The coordinator's environment on the running ``ModelClockLoop``, its nodes linked in memory.
+
+    "Every node is idle" is the loop having nothing ready: then held messages are released, or held node
+    messages settled, before model time moves (``radio_hub.coordinator`` gives the rules).
+    """
+
+    def __init__(
+        self, config: EnvironmentConfig, seed: int, *, pcap_path: Path | None = None, world_log: Path | None = None
+    ) -> None:
+        """``pcap_path`` and ``world_log``: where the air's frames and the world's ground truth go (a run's
+        record); None keeps them in memory only (tests)."""
+        self.loop = asyncio.get_running_loop()
+        if not isinstance(self.loop, ModelClockLoop):
+            raise TypeError("MemoryAir runs on a ModelClockLoop")
+        self.coordinator = Coordinator(
+            config, seed, wall_epoch_us=MODEL_EPOCH_US, pcap_path=pcap_path, world_log=world_log
+        )
+        self.env = self.coordinator.env
+        self._nodes: dict[str, Callable[[bytes], None]] = {}
+        self._settled: list[asyncio.Future[None]] = []
+        self._wake: asyncio.TimerHandle | None = None
+        self._wake_us = 0
+        self.loop.on_quiescent = self.quiescent
+        self._schedule()
+
+    def now_us(self) -> int:
+        """Model time in microseconds."""
+        return round(self.loop.time() * 1e6)
+
+    def link(self) -> MemoryLink:
+        """A new node's port to this environment."""
+        return MemoryLink(self)
+
+    def opened(self, node_id: str, on_down: Callable[[bytes], None]) -> None:
+        """A node's link is open: deliver to ``on_down`` from now on."""
+        self._nodes[node_id] = on_down
+
+    def up(self, node_id: str, data: bytes) -> None:
+        """A node's message, held until every node is idle."""
+        self.coordinator.up(node_id, data)
+
+    def gone(self, node_id: str, instance: str) -> None:
+        """A node's link closed."""
+        self._nodes.pop(node_id, None)
+        self.coordinator.leave(node_id, instance)
+
+    def chaos(self, request: dict[str, Any]) -> dict[str, Any]:
+        """A chaos request (``{"op": "add", "fault": {...}}``, ``{"op": "clear"}``...) now, as the hub's chaos
+        queryable takes it (tests; a run's faults go through the relay, held like every node message)."""
+        answer = self.env.chaos_request(request, self.now_us(), MODEL_EPOCH_S + self.now_us() / 1e6)
+        self._schedule()  # a fault may change what is due next
+        return answer
+
+    def quiescent(self) -> bool:
+        """Nothing is ready: release what is held for nodes, else settle what nodes sent; True when something
+        became ready."""
+        delivered = False
+        for node_id, messages in self.coordinator.take_downs().items():
+            on_down = self._nodes.get(node_id)
+            if on_down is None:  # a node that left meanwhile
+                continue
+            for data in messages:
+                self.loop.call_soon(on_down, data)
+            delivered = True
+        if delivered:
+            return True
+        if self.coordinator.settle(self.now_us()):
+            self._schedule()
+            return self.quiescent()
+        waiting, self._settled = self._settled, []
+        for future in waiting:
+            future.set_result(None)
+        return bool(waiting)
+
+    async def settled(self) -> None:
+        """Until every message of this instant, held both ways, has been handled (no model time passes)."""
+        future: asyncio.Future[None] = self.loop.create_future()
+        self._settled.append(future)
+        await future
+
+    def _fire(self) -> None:
+        self._wake = None
+        self.coordinator.advance(self.now_us())
+        self._schedule()
+
+    def _schedule(self) -> None:
+        # one timer on the loop, always at the environment's next event (an input may bring that forward)
+        due = self.coordinator.next_event_us()
+        if self._wake is not None:
+            if self._wake_us <= due:
+                return
+            self._wake.cancel()
+        self._wake_us = due
+        self._wake = self.loop.call_at(due / 1e6, self._fire)
+
+
+class MemoryLink:
+    """A node's ``HubLink`` to a ``MemoryAir``."""
+
+    def __init__(self, air: MemoryAir) -> None:
+        self.air = air
+        self.node_id = ""
+        self.instance = ""
+        self.closed = False
+
+    def open(
+        self, node_id: str, instance: str, on_down: Callable[[bytes], None], on_hub: Callable[[bool], None]
+    ) -> None:
+        """Register the node with the air (the hub is always present in memory)."""
+        self.node_id, self.instance = node_id, instance
+        self.air.opened(node_id, on_down)
+
+    def put(self, data: bytes) -> None:
+        """One message up, held until every node is idle; nothing once closed (a node that has gone sends
+        nothing more, whatever its leftover tasks try)."""
+        if not self.closed:
+            self.air.up(self.node_id, data)
+
+    async def close(self) -> None:
+        """The node goes."""
+        if not self.closed:
+            self.closed = True
+            self.air.gone(self.node_id, self.instance)
+
+
+_OWNER: contextvars.ContextVar[RunningRobot | None] = contextvars.ContextVar("model_robot", default=None)
+"""The robot whose code is running: every task created meanwhile belongs to it (``RunningRobot.tasks``)."""
+
+
+def _owned_task_factory(
+    loop: asyncio.AbstractEventLoop, coro: Coroutine[Any, Any, Any], context: contextvars.Context | None = None
+) -> asyncio.Task[Any]:
+    """asyncio's own tasks, each noted by the robot that created it (a task inherits its creator's context), so
+    that a robot can be stopped or killed as a whole, as the end of its process would end all its tasks."""
+    task = asyncio.Task(coro, loop=loop, context=context)
+    owner = context.get(_OWNER) if context is not None else _OWNER.get()
+    if owner is not None:
+        owner.adopt(task)
+    return task
+
+
+def _own_timers(loop: asyncio.AbstractEventLoop) -> None:
+    """Make every timer the running robot's code sets (``call_later``, ``call_at``; a sleep's too) its own, as
+    ``_owned_task_factory`` does for tasks: a killed robot's pending timeout must not fire into it."""
+    plain_call_at = loop.call_at
+
+    def call_at(when: float, callback: Callable[..., Any], *args: Any, context: Any = None) -> asyncio.TimerHandle:
+        handle = plain_call_at(when, callback, *args, context=context)
+        owner = context.get(_OWNER) if context is not None else _OWNER.get()
+        if owner is not None:
+            owner.timers.add(handle)
+        return handle
+
+    loop.call_at = call_at  # type: ignore[method-assign]
+
+
+@dataclass
+class RunningRobot:
+    """A ``Robot`` running on a ``MemoryAir``: the object a robot process runs, and every task it started."""
+
+    robot: Robot
+    air: MemoryAir
+    task: asyncio.Task[None] | None = None
+    tasks: set[asyncio.Task[Any]] = field(default_factory=set)
+    """Every live task the robot's code created (its managers' loops, rounds, rosters, handlers)."""
+    timers: weakref.WeakSet[asyncio.TimerHandle] = field(default_factory=weakref.WeakSet)
+    """Its pending timers (a fired one is dropped with the loop's last reference to it)."""
+    gone: bool = False
+    """Stopped or killed: it takes no more commands, and a task it would still start is cancelled at once."""
+
+    def adopt(self, task: asyncio.Task[Any]) -> None:
+        """``task`` was created by this robot's code."""
+        if self.gone:
+            task.cancel()  # a dead robot's leftover timer starts nothing
+            return
+        self.tasks.add(task)
+        task.add_done_callback(self.tasks.discard)
+
+    async def command(self, cmd: str, **args: Any) -> dict[str, Any]:
+        """One control command, as the robot process's control queryable would carry it out (the tasks it
+        starts, such as an organized swarm's rosters, are the robot's). HubUnavailable once it is gone."""
+        if self.gone:
+            raise HubUnavailable(f"robot {self.robot.config.robot_id} is gone")
+        token = _OWNER.set(self)
+        try:
+            return await self.robot.handle({"cmd": cmd, **args})
+        finally:
+            _OWNER.reset(token)
+
+    async def stop(self) -> None:
+        """A clean stop, as on SIGTERM: the robot's loops end, its record gets its last event, its radio
+        detaches; then whatever else it had started ends, as at the end of its process."""
+        self.robot.stopping.set()
+        try:
+            if self.task is not None:
+                await self.task
+            await self.robot.close()
+        finally:
+            self._end()
+
+    async def kill(self) -> None:
+        """As SIGKILL: every task of the robot ends at once, with no last event and no detach; the environment
+        forgets the node as the hub does when a process's liveliness ends."""
+        self._end()
+        await self.robot.rf.radio.close(detach=False)
+        sink, self.robot.log.sink = self.robot.log.sink, None
+        if sink is not None:
+            sink.close()
+        await self.air.settled()  # the cancelled tasks unwind and the environment forgets the node, now
+
+    def _end(self) -> None:
+        self.gone = True
+        for timer in list(self.timers):
+            timer.cancel()
+        for task in list(self.tasks):
+            task.cancel()
+
+
+async def start_robot(config: RobotConfig, air: MemoryAir) -> RunningRobot:
+    """A real ``Robot`` with ``config``, attached to ``air`` through memory and running (stop or kill it)."""
+    loop = asyncio.get_running_loop()
+    if loop.get_task_factory() is None:
+        loop.set_task_factory(_owned_task_factory)  # type: ignore[arg-type]
+        _own_timers(loop)
+    radio = await RadioClient.connect(config.identity(), world=config.world, link=air.link(), timeout=5.0)
+    running = RunningRobot(Robot(config, radio), air)
+    token = _OWNER.set(running)
+    try:
+        running.task = loop.create_task(running.robot.run())
+    finally:
+        _OWNER.reset(token)
+    return running
+
+
+def start_user(config: UserConfig, air: MemoryAir, log: EventLog) -> asyncio.Task[int]:
+    """The user process's coroutine (person, belt and watch) on ``air``; the task ends when the walk is over."""
+    return asyncio.get_running_loop().create_task(run_user(config, log, link=air.link()))
+
+
+def robot_config_of(argv: list[str]) -> RobotConfig:
+    """The robot a ``petswarm robot`` command line describes."""
+    from petswarm.lab.robot_command import robot_config
+
+    return robot_config(_parser().parse_args(argv))
+
+
+async def cancel_leftovers(loop: asyncio.AbstractEventLoop) -> None:
+    """Cancel every task still pending and let them unwind, as ``asyncio.run`` does before it closes its loop
+    (a closed loop with pending tasks warns "Task was destroyed but it is pending")."""
+    current = asyncio.current_task()
+    leftovers = [t for t in asyncio.all_tasks(loop) if t is not current]
+    for task in leftovers:
+        task.cancel()
+    await asyncio.gather(*leftovers, return_exceptions=True)
+
+
+def run_model(opts: RunOptions, scenario: Scenario | None) -> int:
+    """The run in model time, printed as a wall-clock run's is; returns the exit code."""
+    try:
+        summary = execute(opts, scenario)
+    except KeyboardInterrupt:
+        progress("interrupted")
+        return 130
+    progress(
+        f"{summary['model_time_s']:.1f} s of model time in {summary['wall_time_s']:.2f} s "
+        f"({summary['speedup']:g}x); digest {summary['digest'][:16]}"
+    )
+    _print(summary, opts.as_json)
+    return 0 if summary["ok"] else 1
+
+
+def execute(opts: RunOptions, scenario: Scenario | None) -> dict[str, Any]:
+    """Run in model time and leave the record (``summary.json`` too, also when interrupted); the summary."""
+    if scenario is not None:
+        opts = opts.for_scenario(scenario)
+    world = opts.world or f"model-{opts.seed}"
+    record = RunRecord.create(opts, world, ENDPOINT)
+    progress(f"world {world}, seed {opts.seed}, model time, record in {record.path}")
+    started = time.perf_counter()
+    loop = ModelClockLoop()
+    summary: dict[str, Any] = {"ok": False, "problems": ["interrupted"], "seed": opts.seed}
+    try:
+        summary = loop.run_until_complete(_run(opts, scenario, world, record))
+    finally:
+        model_time_s = loop.time()
+        loop.close()
+        summary["clock"] = "model"
+        summary["model_time_s"] = round(model_time_s, 6)
+        summary["wall_time_s"] = round(time.perf_counter() - started, 3)
+        summary["speedup"] = round(model_time_s / max(summary["wall_time_s"], 1e-9), 1)
+        record.finish(summary, {})
+    if scenario is not None:
+        summary["driving"] = driving_metrics(read_world(record.path / "world.jsonl"))
+    violations = check_record(record.path)
+    summary["invariants"] = violations or "all hold"
+    summary["problems"] += [f"invariant violated: {v}" for v in violations]
+    summary["ok"] = not summary["problems"]
+    summary["digest"] = record_digest(record.path)
+    summary["record"] = str(record.path)
+    record.finish(summary, {})
+    return summary
+
+
+async def _run(opts: RunOptions, scenario: Scenario | None, world: str, record: RunRecord) -> dict[str, Any]:
+    world_log = record.path / "world.jsonl" if scenario is not None else None
+    air = MemoryAir(_environment(opts, scenario), opts.seed, pcap_path=record.path / "air.pcap", world_log=world_log)
+    try:
+        # every node starts at model time 0 and attaches in the same round, as lockstep processes do
+        argvs = robot_argvs(opts, scenario, world, record)
+        loop = asyncio.get_running_loop()
+        robots = [loop.create_task(_run_robot(argv, air)) for argv in argvs.values()]
+        user = _start_user(opts, scenario, world, record, air)
+        radio = await RadioClient.connect(CONTROL_IDENTITY, world=world, link=air.link(), timeout=5.0)
+        ctl = RelayControl(radio)
+        summary = await orchestrate(opts, scenario, ctl, world)
+        if user is not None:
+            await user
+        await asyncio.gather(*robots)
+        await radio.close()
+        await cancel_leftovers(asyncio.get_running_loop())
+    finally:
+        air.coordinator.close()
+    return summary
+
+
+def _environment(opts: RunOptions, scenario: Scenario | None) -> EnvironmentConfig:
+    """The hub's tables: ``--config``, and the scenario's world (as ``petswarm hub --scenario`` takes them)."""
+    config = load_config(opts.config) if opts.config else EnvironmentConfig()
+    if scenario is None:
+        return config
+    tables = environment_from_dict(scenario.hub_tables())
+    if opts.config:
+        tables.medium, tables.ir = config.medium, config.ir
+    return tables
+
+
+def robot_argvs(
+    opts: RunOptions, scenario: Scenario | None, world: str, record: RunRecord, endpoint: str = ENDPOINT
+) -> dict[int, list[str]]:
+    """The ``petswarm robot`` command lines of the run's robots, by id."""
+    from petswarm.lab.run_scenario import scenario_robot_argv
+
+    if scenario is None:
+        return {rid: ping_robot_argv(opts, rid, endpoint, world, record) for rid in range(1, opts.robots + 1)}
+    count = scenario.robot_count
+    return {rid: scenario_robot_argv(opts, scenario, rid, endpoint, world, record) for rid in range(1, count + 1)}
+
+
+async def _run_robot(argv: list[str], air: MemoryAir) -> None:
+    """The robot a ``petswarm robot`` command line describes, attached through memory, until told to stop."""
+    running = await start_robot(robot_config_of(argv), air)
+    try:
+        assert running.task is not None
+        await running.task
+        await running.robot.close()
+    finally:
+        running._end()  # as at the end of its process: whatever it left pending ends with it
+
+
+@functools.cache
+def _parser() -> argparse.ArgumentParser:
+    # building the CLI's parser costs milliseconds: once per run, not once per robot
+    from petswarm.lab.robot_command import robot_parser
+
+    return robot_parser()
+
+
+def _start_user(
+    opts: RunOptions, scenario: Scenario | None, world: str, record: RunRecord, air: MemoryAir
+) -> asyncio.Task[int] | None:
+    if scenario is None or scenario.user is None:
+        return None
+    config = UserConfig(
+        scenario.user, ENDPOINT, world, scenario.duration_s, opts.seed, beacon=scenario.surround_enabled
+    )
+    sink = open(record.events_of(scenario.user.node_id), "a")  # noqa: SIM115 (closed when the user is done)
+    task = start_user(config, air, EventLog(sink=sink))
+    task.add_done_callback(lambda _task: sink.close())
+    return task
+
+
+async def orchestrate(opts: RunOptions, scenario: Scenario | None, ctl: RelayControl, world: str) -> dict[str, Any]:
+    """What a model or lockstep run does, on model time, through the relay: wait for the robots, the
+    traffic or scenario phase with its faults, the summary, then every robot told to stop."""
+    await _wait_attached(ctl, opts.robots)
+    faults = FaultTimeline(list(opts.faults) + (list(scenario.faults) if scenario is not None else []))
+    if scenario is None:
+        summary = await ping_and_organize(opts, ctl, faults, world)
+    else:
+        summary = await _follow_scenario(opts, scenario, ctl, faults, world)
+    for rid in range(1, opts.robots + 1):
+        await ctl.command(rid, "stop")
+    return summary
+
+
+async def _wait_attached(ctl: RelayControl, robots: int) -> None:
+    while True:
+        stats = await ctl.hub("stats")
+        attached = sum(1 for node in stats["nodes"].values() if node["attached"])
+        if attached >= robots:
+            progress(f"{attached}/{robots} robots attached")
+            return
+        await ctl.sleep(0.1)
+
+
+async def _apply_faults(ctl: RelayControl, faults: FaultTimeline, elapsed: float) -> None:
+    for at, request in faults.take_due(elapsed):
+        answer = await ctl.hub("chaos", request=request)
+        faults.applied_or_refused(at, request, answer)
+
+
+async def ping_and_organize(opts: RunOptions, ctl: RelayControl, faults: FaultTimeline, world: str) -> dict[str, Any]:
+    notes = organize_shortfall(opts)
+    for note in notes:
+        progress(f"warning: {note}")
+    start = asyncio.get_running_loop().time()
+    for second in range(1, math.ceil(opts.duration) + 1):
+        until = min(float(second), opts.duration)
+        while (elapsed := asyncio.get_running_loop().time() - start) < until:
+            await _apply_faults(ctl, faults, elapsed)
+            await ctl.sleep(min(0.1, until - elapsed))
+        _report(await ctl.hub("stats"), f"t={until:5.1f}/{opts.duration:g}s")
+    await _apply_faults(ctl, faults, float("inf"))  # what is left acts on the swarm phase
+    swarm = await organize_and_disperse(ctl, opts) if opts.organize else {}
+    summary = await _summary(opts, ctl, world)
+    summary["faults"] = faults.applied
+    summary["notes"] = notes
+    problems = summary["problems"] + swarm.pop("problems", [])
+    summary.update(swarm, problems=problems, ok=not problems)
+    return summary
+
+
+async def _follow_scenario(
+    opts: RunOptions, scenario: Scenario, ctl: RelayControl, faults: FaultTimeline, world: str
+) -> dict[str, Any]:
+    loop = asyncio.get_running_loop()
+    start = loop.time()
+    next_report = 5.0
+    while (elapsed := loop.time() - start) < scenario.duration_s:
+        await _apply_faults(ctl, faults, elapsed)
+        await ctl.sleep(min(0.1, scenario.duration_s - elapsed))
+        if loop.time() - start >= next_report:
+            progress(f"t={next_report:5.1f}/{scenario.duration_s:g}s")
+            next_report += 5.0
+    summary = await _summary(opts, ctl, world)
+    summary["problems"] = [p for p in summary["problems"] if p not in HEARING_PROBLEMS]  # no ping phase here
+    summary.update(scenario=scenario.name, faults=faults.applied, duration_s=scenario.duration_s)
+    summary["ok"] = not summary["problems"]
+    return summary
+
+
+async def _summary(opts: RunOptions, ctl: RelayControl, world: str) -> dict[str, Any]:
+    stats = {"world": world, **await ctl.hub("stats")}
+    return summarise(stats, await statuses(ctl, opts.robots), opts, world, ENDPOINT)
+
+
+def _report(stats: dict[str, Any], what: str) -> None:
+    totals = {"sent": 0, "delivered": 0, "collided": 0, "lost": 0}
+    for node in stats["nodes"].values():
+        for name in totals:
+            totals[name] += node.get(name, 0)
+    progress(
+        f"{what}  sent {totals['sent']}  delivered {totals['delivered']}  "
+        f"collided {totals['collided']}  lost {totals['lost']}"
+    )

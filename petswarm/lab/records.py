@@ -1,0 +1,99 @@
+"""Run records: every ``petswarm run`` leaves a directory that can be read, reported and replayed.
+
+    runs/<UTC time>-<seed>/
+        manifest.json          seed, versions, command line, options, medium configuration
+        events/robot-N.jsonl   every robot's structured events, one JSON object per line, as they happen
+        logs/*.log             every process's stdout and stderr
+        air.pcap               the hub's frame log: every 802.15.4 frame on the air (Wireshark, tshark)
+
+        summary.json           the final summary (also written when the run fails or is interrupted, and
+                               rewritten every second while it runs, so a killed run leaves one)
+        supervision.jsonl      children that died during the run (petswarm/lab/supervision.py), one line each
+
+Files are written as the run goes (the robots flush every event), so a run that is killed midway
+still leaves a readable record. Records go under ``runs/``, or under ``$PETSWARM_RUNS`` when it is set
+(the test suite points it into pytest's temporary directory), unless ``--record`` names the directory.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import sys
+import time
+from dataclasses import asdict, dataclass
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+_PACKAGES = ("petswarm", "eclipse-zenoh", "numpy", "msgpack")
+RUNS_ENV = "PETSWARM_RUNS"
+
+
+def runs_dir() -> Path:
+    """Where records go by default: ``$PETSWARM_RUNS``, else ``runs`` in the current directory."""
+    return Path(os.environ.get(RUNS_ENV) or "runs")
+
+
+@dataclass(frozen=True)
+class RunRecord:
+    """The directory of one run."""
+
+    path: Path
+
+    @classmethod
+    def create(cls, opts: Any, world: str, endpoint: str) -> RunRecord:
+        """Make the directory (``opts.record_dir``, or ``<runs_dir()>/<UTC time>-<seed>``) and write the manifest."""
+        stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
+        path = Path(opts.record_dir or runs_dir() / f"{stamp}-{opts.seed}")
+        (path / "events").mkdir(parents=True, exist_ok=True)
+        manifest = {
+            "seed": opts.seed,
+            "world": world,
+            "endpoint": endpoint,
+            "started": stamp,
+            "command": sys.argv,
+            "options": asdict(opts),
+            "medium_config_file": _read(opts.config),
+            "versions": {"python": platform.python_version(), **{p: _version(p) for p in _PACKAGES}},
+        }
+        record = cls(path)
+        record.write("manifest.json", manifest)
+        return record
+
+    def events_of(self, name: str) -> Path:
+        """Where process ``name`` appends its events."""
+        return self.path / "events" / f"{name}.jsonl"
+
+    def write(self, name: str, body: dict[str, Any]) -> None:
+        """One JSON file of the record, replaced whole: a run killed while writing leaves the previous one."""
+        part = self.path / f".{name}.part"
+        part.write_text(json.dumps(body, indent=2, default=str) + "\n")
+        os.replace(part, self.path / name)
+
+    def finish(self, summary: dict[str, Any], exit_codes: dict[str, int]) -> None:
+        """The summary, with every process's exit code."""
+        self.write("summary.json", {**summary, "exit_codes": exit_codes})
+
+
+def read_events(path: Path) -> list[dict[str, Any]]:
+    """A JSON-lines events file; a line cut short by a kill is skipped."""
+    events = []
+    for line in path.read_text().splitlines():
+        try:
+            events.append(json.loads(line))
+        except json.JSONDecodeError:
+            continue
+    return events
+
+
+def _version(package: str) -> str:
+    try:
+        return metadata.version(package)
+    except metadata.PackageNotFoundError:
+        return "unknown"
+
+
+def _read(path: str | None) -> str | None:
+    return Path(path).read_text() if path else None

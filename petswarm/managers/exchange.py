@@ -1,0 +1,218 @@
+"""Message-processing manager: requests, the responses they expect, deadlines and retries.
+
+A step of the swarm process sends a request, then waits until every expected robot has answered or the
+deadline passes; it then repeats the request to the robots still missing, a bounded number of times.
+Responses are matched by session and type; a duplicate (the same robot again) or a late one (after the
+step ended) is counted and otherwise ignored, so retries are idempotent.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass, field
+
+from petswarm import clock
+from petswarm.managers.messages import SwarmMessage
+from petswarm.managers.rf import Incoming
+from petswarm.managers.sequence import EventLog
+
+
+@dataclass(frozen=True)
+class StepTiming:
+    """How long one step waits for answers and how often it retries."""
+
+    deadline_s: float = 0.1
+    max_retries: int = 5
+    quiet_s: float | None = None
+    """Open steps only (anyone may answer): end early once answers have come and none for this long."""
+
+    def __post_init__(self) -> None:
+        if self.deadline_s <= 0 or self.max_retries < 0:
+            raise ValueError("a step needs a positive deadline and max_retries >= 0")
+        if self.quiet_s is not None and self.quiet_s <= 0:
+            raise ValueError("a quiet gap must be positive")
+
+
+@dataclass
+class StepResult:
+    """What one step collected."""
+
+    responses: dict[int, Incoming] = field(default_factory=dict)
+    attempts: int = 0
+    missing: set[int] = field(default_factory=set)
+
+    @property
+    def retries(self) -> int:
+        """Attempts beyond the first."""
+        return max(self.attempts - 1, 0)
+
+
+@dataclass(frozen=True)
+class SendRequest:
+    """Put the step's request on the air, to ``missing`` (None: to anyone, an open step's first attempt)."""
+
+    missing: set[int] | None
+    retry: bool
+    """True from the second attempt on."""
+
+
+@dataclass(frozen=True)
+class WaitUntil:
+    """Nothing to do before ``when`` (seconds) unless an answer arrives."""
+
+    when: float
+
+
+@dataclass(frozen=True)
+class StepOver:
+    """The step has ended: every expected answer came, or the attempts ran out."""
+
+
+StepAction = SendRequest | WaitUntil | StepOver
+
+
+class Step:
+    """One request/response step as a sans-IO state machine: answers and ``now`` in, actions out.
+
+    The driver asks ``next_action(now)``: ``SendRequest`` (it sends, then calls ``sent(now)``), ``WaitUntil``
+    (it waits until then or until ``offer`` takes an answer), or ``StepOver``. No clock, no I/O: the same
+    object runs under the asyncio manager, in model time, or stepped by hand in a test.
+    """
+
+    def __init__(
+        self, session: int, kinds: tuple[type[SwarmMessage], ...], expected: set[int] | None, timing: StepTiming
+    ) -> None:
+        self.session = session
+        self.kinds = kinds
+        self.expected = None if expected is None else set(expected)
+        self.timing = timing
+        self.responses: dict[int, Incoming] = {}
+        self.attempts = 0
+        self.duplicates = 0
+        self._deadline: float | None = None
+        """End of the current attempt's window; None before the first send and between attempts."""
+        self._last_answer = 0.0
+
+    @property
+    def missing(self) -> set[int] | None:
+        """Expected robots that have not answered (None for an open step)."""
+        return None if self.expected is None else self.expected - self.responses.keys()
+
+    def offer(self, incoming: Incoming, now: float) -> bool:
+        """Take an answer meant for this step (a duplicate is counted); False when it is not for this step."""
+        msg = incoming.message
+        if msg.session_id != self.session or not isinstance(msg, self.kinds):
+            return False
+        if incoming.sender in self.responses:
+            self.duplicates += 1
+        else:
+            self.responses[incoming.sender] = incoming
+            self._last_answer = now
+        return True
+
+    def sent(self, now: float) -> None:
+        """The request of the current attempt is on the air: its answer window starts now."""
+        self._deadline = now + self.timing.deadline_s
+
+    def next_action(self, now: float) -> StepAction:
+        """What to do at ``now``."""
+        if self.expected is not None and not self.expected:
+            return StepOver()
+        if self._deadline is not None:
+            end = self._window_end()
+            if now < end and not self._complete():
+                return WaitUntil(end)
+            self._deadline = None
+            if self._done():
+                return StepOver()
+        if self.attempts > self.timing.max_retries:
+            return StepOver()
+        self.attempts += 1
+        return SendRequest(self.missing, retry=self.attempts > 1)
+
+    def result(self) -> StepResult:
+        """What the step collected."""
+        return StepResult(self.responses, self.attempts, self.missing or set())
+
+    def _window_end(self) -> float:
+        assert self._deadline is not None
+        quiet = self.timing.quiet_s
+        if self.expected is None and quiet is not None and self.responses:
+            return min(self._deadline, self._last_answer + quiet)  # answers have stopped coming
+        return self._deadline
+
+    def _complete(self) -> bool:
+        return self.expected is not None and self.expected <= self.responses.keys()
+
+    def _done(self) -> bool:
+        return bool(self.responses) if self.expected is None else self._complete()
+
+
+class MessageProcessingManager:
+    """Runs ``Step``s on the event loop: routes answers to the step waiting for them; counts duplicates and
+    late arrivals."""
+
+    def __init__(self, log: EventLog) -> None:
+        self.log = log
+        self.duplicates = 0
+        self.late = 0
+        self.retries = 0
+        self._steps: list[tuple[Step, asyncio.Event]] = []
+
+    def offer(self, incoming: Incoming) -> bool:
+        """Hand a received message to a waiting step; False when no step wants it."""
+        for step, arrived in self._steps:
+            before = step.duplicates
+            if step.offer(incoming, clock.now()):
+                self.duplicates += step.duplicates - before
+                arrived.set()
+                return True
+        return False
+
+    def count_late(self) -> None:
+        """A response to a step that has ended."""
+        self.late += 1
+
+    async def step(
+        self,
+        name: str,
+        session: int,
+        kinds: tuple[type[SwarmMessage], ...],
+        send: Callable[[set[int] | None], Awaitable[None]],
+        expected: set[int] | None,
+        timing: StepTiming,
+    ) -> StepResult:
+        """Run one request/response step.
+
+        ``send(missing)`` puts the request on the air (``missing`` is None when ``expected`` is None, i.e.
+        when anyone may answer: then the step collects until the deadline, or until answers stop for
+        ``quiet_s``, retrying only if nobody answered at all).
+        """
+        return await self.run(name, Step(session, kinds, expected, timing), send)
+
+    async def run(self, name: str, step: Step, send: Callable[[set[int] | None], Awaitable[None]]) -> StepResult:
+        """Run a step made elsewhere (a sans-IO core's, ``formation_core.Exchange``): route answers to it, send
+        its requests with ``send(missing)``, wait out its windows on the loop's clock."""
+        session = step.session
+        arrived = asyncio.Event()
+        entry = (step, arrived)
+        self._steps.append(entry)
+        try:
+            while not isinstance(action := step.next_action(clock.now()), StepOver):
+                if isinstance(action, SendRequest):
+                    if action.retry:
+                        self.retries += 1
+                        missing = sorted(action.missing or ())
+                        self.log.record("retry", step=name, session=session, attempt=step.attempts - 1, missing=missing)
+                    await send(action.missing)
+                    step.sent(clock.now())
+                    continue
+                arrived.clear()
+                with contextlib.suppress(TimeoutError):
+                    async with asyncio.timeout(max(action.when - clock.now(), 0.0)):
+                        await arrived.wait()
+        finally:
+            self._steps.remove(entry)
+        return step.result()

@@ -1,0 +1,58 @@
+"""RF communication manager: swarm messages over the robot's 802.15.4 radio."""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+
+from petswarm import clock
+from petswarm.managers.messages import MessageError, SwarmMessage, decode
+from radio_hub.interface import BROADCAST, RadioClient, RxFrame, TxResult
+
+
+@dataclass(frozen=True)
+class Incoming:
+    """A decoded message with the frame that carried it."""
+
+    message: SwarmMessage
+    rx: RxFrame
+    received_at: float = field(default_factory=clock.now)
+    """Monotonic seconds when the robot got it."""
+
+    @property
+    def sender(self) -> int:
+        """Short address of the sender."""
+        return self.rx.frame.src
+
+
+class RfCommunicationManager:
+    """Sends and receives swarm messages; counts what it could not understand and how sends ended."""
+
+    def __init__(self, radio: RadioClient) -> None:
+        self.radio = radio
+        self.tx_results: Counter[str] = Counter()
+        self.received = 0
+        self.malformed = 0
+
+    async def send(self, dst: int, message: SwarmMessage, *, dst_pan: int | None = None, ack: bool = True) -> TxResult:
+        """Send one message in one frame; unicast is acknowledged unless ``ack`` is False."""
+        frame = self.radio.data_frame(dst, message.encode(), dst_pan=dst_pan, ack=ack and dst != BROADCAST)
+        result = await self.radio.send(frame)
+        self.tx_results[result.status.value] += 1
+        return result
+
+    async def receive(self) -> Incoming:
+        """The next frame that carries a valid message; anything else is counted and skipped."""
+        while True:
+            rx = await self.radio.receive()
+            try:
+                message = decode(rx.frame.payload)
+            except MessageError:
+                self.malformed += 1
+                continue
+            except Exception as err:  # a decoder bug must not stop the robot hearing the next frame
+                self.malformed += 1
+                self.radio.faults.record("swarm message", err)
+                continue
+            self.received += 1
+            return Incoming(message, rx)

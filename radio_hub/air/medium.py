@@ -1,0 +1,618 @@
+"""The 802.15.4 air as a discrete-event model (sans I/O).
+
+A ``Medium`` takes MAC data requests and the current model time in microseconds, and returns what
+happened: frames received by nodes (with RSSI/LQI) and MAC results for senders. It runs unslotted
+CSMA-CA, puts frames on the air for their exact airtime, decides at every receiver whether a frame
+collided, was lost or was filtered, and runs acknowledged unicast with retries. All randomness comes
+from the ``numpy.random.Generator`` it is given, so a seed and an arrival order fix every outcome.
+
+The caller owns the clock: it calls ``submit`` when a request arrives and ``advance`` when the time of
+``next_event_us`` has come. Events are processed strictly in model-time order, so an outcome does not
+depend on how late the caller's timer fires. A caller that records the traffic (a pcap file) sets
+``on_air_end``: it is handed every transmission, data and ACK, once it has left the air.
+"""
+
+from __future__ import annotations
+
+import enum
+import heapq
+import itertools
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+import numpy as np
+
+from radio_hub.air.chaos import Chaos
+from radio_hub.air.mac import BROADCAST, MAX_PSDU, Frame, FrameError, FrameType, TxStatus
+from radio_hub.air.propagation import (
+    GilbertElliott,
+    Position,
+    distance,
+    lqi_from_rssi,
+    mean_rssi_dbm,
+    reception_probability,
+)
+from radio_hub.config import CHANNELS, MediumConfig, airtime_us
+
+# Receptions are judged against every transmission that could still overlap them.
+_AIR_HORIZON_US = airtime_us(MAX_PSDU) * 2
+_ACK_AIRTIME_US = airtime_us(len(Frame(FrameType.ACK, 0).encode()))
+
+
+class RxOutcome(enum.StrEnum):
+    """What became of one frame at one receiver in its range."""
+
+    DELIVERED = "delivered"
+    COLLIDED = "collided"
+    LOST = "lost"
+    FILTERED = "filtered"
+
+
+@dataclass
+class RadioNode:
+    """A radio attached to the air: its addresses, PAN, channel and position."""
+
+    node_id: str
+    ext_addr: int
+    short_addr: int
+    pan_id: int
+    channel: int
+    position: Position = (0.0, 0.0)
+
+    def validate(self) -> None:
+        """Raise ValueError on a channel or address outside 802.15.4's ranges."""
+        if self.channel not in CHANNELS:
+            raise ValueError(f"channel {self.channel} is not a 2.4 GHz channel (11-26)")
+        for name, value, bits in (
+            ("short_addr", self.short_addr, 16),
+            ("pan_id", self.pan_id, 16),
+            ("ext_addr", self.ext_addr, 64),
+        ):
+            if not 0 <= value < 1 << bits:
+                raise ValueError(f"{name} {value} does not fit in {bits} bits")
+
+
+@dataclass
+class Counters:
+    """Per-node or per-channel counts. At every receiver heard = delivered + collided + lost + filtered."""
+
+    sent: int = 0
+    """Data frames put on the air, every attempt counted."""
+    acks_sent: int = 0
+    mac_retries: int = 0
+    channel_access_failures: int = 0
+    no_ack: int = 0
+    refused: int = 0
+    heard: int = 0
+    """Frames that arrived in range on this node's channel (the receiver side)."""
+    delivered: int = 0
+    collided: int = 0
+    lost: int = 0
+    filtered: int = 0
+    acks_lost: int = 0
+    chaos_lost: int = 0
+    """Of ``lost``: receptions an injected loss fault took."""
+    corrupted: int = 0
+    """Of ``lost``: receptions an injected corruption spoiled (bad FCS, dropped by the MAC)."""
+    duplicated: int = 0
+    """Deliveries handed up twice by an injected duplication (not counted again in ``delivered``)."""
+
+    def count(self, outcome: RxOutcome) -> None:
+        """Count one arrival and its outcome."""
+        self.heard += 1
+        setattr(self, outcome.value, getattr(self, outcome.value) + 1)
+
+    def to_dict(self) -> dict[str, int]:
+        """Plain dict for the wire and summaries."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+@dataclass(frozen=True, slots=True)
+class Reception:
+    """A frame handed up by a receiver's MAC at ``handed_up_us``: when it left the air (``end_us``), or later
+    under a chaos delay fault."""
+
+    node_id: str
+    sender: str
+    psdu: bytes
+    frame: Frame
+    rssi_dbm: float
+    lqi: int
+    start_us: int
+    end_us: int
+    submitted_us: int
+    """When the sender's MAC got the request: end_us - submitted_us is the modelled latency on the air."""
+    handed_up_us: int
+    """When the receiver's stack hands the frame up: ``end_us`` plus any injected delay."""
+
+
+@dataclass(frozen=True, slots=True)
+class TxReport:
+    """The MAC result for one data request, delivered to the sender at ``done_us``."""
+
+    node_id: str
+    token: int
+    status: TxStatus
+    retries: int
+    backoffs: int
+    submitted_us: int
+    done_us: int
+    reason: str = ""
+
+
+Output = Reception | TxReport
+
+
+@dataclass
+class _Job:
+    node_id: str
+    token: int
+    frame: Frame
+    psdu: bytes
+    submitted_us: int
+    nb: int = 0
+    be: int = 0
+    retries: int = 0
+    backoffs: int = 0
+    done: bool = False
+
+    @property
+    def wants_ack(self) -> bool:
+        return self.frame.ack_request and not self.frame.is_broadcast
+
+
+@dataclass
+class Transmission:
+    """One PPDU on the air, with what each receiver made of it once it ended."""
+
+    tx_id: int
+    sender: str
+    channel: int
+    start_us: int
+    end_us: int
+    frame: Frame
+    psdu_len: int
+    position: Position
+    submitted_us: int
+    psdu: bytes = b""
+    """The bytes on the air (MAC header, payload, FCS): a data request's PSDU as sent, or the MAC's ACK."""
+    left_sender: bool = True
+    job: _Job | None = None
+    attempt: int = 0
+    outcomes: dict[str, RxOutcome] = field(default_factory=dict)
+
+    def overlaps(self, start_us: int, end_us: int) -> bool:
+        """True when this transmission is on the air at some instant of [start_us, end_us)."""
+        return self.start_us < end_us and self.end_us > start_us
+
+    def to_dict(self) -> dict[str, Any]:
+        """A frame-log record."""
+        return {
+            "tx_id": self.tx_id,
+            "sender": self.sender,
+            "channel": self.channel,
+            "start_us": self.start_us,
+            "end_us": self.end_us,
+            "type": self.frame.frame_type.name.lower(),
+            "seq": self.frame.seq,
+            "dst_pan": self.frame.dst_pan,
+            "dst": self.frame.dst,
+            "src": self.frame.src,
+            "psdu_len": self.psdu_len,
+            "outcomes": {k: v.value for k, v in self.outcomes.items()},
+        }
+
+
+class Medium:
+    """The air of every 2.4 GHz channel, shared by the attached nodes."""
+
+    def __init__(
+        self,
+        config: MediumConfig,
+        rng: np.random.Generator,
+        log_size: int = 4096,
+        on_air_end: Callable[[Transmission], None] | None = None,
+    ) -> None:
+        self.config = config.validate()
+        self.rng = rng
+        self.nodes: dict[str, RadioNode] = {}
+        self.node_counters: dict[str, Counters] = {}
+        self.channel_counters: dict[int, Counters] = {ch: Counters() for ch in CHANNELS}
+        self.air_log: deque[Transmission] = deque(maxlen=log_size)
+        self.on_air_end = on_air_end
+        """Called with every transmission that has left the air, its outcomes decided, in the order they end.
+        It must not call back into the medium."""
+        self.now_us = 0
+        self._burst = GilbertElliott(config.loss.gilbert_elliott)
+        self.chaos = Chaos()
+        self._queues: dict[str, deque[_Job]] = {}
+        self._air: list[Transmission] = []
+        self._acking_until: dict[str, int] = {}
+        """Per node, when the last ACK its MAC committed to send leaves the air: the radio is busy until then."""
+        self._events: list[tuple[int, int, Callable[..., None], tuple[Any, ...]]] = []
+        self._seq = itertools.count()
+        self._tx_ids = itertools.count(1)
+        self._out: list[Output] = []
+
+    # -- nodes -------------------------------------------------------------------------------
+
+    def attach(self, node: RadioNode) -> None:
+        """Put a node on the air; raises ValueError on a bad node or a duplicate id."""
+        node.validate()
+        if node.node_id in self.nodes:
+            raise ValueError(f"node {node.node_id!r} is already attached")
+        self.nodes[node.node_id] = node
+        self.node_counters.setdefault(node.node_id, Counters())
+        self._queues[node.node_id] = deque()
+
+    def update(self, node_id: str, **changes: Any) -> RadioNode:
+        """Change a node's PAN, short address, channel or position at run time."""
+        node = self.nodes[node_id]
+        candidate = RadioNode(**{**node.__dict__, **changes})
+        candidate.validate()
+        node.__dict__.update(candidate.__dict__)
+        return node
+
+    def detach(self, node_id: str) -> None:
+        """Take a node off the air; its queued requests are dropped without a report."""
+        self.nodes.pop(node_id, None)
+        self._acking_until.pop(node_id, None)
+        for job in self._queues.pop(node_id, ()):
+            job.done = True
+        self._burst.forget(node_id)
+
+    # -- time ------------------------------------------------------------------------------------
+
+    def next_event_us(self) -> int | None:
+        """Model time of the earliest pending event, or None when the air is idle."""
+        return self._events[0][0] if self._events else None
+
+    def advance(self, now_us: int) -> list[Output]:
+        """Process every event due at or before ``now_us``; return what they produced."""
+        while self._events and self._events[0][0] <= now_us:
+            t, _, handler, args = heapq.heappop(self._events)
+            self.now_us = t
+            handler(*args)
+        self.now_us = max(self.now_us, now_us)
+        out, self._out = self._out, []
+        return out
+
+    def submit(self, node_id: str, psdu: bytes, token: int, now_us: int) -> list[Output]:
+        """A MAC data request from ``node_id`` at ``now_us``; returns every output due by then."""
+        out = self.advance(now_us)
+        node = self.nodes.get(node_id)
+        if node is None:
+            return [*out, self._refusal(node_id, token, "node is not attached")]
+        try:
+            frame = Frame.decode(psdu)
+        except FrameError as err:
+            return [*out, self._refusal(node_id, token, str(err))]
+        if frame.frame_type == FrameType.ACK:
+            return [*out, self._refusal(node_id, token, "ACK frames are sent by the MAC itself")]
+        queue = self._queues[node_id]
+        if len(queue) >= self.config.mac.queue_limit:
+            return [*out, self._refusal(node_id, token, "MAC queue full")]
+        if not self.config.mac.ack_enabled and frame.ack_request:
+            frame = Frame(**{**_frame_fields(frame), "ack_request": False})
+        queue.append(_Job(node_id, token, frame, bytes(psdu), self.now_us))
+        if len(queue) == 1:
+            self._start_csma(queue[0])
+        return out + self._drain()
+
+    def _refusal(self, node_id: str, token: int, reason: str) -> TxReport:
+        self._count(node_id, "refused")
+
+        return TxReport(node_id, token, TxStatus.REFUSED, 0, 0, self.now_us, self.now_us, reason)
+
+    def _drain(self) -> list[Output]:
+        out, self._out = self._out, []
+        return out
+
+    def _at(self, t_us: int, handler: Callable[..., None], *args: Any) -> None:
+        heapq.heappush(self._events, (t_us, next(self._seq), handler, args))
+
+    # -- CSMA-CA ---------------------------------------------------------------------------------
+
+    def _start_csma(self, job: _Job) -> None:
+        job.nb, job.be = 0, self.config.mac.min_be
+        self._backoff(job)
+
+    def _backoff(self, job: _Job) -> None:
+        mac = self.config.mac
+        if not mac.csma_enabled:
+            self._at(self.now_us + mac.turnaround_us, self._on_tx_start, job)
+            return
+        slots = int(self.rng.integers(0, 1 << job.be))
+        cca_start = self.now_us + slots * mac.unit_backoff_us
+        self._at(cca_start + mac.cca_us, self._on_cca_end, job, cca_start)
+
+    def _on_cca_end(self, job: _Job, cca_start: int) -> None:
+        if job.done or self._defer_while_acking(job, cca_start):
+            return
+        mac = self.config.mac
+        node = self.nodes[job.node_id]
+        if not self._energy_detected(node, cca_start, self.now_us):
+            self._at(self.now_us + mac.turnaround_us, self._on_tx_start, job)
+            return
+        job.nb += 1
+        job.backoffs += 1
+        job.be = min(job.be + 1, mac.max_be)
+        if job.nb > mac.max_csma_backoffs:
+            self._count(job.node_id, "channel_access_failures")
+            self._finish(job, TxStatus.CHANNEL_ACCESS_FAILURE)
+        else:
+            self._backoff(job)
+
+    def _defer_while_acking(self, job: _Job, from_us: int) -> bool:
+        """Put the job's channel access off when its radio is busy with an ACK at some instant from ``from_us``.
+
+        A half-duplex radio that is turning around to send an ACK, or sending it, can neither assess the channel
+        nor start a data frame: it does the CCA (or, without CSMA, the transmission) once the ACK has left the
+        air. This is the radio's own state, not a busy channel, so no backoff is counted. Returns True when put
+        off.
+        """
+        free_us = self._acking_until.get(job.node_id, 0)
+        if free_us <= from_us:
+            return False
+        mac = self.config.mac
+        start = max(free_us, self.now_us)
+        if mac.csma_enabled:
+            self._at(start + mac.cca_us, self._on_cca_end, job, start)
+        else:
+            self._at(start + mac.turnaround_us, self._on_tx_start, job)
+        return True
+
+    def _energy_detected(self, node: RadioNode, start_us: int, end_us: int) -> bool:
+        reach = self.config.range.interference_range_m
+        return any(
+            tx.channel == node.channel
+            and tx.sender != node.node_id
+            and tx.overlaps(start_us, end_us)
+            and distance(tx.position, node.position) <= reach
+            and not self.chaos.separated(tx.sender, node.node_id)
+            for tx in self._air
+        )
+
+    # -- transmissions ---------------------------------------------------------------------------
+
+    def _put_on_air(self, sender: RadioNode, frame: Frame, psdu: bytes, submitted_us: int) -> Transmission:
+        tx = Transmission(
+            tx_id=next(self._tx_ids),
+            sender=sender.node_id,
+            channel=sender.channel,
+            start_us=self.now_us,
+            end_us=self.now_us + airtime_us(len(psdu)),
+            frame=frame,
+            psdu_len=len(psdu),
+            position=sender.position,
+            submitted_us=submitted_us,
+            psdu=psdu,
+        )
+        ratio = self.config.range.success_ratio_tx
+        tx.left_sender = ratio >= 1.0 or self.rng.random() < ratio
+        self._air.append(tx)
+        return tx
+
+    def _on_tx_start(self, job: _Job) -> None:
+        # an ACK can fall due after a clear CCA (a node moved into range, a partition was lifted, no CSMA at all)
+        if job.done or self._defer_while_acking(job, self.now_us):
+            return
+        tx = self._put_on_air(self.nodes[job.node_id], job.frame, job.psdu, job.submitted_us)
+        tx.job, tx.attempt = job, job.retries
+        self._count(job.node_id, "sent")
+        self._at(tx.end_us, self._on_tx_end, tx)
+
+    def _on_tx_end(self, tx: Transmission) -> None:
+        self._prune_air()
+        job = tx.job
+        assert job is not None
+        for node in self._receivers(tx):
+            outcome = self._judge(tx, node, filtered=not _addressed_to(tx.frame, node))
+            tx.outcomes[node.node_id] = outcome
+            self.node_counters[node.node_id].count(outcome)
+            self.channel_counters[tx.channel].count(outcome)
+            if outcome == RxOutcome.DELIVERED:
+                self._deliver(tx, node, job.psdu)
+                if job.wants_ack and node.short_addr == tx.frame.dst:
+                    ack_start = self.now_us + self.config.mac.turnaround_us
+                    self._at(ack_start, self._on_ack_start, tx, node)
+                    # from now the responder's radio is turning around to send the ACK, then sending it
+                    until = max(self._acking_until.get(node.node_id, 0), ack_start + _ACK_AIRTIME_US)
+                    self._acking_until[node.node_id] = until
+        self._left_air(tx)
+        if job.done:
+            return
+        if job.wants_ack:
+            self._at(self.now_us + self.config.mac.ack_wait_us, self._on_ack_timeout, job, tx.attempt)
+        else:
+            self._finish(job, TxStatus.SUCCESS)
+
+    def _receivers(self, tx: Transmission) -> list[RadioNode]:
+        reach = self.config.range.tx_range_m
+        return [
+            n
+            for n in self.nodes.values()
+            if n.channel == tx.channel
+            and n.node_id != tx.sender
+            and distance(tx.position, n.position) <= reach
+            and not self.chaos.separated(tx.sender, n.node_id)
+        ]
+
+    def _judge(self, tx: Transmission, node: RadioNode, filtered: bool) -> RxOutcome:
+        """Collision first (the bits are garbled), then random loss, then the address filter."""
+        if not tx.left_sender:
+            return RxOutcome.LOST
+        if self._collided(tx, node):
+            return RxOutcome.COLLIDED
+        if self._lost(tx, node):
+            return RxOutcome.LOST
+        return RxOutcome.FILTERED if filtered else RxOutcome.DELIVERED
+
+    def _collided(self, tx: Transmission, node: RadioNode) -> bool:
+        reach = self.config.range.interference_range_m
+        interferers = []
+        for other in self._air:
+            if other is tx or other.channel != tx.channel or not other.overlaps(tx.start_us, tx.end_us):
+                continue
+            if other.sender == node.node_id:
+                return True  # half duplex: a node that is transmitting receives nothing
+            if (
+                other.sender != tx.sender
+                and distance(other.position, node.position) <= reach
+                and not self.chaos.separated(other.sender, node.node_id)
+            ):
+                interferers.append(other)
+        if not interferers:
+            return False
+        capture = self.config.capture
+        if not capture.enabled:
+            return True
+        wanted = mean_rssi_dbm(self.config.path_loss, distance(tx.position, node.position))
+        strongest = max(mean_rssi_dbm(self.config.path_loss, distance(o.position, node.position)) for o in interferers)
+        return wanted - strongest < capture.margin_db
+
+    def _lost(self, tx: Transmission, node: RadioNode) -> bool:
+        rng = self.rng
+        p = reception_probability(self.config.range, distance(tx.position, node.position))
+        if p < 1.0 and rng.random() >= p:
+            return True
+        base = self.config.loss.base
+        if base > 0.0 and rng.random() < base:
+            return True
+        if self._burst.lost((tx.sender, node.node_id), rng):
+            return True
+        if not self.chaos.faults:
+            return False
+        # injected faults: a burst, a fade (loss) or a bad FCS the receiving MAC drops (corrupt)
+        if self.chaos.burst_lost(tx.sender, node.node_id, node.pan_id, tx.channel, rng):
+            self._count(node.node_id, "chaos_lost")
+            return True
+        for kind in ("loss", "corrupt"):
+            for p in self.chaos.probabilities(kind, tx.sender, node.node_id, node.pan_id, tx.channel):
+                if rng.random() < p:
+                    self._count(node.node_id, "corrupted" if kind == "corrupt" else "chaos_lost")
+                    return True
+        return False
+
+    def _deliver(self, tx: Transmission, node: RadioNode, psdu: bytes) -> None:
+        pl = self.config.path_loss
+        rssi = mean_rssi_dbm(pl, distance(tx.position, node.position))
+        if pl.shadowing_sigma_db > 0:
+            rssi += float(self.rng.normal(0.0, pl.shadowing_sigma_db))
+        copies, delay_us = 1, 0
+        if self.chaos.faults:
+            # every selecting fault draws (so the seeded sequence does not depend on which one hit first), but
+            # the frame is duplicated, and counted, once however many of them hit
+            probabilities = self.chaos.probabilities("duplicate", tx.sender, node.node_id, node.pan_id, tx.channel)
+            if any([self.rng.random() < p for p in probabilities]):
+                copies = 2
+                self._count(node.node_id, "duplicated")
+            delay_us = self.chaos.delay_us(tx.sender, node.node_id, node.pan_id, tx.channel, self.rng)
+        reception = Reception(
+            node.node_id,
+            tx.sender,
+            psdu,
+            tx.frame,
+            round(rssi, 1),
+            lqi_from_rssi(pl, rssi),
+            tx.start_us,
+            tx.end_us,
+            tx.submitted_us,
+            tx.end_us + delay_us,
+        )
+        if delay_us:
+            # the outcome and the ACK stay the air's; only the receiver's stack hands the frame up later
+            self._at(reception.handed_up_us, self._hand_up, node, reception, copies)
+        else:
+            self._out.extend([reception] * copies)
+
+    def _hand_up(self, node: RadioNode, reception: Reception, copies: int) -> None:
+        # a node that left (or re-attached as a new radio) meanwhile does not get its old frames
+        if self.nodes.get(node.node_id) is node:
+            self._out.extend([reception] * copies)
+
+    # -- acknowledgements ------------------------------------------------------------------------
+
+    def _on_ack_start(self, data: Transmission, responder: RadioNode) -> None:
+        if responder.node_id not in self.nodes:
+            return
+        frame = Frame(FrameType.ACK, data.frame.seq)
+        ack = self._put_on_air(responder, frame, frame.encode(), self.now_us)
+        ack.job, ack.attempt = data.job, data.attempt
+        self._count(responder.node_id, "acks_sent")
+        self._at(ack.end_us, self._on_ack_end, ack)
+
+    def _on_ack_end(self, ack: Transmission) -> None:
+        job = ack.job
+        assert job is not None
+        self._judge_ack(ack, job)
+        self._left_air(ack)
+
+    def _judge_ack(self, ack: Transmission, job: _Job) -> None:
+        sender = self.nodes.get(job.node_id)
+        if job.done or sender is None or job.retries != ack.attempt:
+            return
+        # a sender that changed channel since it sent (its radio is tuned elsewhere) hears nothing of the ACK
+        in_range = sender.channel == ack.channel
+        in_range = in_range and distance(ack.position, sender.position) <= self.config.range.tx_range_m
+        in_range = in_range and not self.chaos.separated(ack.sender, sender.node_id)
+
+        outcome = self._judge(ack, sender, filtered=False) if in_range else RxOutcome.LOST
+        ack.outcomes[sender.node_id] = outcome
+        if outcome == RxOutcome.DELIVERED:
+            self._finish(job, TxStatus.SUCCESS)
+        else:
+            self._count(job.node_id, "acks_lost")
+
+    def _on_ack_timeout(self, job: _Job, attempt: int) -> None:
+        if job.done or job.retries != attempt:
+            return
+        if job.retries < self.config.mac.max_frame_retries:
+            job.retries += 1
+            self._count(job.node_id, "mac_retries")
+            self._start_csma(job)
+        else:
+            self._count(job.node_id, "no_ack")
+            self._finish(job, TxStatus.NO_ACK)
+
+    def _finish(self, job: _Job, status: TxStatus) -> None:
+        job.done = True
+        self._out.append(
+            TxReport(job.node_id, job.token, status, job.retries, job.backoffs, job.submitted_us, self.now_us)
+        )
+        queue = self._queues.get(job.node_id)
+        if queue and queue[0] is job:
+            queue.popleft()
+            if queue:
+                self._start_csma(queue[0])
+
+    # -- bookkeeping -----------------------------------------------------------------------------
+
+    def _left_air(self, tx: Transmission) -> None:
+        self.air_log.append(tx)
+        if self.on_air_end is not None:
+            self.on_air_end(tx)
+
+    def _count(self, node_id: str, name: str) -> None:
+        """Count for the node and for the channel it is on (so per-channel sums match per-node ones)."""
+        node = self.nodes.get(node_id)
+        if node is None:
+            return
+        for counters in (self.node_counters[node_id], self.channel_counters[node.channel]):
+            setattr(counters, name, getattr(counters, name) + 1)
+
+    def _prune_air(self) -> None:
+        horizon = self.now_us - _AIR_HORIZON_US
+        if self._air and self._air[0].end_us < horizon:
+            self._air = [tx for tx in self._air if tx.end_us >= horizon]
+
+
+def _addressed_to(frame: Frame, node: RadioNode) -> bool:
+    pan_ok = frame.dst_pan in (node.pan_id, BROADCAST)
+    return pan_ok and frame.dst in (node.short_addr, BROADCAST)
+
+
+def _frame_fields(frame: Frame) -> dict[str, Any]:
+    return {f: getattr(frame, f) for f in Frame.__slots__}

@@ -1,0 +1,740 @@
+"""The radio port: what a node (a robot, a wearable, a test) uses to get on the air, whatever carries it.
+
+``RadioClient`` gives an asyncio node the RF calls of a real 802.15.4 radio driver:
+``await send(frame) -> TxResult``, ``await receive() -> RxFrame`` (or ``async for``), and
+``await configure(pan_id=..., short_addr=..., channel=...)`` at run time, plus the body's links (motors,
+own sensors, IR, BLE, LF). It speaks ``wire`` messages to the hub's environment through a ``HubLink``:
+``radio_hub.link.zenoh_link.ZenohLink`` between processes, or a link in memory bound to the environment in a
+model-time run (``runner.model``). This module imports no zenoh.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+import os
+from collections import Counter, deque
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Any, Protocol
+
+from radio_hub.air.mac import BROADCAST, Frame, FrameError, FrameType, TxStatus
+from radio_hub.guard import Faults
+from radio_hub.lazy import lazy_numpy
+from radio_hub.link import wire
+from radio_hub.link.keys import DEFAULT_ENDPOINT, DEFAULT_WORLD, check_name
+from radio_hub.physics.ble import MAX_PAYLOAD as BLE_MAX_PAYLOAD
+from radio_hub.physics.light import RECEIVERS as IR_RECEIVERS
+
+if TYPE_CHECKING:
+    import numpy as np
+else:
+    np = lazy_numpy(__name__)
+
+MODEL_EPOCH_S = 1_700_000_000.0
+"""The wall-clock time model and lockstep runs report for model time 0, on both sides (a fixed date: records of
+equal seeds are equal, pcap stamps included)."""
+
+
+class HubLink(Protocol):
+    """How a node's messages reach the hub's environment and its answers come back.
+
+    ``open`` starts the link: from then on ``on_down(data)`` is called on the node's event loop with every
+    message for the node, and ``on_hub(present)`` whenever the hub appears or goes away. ``put`` sends one
+    encoded message up (in order, never dropped by the transport); ``close`` ends the node's presence.
+    """
+
+    def open(
+        self, node_id: str, instance: str, on_down: Callable[[bytes], None], on_hub: Callable[[bool], None]
+    ) -> None:
+        """Start delivering to the node."""
+
+    def put(self, data: bytes) -> None:
+        """One encoded message to the hub."""
+
+    async def close(self) -> None:
+        """Leave: the hub sees the node go."""
+
+
+class HubUnavailable(ConnectionError):
+    """No hub answers at the endpoint, or it stopped answering."""
+
+
+class RadioError(RuntimeError):
+    """The hub refused a request (bad channel, address, PAN...)."""
+
+
+@dataclass(frozen=True)
+class RadioIdentity:
+    """A node's radio: ids, addresses, PAN, channel and (until the world model) a fixed position."""
+
+    node_id: str
+    ext_addr: int
+    short_addr: int
+    pan_id: int
+    channel: int = 11
+    position: tuple[float, float] = (0.0, 0.0)
+    heading_deg: float = 0.0
+    """Where the body faces when it attaches (the world moves it from then on)."""
+    kind: str = "robot"
+    """``robot``, ``user`` (a person's wearables: BLE, the belt's LF receiver, an IR beacon; no 802.15.4) or
+    ``control`` (a run's orchestrator: it only relays)."""
+
+
+@dataclass(frozen=True)
+class RxFrame:
+    """A frame this node's MAC received, with its signal and model times (microseconds)."""
+
+    frame: Frame
+    rssi_dbm: float
+    lqi: int
+    start_us: int
+    end_us: int
+    submitted_us: int
+
+
+@dataclass(frozen=True)
+class TxResult:
+    """The MAC's answer to ``send``."""
+
+    status: TxStatus
+    retries: int = 0
+    backoffs: int = 0
+    submitted_us: int = 0
+    done_us: int = 0
+    reason: str = ""
+
+    @property
+    def ok(self) -> bool:
+        """True when the frame went out (and, for acknowledged unicast, was acknowledged)."""
+        return self.status == TxStatus.SUCCESS
+
+
+class OwnSensors:
+    """A robot's own body sensors at model time ``t_us``: ultrasonic ranges (m, nan = no echo) at
+    ``angles_rad`` from its heading, AHRS yaw (rad), wheel odometry (vx, vy, omega in its frame).
+
+    As they come off the air (``of_wire``), the ranges stay bytes and the angles a getter until first
+    read: the hub sends them to every robot at 25 Hz, and one that only pings never reads them (and so
+    never imports numpy for them)."""
+
+    __slots__ = ("_angles_rad", "_ranges_m", "odometry", "t_us", "yaw_rad")
+
+    def __init__(
+        self,
+        t_us: int,
+        ranges_m: np.ndarray,
+        angles_rad: np.ndarray,
+        yaw_rad: float,
+        odometry: tuple[float, float, float],
+    ) -> None:
+        self.t_us = t_us
+        self._ranges_m: np.ndarray | bytes = ranges_m
+        self._angles_rad: np.ndarray | Callable[[], np.ndarray] = angles_rad
+        self.yaw_rad = yaw_rad
+        self.odometry = odometry
+
+    @classmethod
+    def of_wire(
+        cls,
+        t_us: int,
+        ranges: bytes,
+        angles: Callable[[], np.ndarray],
+        yaw_rad: float,
+        odometry: tuple[float, float, float],
+    ) -> OwnSensors:
+        """Sensors of ``ranges`` as sent (little-endian float32) and ``angles`` as given when first read."""
+        sensors = cls.__new__(cls)
+        sensors.t_us = t_us
+        sensors._ranges_m = ranges
+        sensors._angles_rad = angles
+        sensors.yaw_rad = yaw_rad
+        sensors.odometry = odometry
+        return sensors
+
+    @property
+    def ranges_m(self) -> np.ndarray:
+        """Ultrasonic ranges (m, nan = no echo), one per sensor of the ring."""
+        if isinstance(self._ranges_m, bytes):
+            self._ranges_m = np.frombuffer(self._ranges_m, dtype="<f4").astype(float)
+        return self._ranges_m
+
+    @property
+    def angles_rad(self) -> np.ndarray:
+        """Each ultrasonic sensor's axis from the heading (rad)."""
+        if callable(self._angles_rad):
+            self._angles_rad = self._angles_rad()
+        return self._angles_rad
+
+
+class BeaconSweep:
+    """One beacon-mode sweep at model time ``t_us``: each coded beacon's 12 readings (counts) and the gain its
+    channel's AGC read them at (divide the light above ambient by it).
+
+    Made from maps (``BeaconSweep(t_us, readings, gains)``) or, as it comes off the air, from one (sources, 12)
+    block (``of_block``); either way ``readings``/``gains`` are the maps and ``arrays()`` the block, each
+    worked out from the other only when asked for (a robot reads the block on each body-sensor sample, 25 Hz)."""
+
+    __slots__ = ("_block", "_gain_list", "_gains", "_readings", "_sources", "t_us")
+
+    def __init__(self, t_us: int, readings: dict[str, np.ndarray], gains: dict[str, float]) -> None:
+        self.t_us = t_us
+        self._readings: dict[str, np.ndarray] | None = readings
+        self._gains: dict[str, float] | None = gains
+        self._sources: list[str] | None = None
+        self._block: np.ndarray | None = None
+        self._gain_list: list[float] | None = None
+
+    @classmethod
+    def of_block(cls, t_us: int, sources: list[str], block: np.ndarray, gains: list[float]) -> BeaconSweep:
+        """A sweep of distinct ``sources``, ``block[i]`` (12 readings) read at ``gains[i]``."""
+        sweep = cls(t_us, {}, {})
+        sweep._readings = sweep._gains = None
+        sweep._sources, sweep._block, sweep._gain_list = sources, block, gains
+        return sweep
+
+    @property
+    def readings(self) -> dict[str, np.ndarray]:
+        """Each source's 12 readings."""
+        if self._readings is None:
+            self._readings = dict(zip(self._sources or [], self._block if self._block is not None else [], strict=True))
+        return self._readings
+
+    @property
+    def gains(self) -> dict[str, float]:
+        """Each source's gain."""
+        if self._gains is None:
+            self._gains = dict(zip(self._sources or [], self._gain_list or [], strict=True))
+        return self._gains
+
+    def arrays(self) -> tuple[list[str], np.ndarray, list[float]]:
+        """The sources, their readings (sources, 12) and their gains (1 where none was given), in one order."""
+        if self._block is not None and self._sources is not None and self._gain_list is not None:
+            return list(self._sources), self._block, list(self._gain_list)
+        names = list(self.readings)
+        block = np.array([self.readings[n] for n in names], dtype=float).reshape(-1, IR_RECEIVERS)
+        return names, block, [self.gains.get(n, 1.0) for n in names]
+
+    def __repr__(self) -> str:
+        return f"BeaconSweep(t_us={self.t_us}, sources={list(self.readings)})"
+
+
+@dataclass(frozen=True)
+class BleMessage:
+    """A BLE message from ``src`` (a user's wearable or a robot)."""
+
+    src: str
+    payload: bytes
+    t_us: int
+
+
+@dataclass(frozen=True)
+class LfBurstHeard:
+    """What a belt's LF front end heard: which antenna, the wake-up pattern, the 4 data bytes, RSSI."""
+
+    antenna: str
+    pattern: int
+    data: bytes
+    rssi_dbm: float
+    t_us: int
+
+
+@dataclass(frozen=True)
+class IrSweep:
+    """One sweep of the 12 phototransistors (ADC counts, receiver 0 on the heading) at model time ``t_us``."""
+
+    readings: np.ndarray
+    t_us: int
+
+
+REQUEST_TIMEOUT_S = 5.0
+
+"""How long a node waits for the hub's answer to a request once attached."""
+
+
+RESEND_S = 0.5
+"""An idempotent request (re-attach, configure, IR mode) unanswered this long is sent again."""
+
+QUEUE_LIMIT = 1000
+"""Received frames, IR sweeps, BLE messages and LF bursts each waiting for the node at most; past it the
+oldest is dropped and counted (``RadioClient.dropped``): a flood costs the node messages, not memory."""
+LF_MAX_DATA = 4
+"""User data bytes an LF burst carries."""
+ERRORS_KEPT = 100
+"""The hub's latest error reasons a radio keeps (``RadioClient.errors``)."""
+
+
+class RadioClient:
+    """One node's 802.15.4 radio, attached to the hub's air."""
+
+    def __init__(self, link: HubLink, world: str, identity: RadioIdentity) -> None:
+        self.identity = identity
+        self.world = world
+        self.request_timeout = 5.0
+        self.malformed = 0
+        self.transport_gaps = 0
+        self.errors: deque[str] = deque(maxlen=ERRORS_KEPT)
+        self.dropped: Counter[str] = Counter()
+        """Messages from the hub dropped because their queue was full, per queue (``rx``, ``ir``, ``ble``,
+        ``lf``)."""
+        self.faults = Faults(f"radio {identity.node_id}")
+        """Unexpected exceptions while handling the hub's messages (each message is dropped, the node goes on)."""
+        self.link = link
+        self._loop = asyncio.get_running_loop()
+        self._rx: asyncio.Queue[RxFrame] = asyncio.Queue(QUEUE_LIMIT)
+        self._ir: asyncio.Queue[IrSweep] = asyncio.Queue(QUEUE_LIMIT)
+        self._ble: asyncio.Queue[BleMessage] = asyncio.Queue(QUEUE_LIMIT)
+        self._lf: asyncio.Queue[LfBurstHeard] = asyncio.Queue(QUEUE_LIMIT)
+        self.sensors: OwnSensors | None = None
+        """The latest own-body sensors (robots; the hub sends them at 25 Hz)."""
+        self.beacons = BeaconSweep(0, {}, {})
+        """The latest beacon sweep, in beacon mode."""
+        self.on_sensors: list[Callable[[OwnSensors], None]] = []
+        self.on_relayed: Callable[[wire.Relayed], None] | None = None
+        """Where control messages relayed by the hub go (model and lockstep runs); None: counted as malformed."""
+        self._ultrasonic_deg: tuple[float, ...] = ()
+        """The ultrasonic ring's axes (degrees from the heading), as the hub gave them on attaching."""
+        self._ultrasonic_rad: np.ndarray | None = None
+        self._pending: dict[int, asyncio.Future[Any]] = {}
+        self._pending_types: dict[int, str] = {}
+
+        self._tokens = itertools.count(1)
+        self._up_seq = itertools.count(1)
+        self._down_seq = 0
+        self._dsn = itertools.count()
+        node_id = identity.node_id
+        # os.urandom as secrets does, without secrets: it brings hmac, random and base64 (with them OpenSSL's
+        # _hashlib) into every node process, about 0.5 MB of RSS
+        self.instance = os.urandom(8).hex()
+        self.session_key = (int.from_bytes(os.urandom(8), "big") >> 1) or 1  # 63 random bits, never 0
+        """Sent with every message: the hub refuses this id's messages with any other key while we are
+        attached (someone else's session speaking for us)."""
+        self.reattaches = 0
+        self.hub_present = True
+        """False while the hub's liveliness token is gone (the hub died or restarts): silence means nothing."""
+
+        self.on_reattach: list[Callable[[], None]] = []
+        """Called after the radio attached again to a restarted hub (the hub forgot IR modes and the like)."""
+        self._attached_once = False
+        self._reattaching: asyncio.Task[None] | None = None
+        if hasattr(link, "session_key"):  # a link that speaks for the node itself (a lockstep idle)
+            link.session_key = self.session_key
+        link.open(node_id, self.instance, self._on_down, self._hub_seen)
+
+    @classmethod
+    async def connect(
+        cls,
+        identity: RadioIdentity,
+        endpoint: str = DEFAULT_ENDPOINT,
+        world: str = DEFAULT_WORLD,
+        *,
+        session: Any = None,
+        link: HubLink | None = None,
+        timeout: float = 5.0,
+        exclusive: bool = False,
+    ) -> RadioClient:
+        """Attach ``identity`` to the hub; raises HubUnavailable if none answers.
+
+        ``link`` is the port to the hub (default: zenoh to ``endpoint``, on ``session`` if given, which the
+        radio then leaves open). With ``exclusive`` the hub refuses (RadioError) when a live node already
+        uses the id.
+        """
+        check_name("node", identity.node_id)
+        if link is None:
+            from radio_hub.link.zenoh_link import ZenohLink  # here: a node in memory never loads zenoh
+
+            link = await ZenohLink.connect(endpoint, world, session)
+        client = cls(link, world, identity)
+        client.request_timeout = timeout
+        try:
+            attached = await client._request(0, client._attach_message(exclusive))
+        except (HubUnavailable, RadioError):
+            await client.close(detach=False)
+            raise
+        client._adopt(attached)
+        client._attached_once = True
+        client.request_timeout = max(timeout, REQUEST_TIMEOUT_S)
+        return client
+
+    @property
+    def session(self) -> Any:
+        """The zenoh session this radio uses (a node may serve its own keys on it); None off zenoh."""
+        return getattr(self.link, "session", None)
+
+    # -- the radio ---------------------------------------------------------------------------------
+
+    def next_dsn(self) -> int:
+        """The MAC data sequence number for the next frame (wraps at 256)."""
+        return next(self._dsn) & 0xFF
+
+    def data_frame(self, dst: int, payload: bytes, *, dst_pan: int | None = None, ack: bool = True) -> Frame:
+        """A data frame from this node; ``ack`` asks for an acknowledgement (ignored for broadcast)."""
+        me = self.identity
+        return Frame(
+            FrameType.DATA,
+            self.next_dsn(),
+            me.pan_id if dst_pan is None else dst_pan,
+            dst,
+            me.pan_id,
+            me.short_addr,
+            payload,
+            ack_request=ack and dst != BROADCAST,
+        )
+
+    async def send(self, frame: Frame) -> TxResult:
+        """Hand a frame to the MAC and wait for its result. FrameError if it cannot be encoded."""
+        psdu = frame.encode()
+        for attempt in range(2):
+            token = next(self._tokens)
+            try:
+                done: wire.TxDone = await self._request(token, wire.Transmit(token=token, psdu=psdu))
+                break
+            except RadioError as err:
+                if str(err) != wire.NOT_ATTACHED or attempt:
+                    raise
+                await self._reattached()  # a restarted hub: attach again, then send once more
+        return TxResult(
+            TxStatus(done.status), done.retries, done.backoffs, done.submitted_us, done.done_us, done.reason
+        )
+
+    async def receive(self) -> RxFrame:
+        """The next received frame."""
+        return await self._rx.get()
+
+    async def set_ir_mode(self, mode: str) -> None:
+        """Switch the IR module: ``idle``, ``receive`` or ``transmit``; returns once the hub has it."""
+        token = next(self._tokens)
+        await self._request(token, wire.SetIrMode(token=token, mode=mode), resend_s=RESEND_S)
+
+    async def ir_sample(self) -> IrSweep:
+        """The next sweep of the 12 phototransistors (arrives only while receiving and something shines)."""
+        return await self._ir.get()
+
+    # -- the body and the wearables' links --------------------------------------------------------
+
+    def drive(self, vx: float, vy: float, omega: float) -> None:
+        """Command the motors (robot frame, m/s and rad/s); the motor controller's watchdog stops the
+        robot if no command comes for half a second."""
+        self._put(wire.Drive(vx=float(vx), vy=float(vy), omega=float(omega)))
+
+    def place(self, x: float, y: float, yaw: float, vx: float = 0.0, vy: float = 0.0, omega: float = 0.0) -> None:
+        """A user's pose and motion in the world frame (users walk; the world does not move them)."""
+        self._put(wire.Place(x=float(x), y=float(y), yaw=float(yaw), vx=float(vx), vy=float(vy), omega=float(omega)))
+
+    def lf_burst(self, antenna: str, pattern: int, data: bytes) -> None:
+        """Fire one LF burst from the ``left`` or ``right`` antenna (one-way, not answered)."""
+        self._put(wire.LfBurst(antenna=antenna, pattern=int(pattern), data=bytes(data)))
+
+    def relay(self, to: str, body: bytes) -> None:
+        """A control message to node ``to`` (or ``hub``), carried by the hub outside the emulated air."""
+        self._put(wire.Relay(to=to, body=bytes(body)))
+
+    def ble_send(self, to: str, payload: bytes) -> None:
+        """A BLE message to another node (not answered; the link may drop it)."""
+        self._put(wire.BleSend(to=to, payload=bytes(payload)))
+
+    def telemetry(
+        self, state: str, role: str = "", master: str = "", slot: tuple[float, float] | None = None, mode: str = ""
+    ) -> None:
+        """Tell the hub what this robot believes (for viewers and metrics only)."""
+        self._put(
+            wire.Telemetry(
+                state=state,
+                role=role,
+                master=master,
+                slot=None if slot is None else [float(slot[0]), float(slot[1])],
+                mode=mode,
+            )
+        )
+
+    async def ble_receive(self) -> BleMessage:
+        """The next BLE message."""
+        return await self._ble.get()
+
+    async def lf_heard(self) -> LfBurstHeard:
+        """The next LF burst the belt's front end heard (users)."""
+        return await self._lf.get()
+
+    def __aiter__(self) -> RadioClient:
+        return self
+
+    async def __anext__(self) -> RxFrame:
+        return await self._rx.get()
+
+    async def configure(
+        self,
+        *,
+        pan_id: int | None = None,
+        short_addr: int | None = None,
+        channel: int | None = None,
+        position: tuple[float, float] | None = None,
+    ) -> RadioIdentity:
+        """Change the radio at run time; returns the radio as the hub now has it. RadioError if refused."""
+        token = next(self._tokens)
+        msg = wire.Configure(
+            token=token,
+            pan_id=pan_id,
+            short_addr=short_addr,
+            channel=channel,
+            position=None if position is None else list(position),
+        )
+        wanted = {
+            k: v
+            for k, v in (("pan_id", pan_id), ("short_addr", short_addr), ("channel", channel), ("position", position))
+            if v is not None
+        }
+        before = self.identity
+        # what we want is our identity from now on: an attach to a restarted hub in the meantime applies it
+        self.identity = replace(before, **wanted)
+        try:
+            self._adopt(await self._request(token, msg, resend_s=RESEND_S))
+        except RadioError as err:
+            if str(err) != wire.NOT_ATTACHED:
+                self.identity = before  # refused: the radio stays as it was
+                raise
+            try:
+                await self._reattached()
+            except RadioError:
+                self.identity = before  # the new hub refused what we wanted: keep what worked
+                raise
+        return self.identity
+
+    async def close(self, detach: bool = True) -> None:
+        """Leave the air and close the link."""
+        if detach:
+            with contextlib.suppress(HubUnavailable):
+                self._put(wire.Detach())
+        for fut in self._pending.values():
+            if not fut.done():
+                fut.set_exception(HubUnavailable("radio closed"))
+        await self.link.close()
+
+    # -- plumbing ----------------------------------------------------------------------------------
+
+    def _adopt(self, attached: wire.Attached) -> None:
+        self.identity = replace(
+            self.identity,
+            ext_addr=attached.ext_addr,
+            short_addr=attached.short_addr,
+            pan_id=attached.pan_id,
+            channel=attached.channel,
+            position=(attached.position[0], attached.position[1]),
+            heading_deg=attached.heading_deg,
+        )
+        self._ultrasonic_deg = tuple(attached.ultrasonic_deg)
+        self._ultrasonic_rad = None
+
+    def _put(self, msg: wire.Message) -> None:
+        msg.n, msg.s = next(self._up_seq), self.session_key
+        self.link.put(msg.encode())
+
+    @property
+    def link_dropped(self) -> int:
+        """Messages the link dropped before they reached the node's loop (too long, or too many waiting)."""
+        return int(getattr(self.link, "dropped", 0))
+
+    def _enqueue(self, name: str, queue: asyncio.Queue[Any], item: Any) -> None:
+        """Into a bounded queue; when full, the oldest goes (the freshest reading is the useful one)."""
+        if queue.full():
+            queue.get_nowait()
+            self.dropped[name] += 1
+        queue.put_nowait(item)
+
+    async def _request(self, token: int, msg: wire.Message, resend_s: float | None = None) -> Any:
+        """Send ``msg`` and wait up to ``request_timeout`` for the hub's answer to ``token``. With ``resend_s``
+        (idempotent requests only) the message goes again every ``resend_s`` until answered: one sent just
+        as the hub restarted, or answered before the router had our subscription back, is lost without a
+        trace, and waiting out the whole timeout left a robot deaf for 5 s after a hub restart."""
+        fut: asyncio.Future[Any] = self._loop.create_future()
+        self._pending[token] = fut
+        self._pending_types[token] = msg.TYPE
+        deadline = self._loop.time() + self.request_timeout
+        try:
+            while True:
+                self._put(msg)
+                left = deadline - self._loop.time()
+                # asyncio.wait leaves the future alone on a timeout, so a resend can still be answered
+                done, _ = await asyncio.wait({fut}, timeout=left if resend_s is None else min(resend_s, left))
+                if done:
+                    return fut.result()
+                if self._loop.time() >= deadline:
+                    raise HubUnavailable(
+                        f"no answer from the hub of world {self.world!r} within {self.request_timeout} s"
+                    )
+        finally:
+            self._pending.pop(token, None)
+            self._pending_types.pop(token, None)
+            if fut.done() and not fut.cancelled():
+                fut.exception()  # a caller cancelled as the radio closed: its error is seen, never warned about
+
+    def _on_down(self, data: bytes) -> None:
+        """One message from the hub; never raises (anything unexpected is counted in ``faults``)."""
+        try:
+            msg = wire.decode(data)
+        except wire.WireError:
+            self.malformed += 1
+            return
+        try:
+            self._on_message(msg)
+        except Exception as err:
+            self.faults.record("downlink", err, msg.TYPE)
+
+    def _on_message(self, msg: wire.Message) -> None:
+        if isinstance(msg, (wire.Attached, wire.Error)) and msg.instance not in ("", self.instance):
+            return  # another process claiming our id at the same moment: its answer, not ours
+        if isinstance(msg, wire.Attached) and msg.token == 0:
+            self._down_seq = msg.n - 1  # the hub numbers afresh on every attach
+        if msg.n > self._down_seq + 1:
+            self.transport_gaps += msg.n - self._down_seq - 1
+        self._down_seq = max(self._down_seq, msg.n)
+        if isinstance(msg, wire.Received):
+            self._on_received(msg)
+        elif isinstance(msg, wire.IrSample):
+            self._on_ir(msg)
+        elif isinstance(msg, wire.Sensors):
+            self._on_sensors(msg)
+        elif isinstance(msg, wire.BleReceived):
+            if len(msg.payload) > BLE_MAX_PAYLOAD:
+                self.malformed += 1
+                return
+            self._enqueue("ble", self._ble, BleMessage(msg.src, msg.payload, msg.t_us))
+        elif isinstance(msg, wire.LfHeard):
+            if len(msg.data) > LF_MAX_DATA:
+                self.malformed += 1
+                return
+            heard = LfBurstHeard(msg.antenna, msg.pattern, msg.data, msg.rssi_dbm, msg.t_us)
+            self._enqueue("lf", self._lf, heard)
+        elif isinstance(msg, wire.Grant):
+            pass  # lockstep: the link has already moved the clock; the grant only keeps the numbering whole
+        elif isinstance(msg, wire.Relayed) and self.on_relayed is not None:
+            self.on_relayed(msg)
+        elif isinstance(msg, wire.IrBeacons):
+            self._on_beacons(msg)
+        elif isinstance(msg, (wire.TxDone, wire.Attached)):
+            self._resolve(msg.token, msg)
+        elif isinstance(msg, wire.Error):
+            self.errors.append(msg.reason)
+            fut = self._pending.get(msg.token)
+            if fut is not None and not fut.done():
+                fut.set_exception(RadioError(msg.reason))
+            if msg.reason == wire.NOT_ATTACHED:
+                self._start_reattach()  # the hub restarted and forgot us
+        else:
+            self.malformed += 1
+
+    def _on_received(self, msg: wire.Received) -> None:
+        try:
+            frame = Frame.decode(msg.psdu)
+        except FrameError:
+            self.malformed += 1
+            return
+        self._enqueue("rx", self._rx, RxFrame(frame, msg.rssi_dbm, msg.lqi, msg.start_us, msg.end_us, msg.submitted_us))
+
+    def _on_ir(self, msg: wire.IrSample) -> None:
+        if len(msg.readings) != 4 * IR_RECEIVERS:
+            self.malformed += 1
+            return
+        self._enqueue("ir", self._ir, IrSweep(np.frombuffer(msg.readings, dtype="<f4").astype(float), msg.t_us))
+
+    def _ultrasonic_angles(self) -> np.ndarray:
+        """The ring's axes in radians, one array shared by every sample until the next attach."""
+        if self._ultrasonic_rad is None:
+            self._ultrasonic_rad = np.radians(np.asarray(self._ultrasonic_deg, dtype=float))
+        return self._ultrasonic_rad
+
+    def _on_sensors(self, msg: wire.Sensors) -> None:
+        if len(msg.ranges) != 4 * len(self._ultrasonic_deg):  # 4 bytes a float32: a range per sensor
+            self.malformed += 1
+            return
+        odometry = (float(msg.odometry[0]), float(msg.odometry[1]), float(msg.odometry[2]))
+        self.sensors = OwnSensors.of_wire(
+            msg.t_us, bytes(msg.ranges), self._ultrasonic_angles, float(msg.yaw), odometry
+        )
+        for callback in self.on_sensors:
+            callback(self.sensors)
+
+    def _on_beacons(self, msg: wire.IrBeacons) -> None:
+        if len(msg.readings) != 4 * IR_RECEIVERS * len(msg.sources):
+            self.malformed += 1
+            return
+        block = np.frombuffer(msg.readings, dtype="<f4").astype(float)
+        gains = msg.gains or [1.0] * len(msg.sources)
+        if block.size != len(msg.sources) * IR_RECEIVERS or len(gains) != len(msg.sources):
+            self.malformed += 1
+            return
+        if not all(0 < g <= 1 for g in gains):
+            self.malformed += 1
+            return
+        block = block.reshape(-1, IR_RECEIVERS)
+        gains = [float(g) for g in gains]
+        if len(set(msg.sources)) == len(msg.sources):
+            self.beacons = BeaconSweep.of_block(msg.t_us, msg.sources, block, gains)
+        else:  # a source named twice: its last sweep counts, as in a map
+            readings = dict(zip(msg.sources, block, strict=True))
+            self.beacons = BeaconSweep(msg.t_us, readings, dict(zip(msg.sources, gains, strict=True)))
+
+    def _hub_seen(self, present: bool) -> None:
+        self.hub_present = present
+        if present and self._attached_once:
+            self._start_reattach()
+
+    def _start_reattach(self) -> None:
+        if self._reattaching is None or self._reattaching.done():
+            self._reattaching = self._loop.create_task(self._reattach())
+            self._reattaching.add_done_callback(self._reattach_done)
+
+    def _reattach_done(self, task: asyncio.Task[None]) -> None:
+        # nobody may await a re-attach started by the hub's reappearance or its "not attached": its failure
+        # (no hub, or a refusal, perhaps forged) is counted here, and the next hint starts another
+        if not task.cancelled() and task.exception() is not None:
+            self.faults.record("reattach", task.exception())  # type: ignore[arg-type]
+
+    async def _reattached(self) -> None:
+        self._start_reattach()
+        assert self._reattaching is not None
+        await asyncio.shield(self._reattaching)
+
+    def _attach_message(self, exclusive: bool = False) -> wire.Attach:
+        """Attach with the radio as this node wants it now."""
+        me = self.identity
+        return wire.Attach(
+            ext_addr=me.ext_addr,
+            short_addr=me.short_addr,
+            pan_id=me.pan_id,
+            channel=me.channel,
+            position=list(me.position),
+            heading_deg=float(me.heading_deg),
+            instance=self.instance,
+            exclusive=exclusive,
+            kind=me.kind,
+        )
+
+    async def _reattach(self) -> None:
+        orphans = [token for token in self._pending if token]  # sent before this attach: to the dead hub
+        attached = await self._request(0, self._attach_message(), resend_s=RESEND_S)
+
+        self._adopt(attached)
+        self.reattaches += 1
+        self._settle_orphans(orphans, attached)
+        for callback in self.on_reattach:
+            callback()
+
+    def _settle_orphans(self, orphans: list[int], attached: wire.Attached) -> None:
+        """Requests the dead hub took with it: the attach carried our configuration (and the IR mode is
+        sent again), so those are done; a frame is lost, as in any crash. Requests sent after the attach
+        went to the new hub, which answers them itself."""
+        for token in orphans:
+            fut = self._pending.get(token)
+            if fut is None or fut.done():
+                continue
+            if self._pending_types.get(token) in (wire.Configure.TYPE, wire.SetIrMode.TYPE):
+                fut.set_result(attached)
+            else:
+                fut.set_exception(HubUnavailable("the hub restarted before it answered"))
+
+    def _resolve(self, token: int, msg: wire.Message) -> None:
+
+        fut = self._pending.get(token)
+        if fut is not None and not fut.done():
+            fut.set_result(msg)

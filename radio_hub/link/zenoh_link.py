@@ -1,0 +1,293 @@
+"""The zenoh side of the radio port: sessions, the reliable publishers, and ``ZenohLink`` for node processes.
+
+A node process's ``RadioClient`` talks to the hub through a ``ZenohLink``: its messages go up on the node's
+``up`` key, the hub's come back on its ``down`` key and are handed to the node's event loop (zenoh-python
+calls back on its own threads, so a callback only hands over), and liveliness tokens tell the hub the node
+is there and the node whether the hub is.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import re
+import sys
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+import msgpack
+import zenoh
+
+from radio_hub.link import wire
+from radio_hub.link.keys import Keys
+from radio_hub.link.port import HubUnavailable
+from radio_hub.link.trust import TransportSecurity, access_control, tls_settings
+
+DOWN_PENDING_LIMIT = 2000
+"""Messages from the hub a node's event loop may have waiting; more are dropped and counted (``dropped``):
+a flood on a node's downlink key costs it those messages, never unbounded memory."""
+DOWN_PENDING_BYTES = 2 << 20
+"""Bytes of such messages waiting at most (the hub's own are a few hundred bytes each)."""
+STRANGER_ANSWERS_PER_S = 200
+"""Answers (errors) a hub sends per second to ids that are not attached; more are dropped and counted."""
+
+_ENDPOINT = re.compile(r"^(tcp|udp|tls|quic)/(\[[0-9a-fA-F:.]+\]|[A-Za-z0-9_.-]+):\d{1,5}$")
+_security = TransportSecurity()
+
+
+def use_security(security: TransportSecurity) -> None:
+    """Every session this process opens from now on uses ``security`` (the command line's TLS options):
+    one process, one identity, so the setting is process-wide rather than threaded through every caller."""
+    global _security
+    _security = security
+
+
+def session_config(mode: str, endpoint: str) -> zenoh.Config:
+    """A zenoh config: ``router`` listens on ``endpoint``, ``client`` connects to it; no multicast. The
+    process's TransportSecurity adds TLS (and, on a router asking for client certificates, access control)
+    on top of its zenoh config file, if it gave one."""
+    if mode not in ("router", "client"):
+        raise ValueError("mode must be router or client")
+    security = _security
+    config = zenoh.Config.from_file(security.zenoh_config) if security.zenoh_config else zenoh.Config()
+    config.insert_json5("mode", f'"{mode}"')
+    for name, value in tls_settings(security, mode).items():
+        config.insert_json5(f"transport/link/tls/{name}", json.dumps(value))
+    if mode == "router" and security.mutual:
+        config.insert_json5("access_control", json.dumps(access_control(security.acl_ids)))
+    where = "listen/endpoints" if mode == "router" else "connect/endpoints"
+    config.insert_json5(where, f'["{endpoint}"]')
+    config.insert_json5("scouting/multicast/enabled", "false")
+    if mode == "client":
+        # A restarted hub must get its nodes back at once. Zenoh's default backoff retries 1 s, then 2, then
+        # 4 s after the router went away: a client unlucky with a hub down 1.5 s came back 5 s late, missed
+        # the re-organize that followed, and failed test_the_hub_restarts about 1 run in 15 on a busy machine.
+        # A constant 0.2-0.5 s costs a connect attempt per node twice a second while the hub is away.
+        retry = "{ period_init_ms: 200, period_max_ms: 500, period_increase_factor: 1.5 }"
+        config.insert_json5("connect/retry", retry)
+    return config
+
+
+def reliable_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
+    """Emulated frames must never vanish in the transport: reliable, and block rather than drop."""
+    return session.declare_publisher(
+        key, congestion_control=zenoh.CongestionControl.BLOCK, reliability=zenoh.Reliability.RELIABLE
+    )
+
+
+def open_session(mode: str, endpoint: str) -> zenoh.Session:
+    """Open a zenoh session, turning zenoh's error into HubUnavailable with the endpoint in it."""
+    if not _ENDPOINT.match(endpoint):
+        raise HubUnavailable(f"{endpoint!r} is not a zenoh endpoint such as tcp/127.0.0.1:7447")
+    try:
+        return zenoh.open(session_config(mode, endpoint))
+    except zenoh.ZError as err:
+        reason = str(err).split(" at /")[0].strip()  # zenoh appends the Rust source location
+        hint = " (is `petswarm hub` running there?)" if mode == "client" else ""
+        raise HubUnavailable(f"cannot reach {endpoint}{hint}: {reason}") from None
+
+
+def query_hub(session: zenoh.Session, key: str, timeout: float = 2.0, payload: bytes | None = None) -> dict[str, Any]:
+    """Ask one of the hub's queryables (blocking); raises HubUnavailable when nobody answers."""
+    for reply in session.get(key, timeout=timeout, payload=payload):
+        if reply.ok is not None:
+            return msgpack.unpackb(reply.ok.payload.to_bytes(), raw=False, strict_map_key=False)
+    raise HubUnavailable(f"no hub answered {key} within {timeout} s")
+
+
+class HubDownlink:
+    """A hub shell's ``Downlink``: the environment's messages to nodes on one reliable publisher per node,
+    declared when first needed, and the world's state on ``world_pub``; nothing while ``session`` is None."""
+
+    def __init__(self, keys: Keys, is_member: Callable[[str], bool] | None = None) -> None:
+        """``is_member(node_id)``: whether the id is attached. Non-members (an id that sent something without
+        attaching, or has left) get no publisher of their own and at most ``STRANGER_ANSWERS_PER_S``
+        answers a second, so a stream of made-up ids costs the hub neither memory nor much time."""
+        self.keys = keys
+        self.session: zenoh.Session | None = None
+        self.world_pub: zenoh.Publisher | None = None
+        self.is_member = is_member
+        self.stranger_answers_dropped = 0
+        self._pubs: dict[str, zenoh.Publisher] = {}
+        self._window_s = 0.0
+        self._window_answers = 0
+
+    def send(self, node_id: str, data: bytes) -> None:
+        if self.session is None:
+            return
+        try:
+            pub = self._pubs.get(node_id)
+            if pub is None and self.is_member is not None and not self.is_member(node_id):
+                self._answer_stranger(node_id, data)
+                return
+            if pub is None:
+                pub = self._pubs[node_id] = reliable_publisher(self.session, self.keys.down(node_id))
+            pub.put(data)
+        except zenoh.ZError as err:
+            print(f"hub: cannot reach {node_id}: {err}", file=sys.stderr)
+
+    def _answer_stranger(self, node_id: str, data: bytes) -> None:
+        now = time.monotonic()
+        if now - self._window_s >= 1.0:
+            self._window_s, self._window_answers = now, 0
+        if self._window_answers >= STRANGER_ANSWERS_PER_S:
+            self.stranger_answers_dropped += 1
+            return
+        self._window_answers += 1
+        assert self.session is not None
+        self.session.put(self.keys.down(node_id), data)
+
+    def forget(self, node_id: str) -> None:
+        pub = self._pubs.pop(node_id, None)
+        if pub is not None:
+            with contextlib.suppress(zenoh.ZError):
+                pub.undeclare()
+
+    def publish_world(self, state: dict[str, Any]) -> None:
+        if self.world_pub is not None:
+            with contextlib.suppress(zenoh.ZError):
+                self.world_pub.put(msgpack.packb(state, use_bin_type=True))
+
+    def close(self) -> None:
+        """Undeclare every node's publisher and stop sending."""
+        for node_id in list(self._pubs):
+            self.forget(node_id)
+        self.session = None
+
+
+def declare_hub_keys(
+    session: zenoh.Session,
+    keys: Keys,
+    put: Callable[[tuple[Any, ...]], None],
+    *,
+    chaos: bool = True,
+    oversized: Callable[[], None] | None = None,
+) -> list[Any]:
+    """What a hub shell serves on its router session, every callback a hand-off to ``put`` (its inbox): nodes'
+    messages (``("up", key, bytes)``), their liveliness (``("alive", key, kind)``), the queryables (``("stats",
+    query)``...; the chaos queryable only with ``chaos``) and the hub's own liveliness token. A node's message
+    longer than ``wire.MAX_UP_BYTES`` is dropped before it is copied out of zenoh (``oversized`` counts it)."""
+
+    def up(sample: zenoh.Sample) -> None:
+        if len(sample.payload) > wire.MAX_UP_BYTES:
+            if oversized is not None:
+                oversized()
+            return
+        put(("up", str(sample.key_expr), sample.payload.to_bytes()))
+
+    decls = [
+        session.declare_subscriber(keys.up_all, up),
+        session.liveliness().declare_subscriber(
+            keys.alive_all, lambda s: put(("alive", str(s.key_expr), s.kind)), history=True
+        ),
+        session.declare_queryable(keys.stats, lambda q: put(("stats", q))),
+        session.declare_queryable(keys.air, lambda q: put(("air", q))),
+        session.declare_queryable(keys.world_query, lambda q: put(("world", q))),
+        session.liveliness().declare_token(keys.hub_alive),
+    ]
+    if chaos:
+        decls.append(session.declare_queryable(keys.chaos, lambda q: put(("chaos", q))))
+    return decls
+
+
+def reply(query: zenoh.Query, body: dict[str, Any]) -> None:
+    """Answer a query with a msgpack map (an error map if it cannot be packed), and let it go."""
+    try:
+        try:
+            data = msgpack.packb(body, use_bin_type=True)
+        except (TypeError, ValueError, OverflowError) as err:
+            data = msgpack.packb({"error": f"cannot encode the answer: {type(err).__name__}: {err}"})
+        query.reply(query.key_expr, data)
+    finally:
+        query.drop()
+
+
+class ZenohLink:
+    """A node's port to the hub over a zenoh client session."""
+
+    def __init__(self, session: zenoh.Session, keys: Keys, owns_session: bool) -> None:
+        self.session = session
+        self.keys = keys
+        self.owns_session = owns_session
+        """Close the session with the link (True when the link opened it)."""
+        self._decls: list[Any] = []
+        self._pub: zenoh.Publisher | None = None
+        self.dropped = 0
+        """Messages from the hub dropped: longer than ``wire.MAX_MESSAGE_BYTES``, or ``DOWN_PENDING_LIMIT``
+        already waiting for the node's event loop."""
+        self._pending = 0
+        self._pending_bytes = 0
+        self._lock = threading.Lock()
+
+    @classmethod
+    async def connect(cls, endpoint: str, world: str, session: zenoh.Session | None = None) -> ZenohLink:
+        """A link on ``session``, or on a new client session to ``endpoint`` (HubUnavailable if it fails)."""
+        owns = session is None
+        if session is None:
+            session = await asyncio.to_thread(open_session, "client", endpoint)
+        return cls(session, Keys(world), owns)
+
+    def open(
+        self, node_id: str, instance: str, on_down: Callable[[bytes], None], on_hub: Callable[[bool], None]
+    ) -> None:
+        """Declare the node's liveliness, its down subscription, the hub watch and its up publisher."""
+        loop = asyncio.get_running_loop()
+        session, keys = self.session, self.keys
+
+        def down(sample: zenoh.Sample) -> None:  # zenoh's thread: hand over and return at once
+            size = len(sample.payload)
+            with self._lock:
+                if (
+                    size > wire.MAX_MESSAGE_BYTES
+                    or self._pending >= DOWN_PENDING_LIMIT
+                    or (self._pending_bytes + size > DOWN_PENDING_BYTES)
+                ):
+                    self.dropped += 1
+                    return
+                self._pending += 1
+                self._pending_bytes += size
+            try:
+                loop.call_soon_threadsafe(handed, sample.payload.to_bytes())
+            except RuntimeError:  # the node's loop has closed (the process is ending): nobody to hand it to
+                with self._lock:
+                    self._pending -= 1
+                    self._pending_bytes -= size
+
+        def handed(data: bytes) -> None:  # the node's loop
+            with self._lock:
+                self._pending -= 1
+                self._pending_bytes -= len(data)
+            on_down(data)
+
+        def hub(sample: zenoh.Sample) -> None:  # a hub appeared (again: it knows nothing of us) or went away
+            with contextlib.suppress(RuntimeError):  # the node's loop has closed
+                loop.call_soon_threadsafe(on_hub, sample.kind == zenoh.SampleKind.PUT)
+
+        self._decls = [
+            session.liveliness().declare_token(keys.alive(node_id, instance)),
+            session.declare_subscriber(keys.down(node_id), down),
+            session.liveliness().declare_subscriber(keys.hub_alive, hub),
+        ]
+        self._pub = reliable_publisher(session, keys.up(node_id))
+        self._decls.append(self._pub)
+
+    def put(self, data: bytes) -> None:
+        """One message to the hub; HubUnavailable when the session is gone."""
+        if self._pub is None:
+            raise HubUnavailable("the link is not open")
+        try:
+            self._pub.put(data)
+        except zenoh.ZError as err:
+            raise HubUnavailable(f"cannot reach the hub: {err}") from None
+
+    async def close(self) -> None:
+        """Undeclare everything; close the session if the link opened it."""
+        for decl in self._decls:
+            with contextlib.suppress(zenoh.ZError):
+                decl.undeclare()
+        self._decls, self._pub = [], None
+        if self.owns_session:
+            await asyncio.to_thread(self.session.close)

@@ -1,0 +1,510 @@
+"""The world: ground-truth poses of every body, kinematics from motor commands, obstacles, and the
+robots' own-body sensors (ultrasonic ranges, AHRS yaw, wheel odometry).
+
+Pure and vectorised: the hub's shell calls ``step`` at a fixed tick with the model time, and asks for
+sensor readings with a numpy Generator it seeds. Nothing here knows about radios or zenoh.
+
+Robots are holonomic (mecanum) bases driven by a motor command (vx, vy, omega) in their own frame
+(x forward, y left, omega counter-clockwise). The drive follows the command within speed and
+acceleration limits, as a motor controller with a ramp does. A motor controller also has a watchdog: a
+command older than ``command_timeout_s`` is taken as zero, so a robot whose process died or froze
+stops rather than driving on forever. Users are moved by their own process, which sets their pose.
+
+Bodies are discs. When a disc would overlap another body or an obstacle it is pushed back out (bodies
+do not pass through each other), and the contact is counted once when it begins: the collision counter
+is the figure the experiments report, the push-back only keeps the geometry sane afterwards.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from radio_hub.config import build_config, check_keys
+
+KINDS = ("robot", "user")
+
+
+MAX_COORDINATE_M = 1e6
+"""How far from the origin a body may be put (a forged pose of 1e300 m must not turn distances into inf)."""
+
+
+@dataclass
+class WorldConfig:
+    """Constants of the world and of the robots' bodies and own sensors (choices documented per field)."""
+
+    tick_s: float = 0.02
+    """Kinematics step: 50 Hz, the surround paper's time step, fine enough for 1.5 m/s (3 cm per tick)."""
+    robot_radius_m: float = 0.15
+    """A Pet-Bot is a small mecanum base about 30 cm across."""
+    user_radius_m: float = 0.25
+    """A person seen from above, shoulders included, as a disc."""
+    max_speed_mps: float = 1.5
+    """Faster than a brisk walk (1.3 m/s), so a robot can catch up with its user."""
+    max_omega_rps: float = 2.5
+    max_accel_mps2: float = 2.0
+    """A ramp a small mecanum base manages without wheel slip."""
+    max_alpha_rps2: float = 8.0
+    command_timeout_s: float = 0.5
+    """Motor watchdog: a robot that has not commanded for this long is stopped."""
+    yaw_noise_deg: float = 1.0
+    """AHRS yaw error (standard deviation): a MEMS AHRS with magnetometer indoors is good to about a degree."""
+    odometry_noise: float = 0.03
+    """Wheel odometry error as a fraction of each measured velocity (mecanum wheels slip a few percent)."""
+    ultrasonic_angles_deg: tuple[float, ...] = (0.0, 45.0, 90.0, 135.0, 180.0, -135.0, -90.0, -45.0)
+    """Eight sensors round the body: a holonomic base can move sideways and backwards, so it looks there too."""
+    ultrasonic_range_m: float = 3.0
+    ultrasonic_half_beam_deg: float = 15.0
+    """An HC-SR04-like transducer sees a cone of about 30 degrees; the nearest echo in it is reported."""
+    ultrasonic_noise_m: float = 0.01
+
+    def validate(self) -> WorldConfig:
+        """Raise ValueError naming the first field out of range."""
+        positive = (
+            "tick_s",
+            "robot_radius_m",
+            "user_radius_m",
+            "max_speed_mps",
+            "max_omega_rps",
+            "max_accel_mps2",
+            "max_alpha_rps2",
+            "command_timeout_s",
+            "ultrasonic_range_m",
+        )
+        for name in positive:
+            if not getattr(self, name) > 0:
+                raise ValueError(f"world.{name} must be > 0, got {getattr(self, name)}")
+        for name in ("yaw_noise_deg", "odometry_noise", "ultrasonic_noise_m", "ultrasonic_half_beam_deg"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"world.{name} must be >= 0, got {getattr(self, name)}")
+        if self.tick_s > 0.1:
+            raise ValueError(f"world.tick_s must be at most 0.1 s, got {self.tick_s}")
+        self.ultrasonic_angles_deg = tuple(float(a) for a in self.ultrasonic_angles_deg)
+        return self
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain values, for stats and run records."""
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.__dict__.items()}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> WorldConfig:
+        """From a config table; unknown keys and bad values are errors naming the key."""
+        return build_config(cls, data, "world.").validate()
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """A circle (x, y, r), a wall (segment x0,y0 - x1,y1) or a rectangle (corners x0,y0 and x1,y1)."""
+
+    kind: str
+    x: float = 0.0
+    y: float = 0.0
+    r: float = 0.0
+    x0: float = 0.0
+    y0: float = 0.0
+    x1: float = 0.0
+    y1: float = 0.0
+
+    def segments(self) -> list[tuple[float, float, float, float]]:
+        """The walls and rectangle edges as segments (circles have none)."""
+        if self.kind == "wall":
+            return [(self.x0, self.y0, self.x1, self.y1)]
+        if self.kind == "rect":
+            a, b, c, d = self.x0, self.y0, self.x1, self.y1
+            return [(a, b, c, b), (c, b, c, d), (c, d, a, d), (a, d, a, b)]
+        return []
+
+    def to_dict(self) -> dict[str, Any]:
+        """The fields of its kind, as a scenario file writes them."""
+        keys = {"circle": ("x", "y", "r"), "wall": ("x0", "y0", "x1", "y1"), "rect": ("x0", "y0", "x1", "y1")}
+        return {"kind": self.kind, **{k: getattr(self, k) for k in keys[self.kind]}}
+
+
+def parse_obstacle(spec: dict[str, Any], where: str = "obstacle") -> Obstacle:
+    """An obstacle from a scenario table (``where`` names it in errors); ValueError naming what is wrong."""
+    needs = {"circle": ("x", "y", "r"), "wall": ("x0", "y0", "x1", "y1"), "rect": ("x0", "y0", "x1", "y1")}
+    kind = spec.get("kind") if isinstance(spec, dict) else None
+    check_keys(spec, ("kind", *needs.get(kind, ("x", "y", "r", "x0", "y0", "x1", "y1"))), where)
+    if kind not in needs:
+        raise ValueError(f"{where}: obstacle kind must be circle, wall or rect, not {kind!r}")
+    missing = [k for k in needs[kind] if k not in spec]
+    if missing:
+        raise ValueError(f"{where}: a {kind} obstacle takes {', '.join(needs[kind])}; missing {', '.join(missing)}")
+    values = {k: float(spec[k]) for k in needs[kind]}
+    if kind == "circle" and values["r"] <= 0:
+        raise ValueError(f"a circle's r must be > 0, got {values['r']}")
+    if kind == "rect":
+        values = {
+            "x0": min(values["x0"], values["x1"]),
+            "x1": max(values["x0"], values["x1"]),
+            "y0": min(values["y0"], values["y1"]),
+            "y1": max(values["y0"], values["y1"]),
+        }
+    return Obstacle(kind, **values)
+
+
+@dataclass
+class Body:
+    """One body's truth: pose, velocity in the world frame, and its last motor command."""
+
+    body_id: str
+    kind: str
+    radius: float
+    pose: np.ndarray
+    """x, y, yaw (rad)."""
+    velocity: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    """vx, vy (world frame), omega."""
+    command: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    """vx, vy (body frame), omega, as last commanded."""
+    command_t: float = -math.inf
+
+
+@dataclass(frozen=True)
+class OwnSensors:
+    """What a robot's own body senses: ultrasonic ranges (nan = no echo), AHRS yaw, wheel odometry."""
+
+    ranges_m: np.ndarray
+    yaw_rad: float
+    odometry: np.ndarray
+    """vx, vy (body frame), omega, as the wheels measured them."""
+
+
+class World:
+    """All bodies and obstacles of one world."""
+
+    def __init__(self, config: WorldConfig | None = None, obstacles: list[Obstacle] | None = None) -> None:
+        """Start empty; add bodies as nodes attach."""
+        self.config = (config or WorldConfig()).validate()
+        self.obstacles: list[Obstacle] = list(obstacles or [])
+        self.bodies: dict[str, Body] = {}
+        self.collisions = 0
+        self.collision_log: list[dict[str, Any]] = []
+        self._contacts: set[tuple[str, str]] = set()
+        self.t = 0.0
+        self._segments = _segment_array(self.obstacles)
+        self._circles = np.array([(o.x, o.y, o.r) for o in self.obstacles if o.kind == "circle"]).reshape(-1, 3)
+        self._ultrasonic_rad = np.array([math.radians(a) for a in self.config.ultrasonic_angles_deg], dtype=float)
+        half = math.radians(self.config.ultrasonic_half_beam_deg)
+        self._ultrasonic_spread = np.array((-half, 0.0, half) if half > 0 else (0.0,))
+
+    def set_obstacles(self, obstacles: list[Obstacle]) -> None:
+        """Replace the obstacles (a scenario loaded at run time)."""
+        self.obstacles = list(obstacles)
+        self._segments = _segment_array(self.obstacles)
+        self._circles = np.array([(o.x, o.y, o.r) for o in self.obstacles if o.kind == "circle"]).reshape(-1, 3)
+
+    def add(self, body_id: str, kind: str, x: float, y: float, yaw: float) -> Body:
+        """Place a body (again): a re-attached node keeps no velocity."""
+        if kind not in KINDS:
+            raise ValueError(f"body kind must be one of {KINDS}, not {kind!r}")
+        if not all(math.isfinite(v) for v in (x, y, yaw)) or max(abs(x), abs(y)) > MAX_COORDINATE_M:
+            raise ValueError(f"a pose must be finite numbers within {MAX_COORDINATE_M:g} m")
+        radius = self.config.robot_radius_m if kind == "robot" else self.config.user_radius_m
+        body = Body(body_id, kind, radius, np.array([x, y, _wrap(yaw)], dtype=float))
+        self.bodies[body_id] = body
+        return body
+
+    def remove(self, body_id: str) -> None:
+        """A body that left (its node detached)."""
+        self.bodies.pop(body_id, None)
+        self._contacts = {c for c in self._contacts if body_id not in c}
+
+    def command(self, body_id: str, vx: float, vy: float, omega: float, t: float) -> None:
+        """A robot's motor command in its own frame; raises KeyError/ValueError on a bad one."""
+        body = self.bodies[body_id]
+        if body.kind != "robot":
+            raise ValueError(f"{body_id} is a {body.kind}: only robots take motor commands")
+        if not all(math.isfinite(v) for v in (vx, vy, omega)):
+            raise ValueError("a motor command must be finite numbers")
+        body.command = np.array([vx, vy, omega], dtype=float)
+        body.command_t = t
+
+    def place(
+        self, body_id: str, x: float, y: float, yaw: float, vx: float = 0.0, vy: float = 0.0, omega: float = 0.0
+    ) -> None:
+        """Set a body's pose and world velocity outright (a user walking, or a test teleporting a robot)."""
+        if not all(math.isfinite(v) for v in (x, y, yaw, vx, vy, omega)) or max(abs(x), abs(y)) > MAX_COORDINATE_M:
+            raise ValueError(f"a pose must be finite numbers within {MAX_COORDINATE_M:g} m")
+        body = self.bodies[body_id]
+        body.pose = np.array([x, y, _wrap(yaw)], dtype=float)
+        body.velocity = np.array([vx, vy, omega], dtype=float)
+
+    def step(self, t: float) -> None:
+        """Advance the robots to model time ``t`` (seconds), then settle contacts."""
+        dt = t - self.t
+        self.t = t
+        if dt <= 0:
+            return
+        cfg = self.config
+        robots = [b for b in self.bodies.values() if b.kind == "robot"]
+        if robots:
+            # every robot at once, element by element the arithmetic of one
+            pose = np.array([b.pose for b in robots], dtype=float)
+            velocity = np.array([b.velocity for b in robots], dtype=float)
+            fresh = np.array([t - b.command_t <= cfg.command_timeout_s for b in robots])
+            wanted = np.where(fresh[:, None], np.array([b.command for b in robots], dtype=float), 0.0)
+            c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+            target = np.stack(
+                [c * wanted[:, 0] - s * wanted[:, 1], s * wanted[:, 0] + c * wanted[:, 1], wanted[:, 2]], axis=1
+            )
+            target[:, :2] = _clip_norms(target[:, :2], cfg.max_speed_mps)
+            target[:, 2] = np.clip(target[:, 2], -cfg.max_omega_rps, cfg.max_omega_rps)
+            change = target - velocity
+            change[:, :2] = _clip_norms(change[:, :2], cfg.max_accel_mps2 * dt)
+            change[:, 2] = np.clip(change[:, 2], -cfg.max_alpha_rps2 * dt, cfg.max_alpha_rps2 * dt)
+            velocity = velocity + change
+            pose = pose + velocity * dt
+            pose[:, 2] = (pose[:, 2] + math.pi) % (2 * math.pi) - math.pi
+            for k, body in enumerate(robots):
+                body.velocity, body.pose = velocity[k], pose[k]
+        self._settle_contacts()
+
+    def _settle_contacts(self) -> None:
+        if not self._may_touch():
+            contacts: set[tuple[str, str]] = set()
+        else:
+            contacts = self._settled_contacts()
+        for pair in sorted(contacts - self._contacts):
+            self.collisions += 1
+            self.collision_log.append({"t": round(self.t, 4), "a": pair[0], "b": pair[1]})
+        self._contacts = contacts
+
+    def _may_touch(self) -> bool:
+        """Whether any two bodies, or a body and an obstacle, are within a hair of touching (one array
+        computation; when none is, settling would move nothing and find no contact)."""
+        bodies = list(self.bodies.values())
+        if not bodies:
+            return False
+        xyr = np.array([(b.pose[0], b.pose[1], b.radius) for b in bodies], dtype=float)
+        p, radius = xyr[:, :2], xyr[:, 2]
+        slack = 1e-6
+        gap = p[:, None, :] - p[None, :, :]
+        reach = radius[:, None] + radius[None, :] + slack
+        close = np.hypot(gap[..., 0], gap[..., 1]) < reach
+        np.fill_diagonal(close, False)
+        if close.any():
+            return True
+        circles = self._circles
+        if len(circles):
+            gap = p[:, None, :] - circles[None, :, :2]
+            if (np.hypot(gap[..., 0], gap[..., 1]) < radius[:, None] + circles[None, :, 2] + slack).any():
+                return True
+        segments = self._segments
+        if len(segments):
+            a, e = segments[:, :2], segments[:, 2:] - segments[:, :2]
+            length2 = np.einsum("ij,ij->i", e, e)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                u = np.where(length2 > 0, np.einsum("bsj,sj->bs", p[:, None, :] - a[None], e) / length2, 0.0)
+            closest = a[None] + np.clip(u, 0.0, 1.0)[..., None] * e[None]
+            gap = p[:, None, :] - closest
+            if (np.hypot(gap[..., 0], gap[..., 1]) < radius[:, None] + slack).any():
+                return True
+        for o in self.obstacles:  # a centre inside a rectangle is pushed out whatever its distance to the sides
+            if o.kind == "rect" and ((o.x0 < p[:, 0]) & (p[:, 0] < o.x1) & (o.y0 < p[:, 1]) & (p[:, 1] < o.y1)).any():
+                return True
+        return False
+
+    def _settled_contacts(self) -> set[tuple[str, str]]:
+        """Push overlapping bodies apart and out of obstacles, pair by pair; the contacts found."""
+        contacts: set[tuple[str, str]] = set()
+        bodies = list(self.bodies.values())
+        for i, a in enumerate(bodies):
+            for b in bodies[i + 1 :]:
+                gap = a.pose[:2] - b.pose[:2]
+                dist = float(np.hypot(*gap))
+                overlap = a.radius + b.radius - dist
+                if overlap > 0:
+                    contacts.add((a.body_id, b.body_id) if a.body_id < b.body_id else (b.body_id, a.body_id))
+                    _push_apart(a, b, gap, dist, overlap)
+            for k, push in self._obstacle_pushes(a):
+                contacts.add((a.body_id, f"obstacle-{k}"))
+                if a.kind == "robot":
+                    a.pose[:2] += push
+        return contacts
+
+    def _obstacle_pushes(self, body: Body) -> list[tuple[int, np.ndarray]]:
+        """(obstacle index, push-out vector) for every obstacle the body overlaps."""
+        pushes = []
+        p = body.pose[:2]
+        for k, obstacle in enumerate(self.obstacles):
+            if obstacle.kind == "circle":
+                gap = p - (obstacle.x, obstacle.y)
+                dist = float(np.hypot(*gap))
+                depth = body.radius + obstacle.r - dist
+                if depth > 0:
+                    pushes.append((k, _unit(gap) * depth))
+                continue
+            if obstacle.kind == "rect" and obstacle.x0 < p[0] < obstacle.x1 and obstacle.y0 < p[1] < obstacle.y1:
+                pushes.append((k, _out_of_rect(p, obstacle, body.radius)))
+                continue
+            for seg in obstacle.segments():
+                closest = _closest_on_segment(p, seg)
+                gap = p - closest
+                dist = float(np.hypot(*gap))
+                if dist < body.radius:
+                    pushes.append((k, _unit(gap) * (body.radius - dist)))
+                    break
+        return pushes
+
+    # -- sensors ---------------------------------------------------------------------------------
+
+    def sense(self, body_id: str, rng: np.random.Generator) -> OwnSensors:
+        """A robot's ultrasonic ranges, AHRS yaw and wheel odometry, with their noise."""
+        return self.sense_many([body_id], rng)[0]
+
+    def sense_many(self, body_ids: list[str], rng: np.random.Generator) -> list[OwnSensors]:
+        """``sense`` for several robots: one ray computation for all, and the noise drawn as ``sense`` called
+        for each in turn draws it (per body: its echoes' ranges, the yaw, the three odometry values)."""
+        cfg = self.config
+        n = len(body_ids)
+        if not n:
+            return []
+        ranges = self.ultrasonic_many(body_ids)
+        bodies = [self.bodies[b] for b in body_ids]
+        pose = np.array([b.pose for b in bodies], dtype=float).reshape(n, 3)
+        velocity = np.array([b.velocity for b in bodies], dtype=float).reshape(n, 3)
+        # one draw of standard normals for all, cut as the draws body by body would have been
+        seen = ~np.isnan(ranges)
+        echoes = np.count_nonzero(seen, axis=1)
+        ends = np.cumsum(echoes + 4)
+        starts = ends - (echoes + 4)
+        z = rng.standard_normal(int(ends[-1]))
+        at_echo = starts[:, None] + np.cumsum(seen, axis=1) - 1
+        ranges[seen] = np.maximum(0.02, ranges[seen] + (0.0 + cfg.ultrasonic_noise_m * z[at_echo[seen]]))
+        yaw_noise = 0.0 + math.radians(cfg.yaw_noise_deg) * z[starts + echoes]
+        yaw = np.mod(pose[:, 2] + yaw_noise + math.pi, 2 * math.pi) - math.pi
+        odometry_noise = 0.0 + cfg.odometry_noise * z[(starts + echoes + 1)[:, None] + np.arange(3)]
+        c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+        vx, vy, omega = velocity.T
+        odometry = np.stack([c * vx + s * vy, -s * vx + c * vy, omega], axis=1) * (1.0 + odometry_noise)
+        yaws = yaw.tolist()
+        return [OwnSensors(ranges[k], yaws[k], odometry[k]) for k in range(n)]
+
+    def ultrasonic(self, body_id: str) -> np.ndarray:
+        """Noise-free range of the nearest echo in each sensor's cone (nan when nothing within range)."""
+        return self.ultrasonic_many([body_id])[0]
+
+    def ultrasonic_many(self, body_ids: list[str]) -> np.ndarray:
+        """``ultrasonic`` of several bodies, shape (bodies, sensors): every ray of every body against every
+        circle (obstacles and the other bodies) and segment in one array computation.
+
+        Each sensor casts three rays (the cone's edges and its axis); a ray's echo is the nearest surface it
+        meets, measured from the body's skin, and a sensor reports the nearest of its rays within range."""
+        cfg = self.config
+        n = len(body_ids)
+        bodies = [self.bodies[b] for b in body_ids]
+        everyone = list(self.bodies.values())
+        poses = np.array([b.pose for b in bodies], dtype=float).reshape(n, 3)
+        skin = np.array([b.radius for b in bodies], dtype=float)
+        origin = poses[:, :2]
+        # ray directions (bodies, sensors, rays): heading + sensor angle + spread, as one sensor's cone
+        directions = (poses[:, 2, None] + self._ultrasonic_rad)[:, :, None] + self._ultrasonic_spread
+        unit = np.stack([np.cos(directions), np.sin(directions)], axis=-1)  # (n, S, K, 2)
+        best = np.full(directions.shape, np.inf)
+        bodies_xyr = np.array([(*b.pose[:2], b.radius) for b in everyone], dtype=float).reshape(-1, 3)
+        circles = np.vstack([self._circles, bodies_xyr])
+        if len(circles):
+            # a body does not echo off itself
+            not_self = np.ones((n, len(circles)), dtype=bool)
+            index = {b.body_id: len(self._circles) + k for k, b in enumerate(everyone)}
+            not_self[np.arange(n), [index[b] for b in body_ids]] = False
+            rel = circles[None, :, :2] - origin[:, None, :]  # (n, M, 2)
+            # one matrix-vector product per ray (as rel @ d for a single ray)
+            along = np.matmul(rel[:, None, None], unit[..., None])[..., 0]  # (n, S, K, M)
+            perp2 = (rel[..., 0] * rel[..., 0] + rel[..., 1] * rel[..., 1])[:, None, None, :] - along**2
+            r2 = circles[:, 2] ** 2
+            hit = (perp2 <= r2) & (along > 0) & not_self[:, None, None, :]
+            with np.errstate(invalid="ignore"):
+                t = along - np.sqrt(r2 - perp2)
+            best = np.minimum(best, np.where(hit, np.maximum(t, 0.0), np.inf).min(axis=-1))
+        segments = self._segments
+        if len(segments):
+            e = segments[:, 2:] - segments[:, :2]  # (G, 2)
+            dx, dy = unit[..., 0, None], unit[..., 1, None]  # (n, S, K, 1)
+            denom = dx * e[:, 1] - dy * e[:, 0]  # (n, S, K, G)
+            ok = np.abs(denom) > 1e-12
+            w = segments[None, :, :2] - origin[:, None, :]  # (n, G, 2)
+            w0, w1 = w[:, None, None, :, 0], w[:, None, None, :, 1]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = (w0 * e[:, 1] - w1 * e[:, 0]) / denom
+                u = (w0 * dy - w1 * dx) / denom
+            hit = ok & (t > 0) & (u >= 0) & (u <= 1)
+            best = np.minimum(best, np.where(hit, t, np.inf).min(axis=-1))
+        reach = best - skin[:, None, None]
+        reach = np.where(reach <= cfg.ultrasonic_range_m, reach, np.inf)
+        nearest = reach.min(axis=-1)
+        return np.where(nearest <= cfg.ultrasonic_range_m, nearest, np.nan)
+
+    def poses(self) -> dict[str, tuple[float, float, float]]:
+        """Every body's pose (x, y, yaw) as plain floats, by id (for the IR light and the radio ranges)."""
+        return {n: (float(b.pose[0]), float(b.pose[1]), float(b.pose[2])) for n, b in self.bodies.items()}
+
+    def snapshot(self) -> list[dict[str, Any]]:
+        """Every body's truth as plain values (for the world publication and records)."""
+        bodies = list(self.bodies.values())
+        if not bodies:
+            return []
+        # every pose and velocity as Python floats in one conversion, then rounded as before
+        values = np.array([(*b.pose, *b.velocity) for b in bodies], dtype=float).tolist()
+        return [
+            {
+                "id": b.body_id,
+                "kind": b.kind,
+                "x": round(x, 4),
+                "y": round(y, 4),
+                "yaw": round(yaw, 4),
+                "vx": round(vx, 4),
+                "vy": round(vy, 4),
+                "omega": round(omega, 4),
+                "radius": b.radius,
+            }
+            for b, (x, y, yaw, vx, vy, omega) in zip(bodies, values, strict=True)
+        ]
+
+
+def _segment_array(obstacles: list[Obstacle]) -> np.ndarray:
+    return np.array([seg for o in obstacles for seg in o.segments()], dtype=float).reshape(-1, 4)
+
+
+def _closest_on_segment(p: np.ndarray, seg: tuple[float, float, float, float]) -> np.ndarray:
+    a, b = np.array(seg[:2]), np.array(seg[2:])
+    e = b - a
+    length2 = float(e @ e)
+    u = 0.0 if length2 == 0 else float(np.clip((p - a) @ e / length2, 0.0, 1.0))
+    return a + u * e
+
+
+def _out_of_rect(p: np.ndarray, rect: Obstacle, radius: float) -> np.ndarray:
+    # a centre inside the rectangle leaves through the nearest side
+    gaps = [p[0] - rect.x0, rect.x1 - p[0], p[1] - rect.y0, rect.y1 - p[1]]
+    side = int(np.argmin(gaps))
+    push = gaps[side] + radius
+    return np.array([(-push, 0.0), (push, 0.0), (0.0, -push), (0.0, push)][side])
+
+
+def _push_apart(a: Body, b: Body, gap: np.ndarray, dist: float, overlap: float) -> None:
+    direction = _unit(gap) if dist > 1e-9 else np.array([1.0, 0.0])
+    # a user is moved by their own process; only robots yield
+    share_a = 0.0 if a.kind != "robot" else (0.5 if b.kind == "robot" else 1.0)
+    share_b = 0.0 if b.kind != "robot" else (0.5 if a.kind == "robot" else 1.0)
+    a.pose[:2] += direction * overlap * share_a
+    b.pose[:2] -= direction * overlap * share_b
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    n = float(np.hypot(*v))
+    return v / n if n > 1e-12 else np.array([1.0, 0.0])
+
+
+def _clip_norms(v: np.ndarray, limit: float) -> np.ndarray:
+    """Every row of an (n, 2) array scaled down to the norm ``limit`` where it is longer (as v (limit / |v|))."""
+    n = np.hypot(v[:, 0], v[:, 1])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where((n > limit)[:, None], v * (limit / n)[:, None], v)
+
+
+def _wrap(angle: float) -> float:
+    return (angle + math.pi) % (2 * math.pi) - math.pi

@@ -1,0 +1,392 @@
+"""The radio hub process: a zenoh router whose one job thread drives the ``Environment`` on the wall clock.
+
+Zenoh callbacks only hand samples to an inbox queue. The job thread takes them in arrival order,
+stamps each with the model clock (microseconds since the hub started), feeds the environment, and sleeps
+until the environment's next event with a timed wait. A plain thread is used rather than asyncio because
+epoll's millisecond timeouts would add up to a millisecond of lag to every delivery; a timed queue
+wait overshoots by tens of microseconds.
+
+Nothing a client sends can end the job loop or grow the hub without bound (see README, "Bad input and
+bounds"): the inbox holds at most ``INBOX_PER_NODE`` messages per attached node and ``INBOX_STRANGERS`` from
+all other ids together (more are dropped and counted in ``stats()["inbox"]``); an attach whose liveliness
+token does not show within ``ATTACH_TOKEN_TIMEOUT_S`` is detached; at most ``MAX_UNPROVEN`` such attaches
+wait at once; any exception in a handler is counted in ``stats()["hub"]["faults"]`` and the loop goes on.
+
+With ``pcap_path`` the hub also writes every transmission that leaves the air, data frames and ACKs,
+to a pcap file (``radio_hub.air.pcap``), stamped with the wall-clock time at which it started on the air.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import json
+import os
+import queue
+import threading
+import time
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+import msgpack
+import zenoh
+
+from radio_hub.config import MediumConfig
+from radio_hub.environment import (
+    Environment,
+    EnvironmentConfig,
+    environment_from_dict,
+    load_config,
+    process_usage,
+)
+from radio_hub.link import wire
+from radio_hub.link.keys import Keys
+from radio_hub.link.zenoh_link import HubDownlink, declare_hub_keys, reply, session_config
+from radio_hub.physics.light import IrConfig
+
+__all__ = ["Environment", "EnvironmentConfig", "RadioHub", "environment_from_dict", "load_config", "ready_line"]
+
+_IDLE_WAKE_US = 200_000
+_SPIN_US = 100
+"""Sleep until this close to the next model event, then spin: deliveries land within a few us of model time."""
+
+_PR_SET_TIMERSLACK = 29
+
+INBOX_PER_NODE = 1000
+"""Messages of one attached node waiting in the inbox; a node past it loses its newest (counted)."""
+INBOX_STRANGERS = 1000
+"""Messages of every id that is not attached (first attaches included) waiting in the inbox, together."""
+STRANGERS_PER_S = 2000
+"""Messages of ids that are not attached taken into the inbox per second, together (attaches included: a
+swarm of 50 attaches in well under a second); the rest are dropped in zenoh's thread at once, so a flood
+of made-up ids costs the job loop almost nothing."""
+INBOX_OTHER = 1000
+"""Queries and liveliness changes waiting in the inbox."""
+INBOX_BUCKET_BYTES = 4 << 20
+"""Bytes of node messages one bucket (an attached node, or all strangers) may have waiting: with the counts,
+the inbox never holds more than (attached nodes + 1) x 4 MB."""
+BATCH = 256
+"""Inbox items taken at most before the environment advances (a flood never holds up the air)."""
+ATTACH_TOKEN_TIMEOUT_S = 5.0
+"""An attached node whose liveliness token has not shown (or has gone) this long is detached."""
+MAX_UNPROVEN = 64
+"""Attached nodes without a liveliness token at once; a further attach without one is refused (counted)."""
+TOKENS_KEPT = 4096
+"""Liveliness tokens remembered; past it, tokens of ids that are not attached are forgotten first."""
+_EXPIRY_EVERY_US = 500_000
+
+
+class RadioHub:
+    """The emulated environment of one world, served over zenoh on the wall clock."""
+
+    def __init__(
+        self,
+        endpoint: str,
+        world: str,
+        config: MediumConfig | None = None,
+        seed: int = 0,
+        ir_config: IrConfig | None = None,
+        pcap_path: str | Path | None = None,
+        environment: EnvironmentConfig | None = None,
+        world_log: str | Path | None = None,
+    ) -> None:
+        """Raises OSError when ``pcap_path`` or ``world_log`` is given and cannot be opened for writing.
+
+        ``environment`` gives every table at once (``config`` and ``ir_config`` override its medium and IR);
+        ``world_log`` receives one JSON line per world tick (the ground truth a run's metrics come from).
+        """
+        env = environment or EnvironmentConfig()
+        tables = EnvironmentConfig(config or env.medium, ir_config or env.ir, env.world, env.ble, env.lf, env.obstacles)
+        self.endpoint = endpoint
+        self.keys = Keys(world)
+        self.seed = seed
+        self._downlink = HubDownlink(self.keys, is_member=lambda node_id: node_id in self.env.kinds)
+        self._t0_ns = time.perf_counter_ns()
+        self.env = Environment(
+            tables,
+            seed,
+            self._downlink,
+            wall_epoch_us=time.time_ns() // 1000,
+            pcap_path=pcap_path,
+            world_log=world_log,
+        )
+        self.env.holder_alive = self._token_present
+        self._inbox: queue.SimpleQueue[tuple[Any, ...]] = queue.SimpleQueue()
+        self._stop = threading.Event()
+        self._session: zenoh.Session | None = None
+        self._decls: list[Any] = []
+        self._waiting: Counter[str] = Counter()
+        self._waiting_bytes: Counter[str] = Counter()
+        """Inbox items per bucket: an attached node's id, ``""`` for every other id, ``"?"`` for the rest."""
+        self._waiting_lock = threading.Lock()
+        self.inbox_dropped: Counter[str] = Counter()
+        """Items refused at the inbox: ``node`` (an attached node past its limit), ``stranger``, ``other``,
+        ``oversized`` (longer than ``wire.MAX_UP_BYTES``)."""
+        self._stranger_window = (0.0, 0)
+        """(start of the current second, strangers admitted in it)."""
+        self._tokens: dict[tuple[str, str], None] = {}
+        """Liveliness tokens present, (node id, instance)."""
+        self._tokenless: dict[str, int] = {}
+        """Attached nodes without a token, and since when (model us)."""
+        self.expired = 0
+        self.refused_unproven = 0
+        self.tokens_dropped = 0
+        self._next_expiry_us = 0
+
+    @property
+    def medium(self) -> Any:
+        """The environment's 802.15.4 medium."""
+        return self.env.medium
+
+    @property
+    def environment(self) -> EnvironmentConfig:
+        """The environment's tables."""
+        return self.env.config
+
+    def now_us(self) -> int:
+        """The model clock: microseconds of wall time since the hub opened."""
+        return (time.perf_counter_ns() - self._t0_ns) // 1000
+
+    def open(self) -> None:
+        """Open the router session and declare the hub's keys. Raises zenoh.ZError if it cannot listen."""
+        session = zenoh.open(session_config("router", self.endpoint))
+        self._session = session
+        self._decls = declare_hub_keys(session, self.keys, self._admit, oversized=self._oversized)
+        self._downlink.world_pub = session.declare_publisher(self.keys.world_state)
+        self._decls.append(self._downlink.world_pub)
+        self._downlink.session = session
+        self._t0_ns = time.perf_counter_ns()
+        self.env.wall_epoch_us = time.time_ns() // 1000
+
+    def stop(self) -> None:
+        """Ask the job loop to end (safe from any thread or a signal handler)."""
+        self._stop.set()
+        self._inbox.put(("wake",))
+
+    def close(self) -> None:
+        """Undeclare everything, close the session, the pcap file and the world log."""
+        self.env.close()
+        self._downlink.session = None
+        for decl in self._decls:
+            decl.undeclare()
+        self._decls = []
+        if self._session is not None:
+            self._session.close()
+            self._session = None
+
+    def serve(self) -> None:
+        """Run the job loop until ``stop``. Nothing a client sends ends it: a handler's exception is counted
+        (``stats()["hub"]["faults"]``) and the loop goes on."""
+        _tight_timer_slack()
+        inbox, env = self._inbox, self.env
+        while not self._stop.is_set():
+            until_due = env.next_event_us() - self.now_us()
+            until_due = min(until_due, _IDLE_WAKE_US)
+            try:
+                if until_due > _SPIN_US:
+                    item: tuple[Any, ...] | None = inbox.get(timeout=(until_due - _SPIN_US) / 1e6)
+                else:
+                    item = inbox.get_nowait()
+            except queue.Empty:
+                item = None
+                if 0 < until_due <= _SPIN_US:
+                    # a timed wait wakes tens of microseconds late; yield-spin the last stretch instead
+                    os.sched_yield()
+            taken = 0
+            while item is not None:  # take what arrived meanwhile before advancing time, a batch at most
+                self._handle_safely(item)
+                taken += 1
+                item = None
+                if taken < BATCH:
+                    with contextlib.suppress(queue.Empty):
+                        item = inbox.get_nowait()
+            self._advance_safely()
+
+    def _admit(self, item: tuple[Any, ...]) -> None:
+        """Zenoh's threads: into the inbox if its bucket has room, else dropped and counted."""
+        size = 0
+        if item[0] == "up":
+            node_id, size = self.keys.node_of(item[1]), len(item[2])
+            bucket, limit = (node_id, INBOX_PER_NODE) if node_id in self.env.kinds else ("", INBOX_STRANGERS)
+            if not bucket and not self._stranger_admitted():
+                return
+        else:
+            bucket, limit = "?", INBOX_OTHER
+        with self._waiting_lock:
+            full = self._waiting[bucket] >= limit or self._waiting_bytes[bucket] + size > INBOX_BUCKET_BYTES
+            if full:
+                self.inbox_dropped["other" if bucket == "?" else "stranger" if bucket == "" else "node"] += 1
+            else:
+                self._waiting[bucket] += 1
+                if size:
+                    self._waiting_bytes[bucket] += size
+        refused = full
+        if refused:
+            if item[0] in ("stats", "air", "world", "chaos"):
+                item[1].drop()  # the query ends unanswered
+            return
+        self._inbox.put((*item, bucket))
+
+    def _stranger_admitted(self) -> bool:
+        """Within ``STRANGERS_PER_S`` (else counted as dropped)."""
+        now = time.monotonic()
+        with self._waiting_lock:
+            start, admitted = self._stranger_window
+            if now - start >= 1.0:
+                start, admitted = now, 0
+            if admitted >= STRANGERS_PER_S:
+                self.inbox_dropped["stranger"] += 1
+                return False
+            self._stranger_window = (start, admitted + 1)
+            return True
+
+    def _oversized(self) -> None:
+        with self._waiting_lock:
+            self.inbox_dropped["oversized"] += 1
+
+    def _handle_safely(self, item: tuple[Any, ...]) -> None:
+        if item[0] == "wake":
+            return
+        bucket, size = item[-1], len(item[2]) if item[0] == "up" else 0
+        with self._waiting_lock:
+            left = self._waiting[bucket] - 1
+            if left > 0:
+                self._waiting[bucket] = left
+                self._waiting_bytes[bucket] -= size
+            else:  # no key per departed node stays behind
+                del self._waiting[bucket]
+                del self._waiting_bytes[bucket]
+        try:
+            self._handle(item[:-1])
+        except Exception as err:
+            self.env.faults.record(f"handle {item[0]}", err)
+
+    def _advance_safely(self) -> None:
+        now = self.now_us()
+        try:
+            if now >= self._next_expiry_us:
+                self._next_expiry_us = now + _EXPIRY_EVERY_US
+                self._expire_tokenless(now)
+            self.env.advance(now)
+        except Exception as err:
+            self.env.faults.record("advance", err)
+
+    def _handle(self, item: tuple[Any, ...]) -> None:
+        kind = item[0]
+        if kind == "up":
+            node_id = self.keys.node_of(item[1])
+            known = node_id in self.env.kinds
+            if not known and self._refuse_unproven(node_id, item[2]):
+                return
+            self.env.receive(node_id, item[2], self.now_us())
+            instance = self.env.instance_of(node_id)
+            if not known and instance is not None and (node_id, instance) not in self._tokens:
+                self._tokenless.setdefault(node_id, self.now_us())  # counts towards MAX_UNPROVEN at once
+        elif kind == "alive":
+            node_id, instance = self.keys.alive_of(item[1])
+            if item[2] == zenoh.SampleKind.DELETE:
+                self._tokens.pop((node_id, instance), None)
+                self.env.node_gone(node_id, instance, self.now_us())
+            else:
+                self._token_seen(node_id, instance)
+        elif kind == "stats":
+            reply(item[1], self.stats())
+        elif kind == "air":
+            reply(item[1], self.env.air())
+        elif kind == "chaos":
+            query = item[1]
+            try:
+                request = msgpack.unpackb(query.payload.to_bytes(), raw=False) if query.payload else {}
+            except Exception as err:  # a bad request must not hurt the hub
+                reply(query, {"error": f"{type(err).__name__}: {err}"})
+                return
+            reply(query, self.env.chaos_request(request, self.now_us(), time.time()))
+        elif kind == "world":
+            reply(item[1], self.env.world_state(self.now_us()))
+
+    # -- liveliness: an attach is only kept while its process's token is there -------------------------------
+
+    def _token_present(self, node_id: str, instance: str) -> bool:
+        return (node_id, instance) in self._tokens
+
+    def _token_seen(self, node_id: str, instance: str) -> None:
+        tokens = self._tokens
+        if len(tokens) >= TOKENS_KEPT:
+            kinds = self.env.kinds
+            for key in [k for k in tokens if k[0] not in kinds]:
+                del tokens[key]
+        if len(tokens) >= TOKENS_KEPT:
+            self.tokens_dropped += 1
+            return
+        tokens[(node_id, instance)] = None
+
+    def _refuse_unproven(self, node_id: str, data: bytes) -> bool:
+        """An attach from an id that is not attached, without a token, when ``MAX_UNPROVEN`` wait already."""
+        if len(self._tokenless) < MAX_UNPROVEN:
+            return False
+        try:
+            msg = wire.decode(data, wire.MAX_UP_BYTES)
+        except wire.WireError:
+            return False  # the environment counts it
+        if not isinstance(msg, wire.Attach) or (node_id, msg.instance) in self._tokens:
+            return False
+        self.refused_unproven += 1
+        return True
+
+    def _expire_tokenless(self, now_us: int) -> None:
+        """Detach nodes whose liveliness token has been missing for ``ATTACH_TOKEN_TIMEOUT_S``."""
+        env, tokenless = self.env, self._tokenless
+        for node_id in list(tokenless):
+            if node_id not in env.kinds:
+                del tokenless[node_id]
+        for node_id in env.kinds:
+            instance = env.instance_of(node_id) or ""
+            if (node_id, instance) in self._tokens:
+                tokenless.pop(node_id, None)
+            else:
+                tokenless.setdefault(node_id, now_us)
+        for node_id, since in list(tokenless.items()):
+            if now_us - since >= ATTACH_TOKEN_TIMEOUT_S * 1e6:
+                del tokenless[node_id]
+                self.expired += 1
+                env.node_gone(node_id, env.instance_of(node_id) or "", now_us)
+
+    def stats(self) -> dict[str, Any]:
+        """The environment's counters, with this hub's world name and model clock."""
+        stats = {"world": self.keys.world, **self.env.stats(self.now_us()), "process": process_usage()}
+        with self._waiting_lock:
+            waiting, dropped = sum(self._waiting.values()), dict(self.inbox_dropped)
+        stats["inbox"] = {
+            "waiting": waiting,
+            "dropped": dropped,
+            "limits": {
+                "per_node": INBOX_PER_NODE,
+                "strangers": INBOX_STRANGERS,
+                "strangers_per_s": STRANGERS_PER_S,
+                "other": INBOX_OTHER,
+                "bucket_bytes": INBOX_BUCKET_BYTES,
+            },
+        }
+        stats["liveliness"] = {
+            "tokens": len(self._tokens),
+            "tokenless": len(self._tokenless),
+            "expired": self.expired,
+            "refused_unproven": self.refused_unproven,
+            "tokens_dropped": self.tokens_dropped,
+            "timeout_s": ATTACH_TOKEN_TIMEOUT_S,
+        }
+        stats["hub"]["stranger_answers_dropped"] = self._downlink.stranger_answers_dropped
+        return stats
+
+
+def _tight_timer_slack() -> None:
+    # Linux lets a sleeping thread wake up to 50 us late by default (timer slack); deliveries are
+    # timed to the microsecond, so ask for 1 us. Best effort: other kernels keep their default.
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_TIMERSLACK, 1000)
+
+
+def ready_line(hub: RadioHub) -> str:
+    """The one JSON line a hub prints on stdout once it serves, for supervisors to wait on."""
+    return json.dumps({"event": "hub_ready", "endpoint": hub.endpoint, "world": hub.keys.world, "seed": hub.seed})
