@@ -8,7 +8,7 @@ from typing import Any
 import pytest
 
 from petswarm.robot import DEFAULT_PAN
-from radio_hub.interface import BROADCAST
+from radio_hub.interface import BROADCAST, MediumConfig
 
 from .harness import LOSSLESS, ModelWorld, run_model_time
 
@@ -38,6 +38,37 @@ def test_a_broadcast_ping_is_answered_by_every_robot_and_counted_on_both_sides()
         assert [w.status(rid)["pings_answered"] for rid in (2, 3, 4)] == [1, 2, 1]
 
     run_model_time(body, config=LOSSLESS)
+
+
+@pytest.mark.parametrize(
+    ("fault", "delay_ms"), [({"link": ["robot-1", "robot-2"]}, 60.0), ({"node": "robot-2"}, 120.0)]
+)
+def test_a_delay_lengthens_the_round_trip_by_exactly_the_delay_on_its_path(fault: dict, delay_ms: float) -> None:
+    """Moved from tests/process/test_chaos.py, whose wall-clock round trips carried the machine's load (a base
+    measured late made a 60 ms delay look like 54 ms). A round trip also carries two random CSMA backoffs (the
+    ping's and the pong's, on an idle channel one attempt each at the MAC's minimum exponent): against the same
+    seed's world without the fault it differs by the delay on the path (one way on the link, both ways through
+    robot 2), give or take those two backoffs, and by nothing the machine does."""
+
+    def round_trip(delayed: bool) -> float:
+        rtts: list[float] = []
+
+        async def body(w: ModelWorld) -> None:
+            await w.robot(1, CORNERS[1])
+            await w.robot(2, CORNERS[2])
+            if delayed:
+                w.fault("delay", ms=60, **fault)
+            answer = await w.command(1, "ping", dst=2, wait=0.5)
+            assert answer["tx"]["status"] == "success"  # the ACK keeps the air's timing
+            rtts.extend(r["rtt_ms"] for r in answer["replies"])
+
+        run_model_time(body, config=LOSSLESS, seed=3)
+        [rtt] = rtts
+        return rtt
+
+    mac = MediumConfig().mac
+    backoffs_ms = 2 * (2**mac.min_be - 1) * mac.unit_backoff_us / 1000
+    assert abs(round_trip(delayed=True) - round_trip(delayed=False) - delay_ms) <= backoffs_ms
 
 
 def test_a_pong_lost_on_its_way_back_is_not_counted_as_answered() -> None:

@@ -187,18 +187,18 @@ def _best_rtt_ms(air, rounds: int = 2) -> float:
     return min(r["rtt_ms"] for a in answers for r in a["replies"])
 
 
-def test_delay_lengthens_the_round_trip_by_the_delay_on_its_path(make_air):
+def test_delay_faults_from_the_cli_hold_frames_back_on_their_path(make_air):
+    """Over sockets, a frame held back 60 ms cannot come back sooner, whatever the machine's load; by how much
+    exactly a delay lengthens a round trip is asserted in model time (tests/model/test_robot.py), where the
+    wall clock's noise in the base round trip cannot blur it."""
     air = make_air()
     air.robot(1, (0.0, 0.0))
     air.robot(2, (1.0, 0.0))
-    base = _best_rtt_ms(air)
     assert _chaos(air, "delay", "--ms", "60", "--link", "robot-1,robot-2").returncode == 0
-    one_way = _best_rtt_ms(air) - base
+    assert _best_rtt_ms(air) >= 60
     assert _chaos(air, "clear").returncode == 0
     assert _chaos(air, "delay", "--ms", "60", "--node", "robot-2").returncode == 0  # both ways
-    both_ways = _best_rtt_ms(air) - base
-    assert 55 <= one_way <= 60 + 25, one_way
-    assert 115 <= both_ways <= 120 + 25, both_ways
+    assert _best_rtt_ms(air) >= 120
     assert air.stats()["hub"]["lag_p50_us"] < 5_000  # the delay is model time, not the hub being late
     refused = query_hub(air.session, air.keys.chaos, payload=msgpack.packb({"op": "add", "fault": {"kind": "delay"}}))
     assert "needs ms" in refused["error"]  # the hub refuses a malformed fault on its own too
