@@ -285,7 +285,13 @@ class Robot:
         )
 
     async def close(self) -> None:
-        """Record the last event (the run's record keeps the driving totals), leave the air, close the record."""
+        """End the handlers still at work, record the last event (the run's record keeps the driving totals),
+        leave the air, close the record. Handlers go first: one that failed after ``stop`` (an answer the hub
+        never took, as the run ends) would put an error after the record's last event."""
+        pending = list(self._tasks)
+        for task in pending:
+            task.cancel()
+        await asyncio.gather(*pending, return_exceptions=True)
         self.log.record("stop", driving=dict(self.driver.counters))
         await self.rf.radio.close()
         if self.log.sink is not None:
