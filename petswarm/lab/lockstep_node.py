@@ -27,24 +27,25 @@ def open_link(endpoint: str, world: str, timeout: float = HUB_WAIT_S) -> Lockste
         try:
             session = open_session("client", endpoint)
         except HubUnavailable:
-            session = None
-        if session is not None and _hub_serves(session, keys, max(deadline - time.monotonic(), 0.5)):
-            return LockstepLink(session, keys, owns_session=True)
-        if session is not None:
+            pass
+        else:
+            if _hub_serves(session, keys, deadline):
+                return LockstepLink(session, keys, owns_session=True)
             session.close()
         if time.monotonic() >= deadline:
             raise HubUnavailable(f"no lockstep hub serves world {world!r} on {endpoint} within {timeout:g} s")
         time.sleep(0.2)
 
 
-def _hub_serves(session: zenoh.Session, keys: Keys, timeout: float) -> bool:
-    """True once the hub's liveliness token is seen (it is declared after every key the hub serves)."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
+def _hub_serves(session: zenoh.Session, keys: Keys, deadline: float) -> bool:
+    """True once the hub's liveliness token is seen (it is declared after every key the hub serves), asked
+    again until ``deadline`` (monotonic seconds)."""
+    while True:
         if any(reply.ok is not None for reply in session.liveliness().get(keys.hub_alive, timeout=1.0)):
             return True
+        if time.monotonic() >= deadline:
+            return False
         time.sleep(0.1)
-    return False
 
 
 def run_node(name: str, endpoint: str, world: str, main: Callable[[LockstepLink], Coroutine[Any, Any, int]]) -> int:

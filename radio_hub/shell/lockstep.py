@@ -336,8 +336,10 @@ class LockstepHub:
     def _run_rounds(self) -> None:
         while self.nodes and all(node.idle for node in self.nodes.values()):
             if not self._started:
-                if len(self.nodes) < self.expect and not self._waited_long_enough():
-                    return
+                if len(self.nodes) < self.expect:
+                    if time.monotonic() - self._opened_at < self.start_within_s:
+                        return
+                    self._record_missing()
                 self._started = True
                 # instant 0 opens like any other, with the environment's events (the first world tick) before
                 # what nodes sent: in model time the environment's timer at 0 runs before the nodes' attaches
@@ -354,15 +356,12 @@ class LockstepHub:
             due = {nid for nid, node in self.nodes.items() if node.next_s is not None and node.next_s < horizon}
             self._deliver(due)
 
-    def _waited_long_enough(self) -> bool:
-        """True once the start's wait is over: the missing nodes are recorded as gone before model time begins."""
-        if time.monotonic() - self._opened_at < self.start_within_s:
-            return False
+    def _record_missing(self) -> None:
+        """The start's wait is over: the nodes that never came are recorded as gone before model time begins."""
         missing = self.expect - len(self.nodes)
         why = f"{missing} of {self.expect} expected nodes did not come within {self.start_within_s:g} s of wall time"
         self.dead.append({"node": "missing", "model_time_s": 0.0, "why": why})
         print(f"hub: model time starts without them: {why}", file=sys.stderr, flush=True)
-        return True
 
     def _deliver(self, due: set[str]) -> None:
         """The round's messages to every node concerned, each followed by its grant."""
