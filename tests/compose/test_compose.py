@@ -201,7 +201,9 @@ def test_the_hub_restarts_every_robot_reattaches_and_a_swarm_forms_again(stack: 
     settled = ("master-driving", "following", "waiting")  # the swarm went on, or it is over for robot 1
     master = wait_for("robot 1 settled after the outage", lambda: (m := _robot(stack, 1))["state"] in settled and m, 20)
     if master["state"] == "master-driving":  # the swarm outlived the outage: end it, as the user would
-        stack.petswarm("swarm", "disperse", "--master", "1")
+        ended = stack.petswarm("swarm", "disperse", "--master", "1", check=False)
+        # unless it ended on its own in between: members lost in the outage make the master give it up
+        assert ended.returncode == 0 or "not the master of a swarm" in ended.stdout + ended.stderr, ended
     user = ["--user", "1"] if _robot(stack, 1)["state"] == "waiting" else []  # robot 1 still follows user 1
     again = json.loads(stack.petswarm("swarm", "organize", "--master", "1", "--count", "3", *user, "--json").stdout)
     assert len(again["members"]) == 3 and 1 not in again["members"], again
