@@ -13,6 +13,11 @@
 Files are written as the run goes (the robots flush every event), so a run that is killed midway
 still leaves a readable record. Records go under ``runs/``, or under ``$PETSWARM_RUNS`` when it is set
 (the test suite points it into pytest's temporary directory), unless ``--record`` names the directory.
+
+A directory holds one run. ``--record DIR`` naming a directory with an earlier run replaces that run's files
+(said on stderr): robots append to their event streams, so an earlier run's lines would otherwise end up in
+this run's events and digest. Files the record does not own are left alone. A default name already taken
+(two runs with one seed in the same second) gets a suffix instead.
 """
 
 from __future__ import annotations
@@ -46,7 +51,11 @@ class RunRecord:
     def create(cls, opts: Any, world: str, endpoint: str) -> RunRecord:
         """Make the directory (``opts.record_dir``, or ``<runs_dir()>/<UTC time>-<seed>``) and write the manifest."""
         stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
-        path = Path(opts.record_dir or runs_dir() / f"{stamp}-{opts.seed}")
+        if opts.record_dir:
+            path = Path(opts.record_dir)
+            _clear_earlier_run(path)
+        else:
+            path = _free_name(runs_dir() / f"{stamp}-{opts.seed}")
         (path / "events").mkdir(parents=True, exist_ok=True)
         manifest = {
             "seed": opts.seed,
@@ -75,6 +84,31 @@ class RunRecord:
     def finish(self, summary: dict[str, Any], exit_codes: dict[str, int]) -> None:
         """The summary, with every process's exit code."""
         self.write("summary.json", {**summary, "exit_codes": exit_codes})
+
+
+RECORD_FILES = ("manifest.json", "summary.json", "world.jsonl", "air.pcap", "supervision.jsonl")
+"""The files a run writes at the top of its directory (besides ``events/``, ``logs/`` and report plots)."""
+
+
+def _clear_earlier_run(path: Path) -> None:
+    """Remove the files an earlier run left in ``path``; nothing else there is touched."""
+    owned = [path / name for name in RECORD_FILES]
+    owned += [*path.glob("events/*.jsonl"), *path.glob("logs/*.log"), *path.glob("*.png"), *path.glob(".*.part")]
+    earlier = [file for file in owned if file.is_file()]
+    if not earlier:
+        return
+    print(f"petswarm run: {path} held an earlier run; its {len(earlier)} files are replaced", file=sys.stderr)
+    for file in earlier:
+        file.unlink()
+
+
+def _free_name(path: Path) -> Path:
+    """``path``, or ``path-2``, ``path-3``... whichever does not exist yet."""
+    candidate, n = path, 1
+    while candidate.exists():
+        n += 1
+        candidate = path.with_name(f"{path.name}-{n}")
+    return candidate
 
 
 def read_events(path: Path) -> list[dict[str, Any]]:

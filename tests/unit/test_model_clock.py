@@ -105,3 +105,15 @@ def test_the_digest_ignores_wall_clock_stamps_and_sees_everything_else(tmp_path:
     assert record_digest(tmp_path) == before
     (events / "robot-1.jsonl").write_text(json.dumps({**line, "mono": 0.6}) + "\n")
     assert record_digest(tmp_path) != before
+
+
+def test_a_run_into_a_folder_that_holds_an_earlier_run_gives_the_same_digest(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A robot appends to its event file (a restarted robot carries on its own stream), so a second run with the
+    same ``--record`` once appended to the first run's streams and reported a digest of both."""
+    first = _model_run(tmp_path, "same", 7, capsys)
+    (tmp_path / "same" / "events" / "robot-9.jsonl").write_text('{"kind": "start"}\n')  # a larger earlier run's
+    again = _model_run(tmp_path, "same", 7, capsys)
+    assert again["digest"] == first["digest"] == record_digest(tmp_path / "same")
+    assert not (tmp_path / "same" / "events" / "robot-9.jsonl").exists()

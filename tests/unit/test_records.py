@@ -25,3 +25,23 @@ def test_a_record_goes_under_petswarm_runs(tmp_path: Path, monkeypatch: pytest.M
 def test_the_suite_keeps_run_records_out_of_the_working_tree() -> None:
     runs = Path(os.environ["PETSWARM_RUNS"]).resolve()  # tests/conftest.py sets it for the whole session
     assert not runs.is_relative_to(ROOT.resolve()) and not runs.is_relative_to(Path.cwd().resolve())
+
+
+def test_two_runs_with_one_seed_in_the_same_second_get_two_records(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("PETSWARM_RUNS", str(tmp_path))
+    monkeypatch.setattr("petswarm.lab.records.time.strftime", lambda *_: "20261122T190000Z")  # one second
+    opts = RunOptions(robots=1, seed=7, duration=1.0, ping_interval=0.5)
+    first, second = (RunRecord.create(opts, "w", "tcp/x:1") for _ in range(2))
+    assert first.path.name == "20261122T190000Z-7" and second.path.name == "20261122T190000Z-7-2"
+
+
+def test_a_named_record_keeps_files_it_does_not_own(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    opts = RunOptions(robots=1, seed=7, duration=1.0, ping_interval=0.5, record_dir=str(tmp_path))
+    RunRecord.create(opts, "w", "tcp/x:1")
+    (tmp_path / "notes.txt").write_text("mine")
+    (tmp_path / "summary.json").write_text("{}")
+    RunRecord.create(opts, "w", "tcp/x:1")
+    assert (tmp_path / "notes.txt").read_text() == "mine" and not (tmp_path / "summary.json").exists()
+    assert "held an earlier run" in capsys.readouterr().err
