@@ -273,6 +273,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     borg.add_argument("--mac-ack", choices=("on", "off"), default="on", help="MAC acknowledgements (default on)")
     borg.add_argument(
+        "--clock",
+        choices=("model", "wall"),
+        default="model",
+        help="model (default): every slave count in this one process on model time, the same figures for the "
+        "same seed on any machine; wall: a hub process and robot processes over zenoh, in real time",
+    )
+    borg.add_argument(
         "--step-deadline",
         type=bounded(float, 0.005, 10),
         help="seconds each organizing step waits before retrying (default: the robot's, 0.1)",
@@ -609,6 +616,10 @@ def _bench(args: argparse.Namespace) -> int:
         from petswarm.bench.scale import bench_scale
 
         return bench_scale(args)
+    if args.bench == "organize" and args.clock == "model":
+        from petswarm.bench.organize_model import bench_organize as bench_organize_model
+
+        return bench_organize_model(args)
     if args.bench == "organize":
         from petswarm.bench.organize import bench_organize
 

@@ -114,9 +114,9 @@ class Swarm:
         self.counters = {name: {k: node.get(k, 0) for k in MAC_COUNTERS} for name, node in nodes.items()}
 
 
-def robot_argv(rid: int, hub: HubRun, args: argparse.Namespace) -> list[str]:
+def robot_argv(rid: int, endpoint: str, world: str, args: argparse.Namespace) -> list[str]:
     """``petswarm robot`` arguments: robot 1 is the master (connected to the user), the rest wait."""
-    argv = ["robot", "--id", str(rid), "--hub", hub.endpoint, "--world", hub.keys.world, "--seed", str(args.seed)]
+    argv = ["robot", "--id", str(rid), "--hub", endpoint, "--world", world, "--seed", str(args.seed)]
     if rid == MASTER:
         argv += ["--user", str(USER)]
     if args.step_deadline is not None:
@@ -149,7 +149,7 @@ def measure_count(sup: Supervisor, n: int, args: argparse.Namespace, out: Path, 
         try:
             swarm = Swarm(hub, n, names)
             for rid, name in zip(swarm.robot_ids, names[1:], strict=True):
-                sup.spawn(name, robot_argv(rid, hub, args))
+                sup.spawn(name, robot_argv(rid, hub.endpoint, hub.keys.world, args))
             wait_attached(sup, hub, n + 1, names[1:])
             wait_serving(sup, swarm)
             records = run_series(sup, swarm, args)
@@ -167,10 +167,20 @@ def run_series(sup: Supervisor, swarm: Swarm, args: argparse.Namespace) -> list[
     for index in range(args.runs):
         for protocol in protocols:
             check_alive(sup, swarm.names)
-            records.append(organize_once(swarm, protocol, index))
+            waiting = waiting_after(records[-1] if records else None, swarm.slaves)
+            records.append({"waiting_before": waiting, **organize_once(swarm, protocol, index)})
         if (index + 1) % PROGRESS_EVERY == 0 or index + 1 == args.runs:
             progress(f"{swarm.slaves} slave(s): run {index + 1}/{args.runs}  " + so_far(records, protocols))
     return records
+
+
+def waiting_after(previous: dict[str, Any] | None, slaves: int) -> int:
+    """Slaves waiting on the waiting PAN once ``previous`` (None: nothing yet) had settled: all of them
+    unless some were stuck elsewhere when the bench stopped waiting for them."""
+    if previous is None:
+        return slaves
+    stuck = previous["settle"].get("stuck", {})
+    return slaves - sum(1 for rid in stuck if int(rid) != MASTER)
 
 
 def so_far(records: list[dict[str, Any]], protocols: tuple[str, ...]) -> str:
@@ -280,7 +290,7 @@ def hub_figures(stats: dict[str, Any]) -> dict[str, Any]:
             if isinstance(value, int) and not isinstance(value, bool):
                 totals[name] = totals.get(name, 0) + value
     hub = stats["hub"]
-    lag = {k: hub[k] for k in ("lag_p50_us", "lag_p99_us", "transport_gaps", "malformed")}
+    lag = {k: hub.get(k, 0) for k in ("lag_p50_us", "lag_p99_us", "transport_gaps", "malformed")}
     return {"robots": totals, "hub": lag}
 
 
@@ -309,6 +319,7 @@ def settings(args: argparse.Namespace, config: dict[str, Any], load_average: flo
     mac, rng, path_loss = config["mac"], config["range"], config["path_loss"]
     return {
         "seed": args.seed,
+        "clock": args.clock,
         "runs": args.runs,
         "slaves": args.slaves,
         "protocols": list(protocols_of(args.protocol)),

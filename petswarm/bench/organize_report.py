@@ -40,6 +40,7 @@ def summary_row(records: list[dict[str, Any]], protocol: str, slaves: int) -> di
         "runs": len(records),
         "failed": len(records) - len(ok),
         "incomplete": len(ok) - len(complete),
+        "short": len(ended_short(records)),
         "scan_missed": sum(1 for r in ok if len(r["candidates"] or ()) < slaves),
         "time_ms": stats_ms([r["organize_time_s"] * 1000 for r in complete]),
         "min_no_retry_ms": min(no_retry) if no_retry else math.nan,
@@ -52,6 +53,15 @@ def summary_row(records: list[dict[str, Any]], protocol: str, slaves: int) -> di
         "unsettled": sum(1 for r in records if not r["settle"]["ok"]),
         "errors": sorted({r["error"] for r in records if not r["ok"]}),
     }
+
+
+def ended_short(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Organizations that ended with fewer members than requested although as many robots were waiting."""
+    return [
+        r
+        for r in records
+        if r["ok"] and len(r["members"] or ()) < r["slaves"] and r.get("waiting_before", r["slaves"]) >= r["slaves"]
+    ]
 
 
 def stats_ms(values: list[float]) -> dict[str, float]:
@@ -168,7 +178,8 @@ def _settings_lines(s: dict[str, Any]) -> list[str]:
     m = s["medium"]
     step = "robot defaults" if s["step_defaults"] else "given"
     return [
-        f"petswarm bench organize: seed {s['seed']}, {s['runs']} organizations per protocol and slave count "
+        f"petswarm bench organize: seed {s['seed']}, {s.get('clock', 'wall')} time, {s['runs']} organizations "
+        "per protocol and slave count "
         f"(protocols interleaved run by run: {', '.join(s['protocols'])}), slaves {_counts(s['slaves'])}, "
         f"MAC ACK {s['mac_ack']}",
         f"organizing steps: deadline {s['step_deadline_s'] * 1000:g} ms, {s['step_retries']} retries ({step}); "
@@ -213,7 +224,10 @@ def _time_cell(r: dict[str, Any]) -> str:
 def _retry_cell(r: dict[str, Any]) -> str:
     by_step = "/".join(str(r["retries_by_step"][s]) for s in STEPS)
     orgs = "/".join(str(r["organizations_retried_by_step"][s]) for s in STEPS)
-    return f"{by_step:>14}{orgs:>12}{r['incomplete']:>8}{r['failed']:>7}{r['unsettled']:>10}{r['disperse_retries']:>9}"
+    return (
+        f"{by_step:>14}{orgs:>12}{r['incomplete']:>8}{r['short']:>6}{r['failed']:>7}{r['unsettled']:>10}"
+        f"{r['disperse_retries']:>9}"
+    )
 
 
 def _time_lines(summary: list[dict[str, Any]], protocols: list[str], counts: list[int]) -> list[str]:
@@ -223,12 +237,18 @@ def _time_lines(summary: list[dict[str, Any]], protocols: list[str], counts: lis
 
 
 def _retry_lines(summary: list[dict[str, Any]], protocols: list[str], counts: list[int]) -> list[str]:
-    head = f"{'retries s/q/n':>14}{'orgs s/q/n':>12}{'incompl':>8}{'failed':>7}{'unsettled':>10}{'disp rtr':>9}"
+    head = (
+        f"{'retries s/q/n':>14}{'orgs s/q/n':>12}{'incompl':>8}{'short':>6}{'failed':>7}{'unsettled':>10}"
+        f"{'disp rtr':>9}"
+    )
     title = (
         "where the retries were (scan/query/notice: retries in total, organizations with one), incomplete "
-        "organizations, failed commands, robots not back in 5 s, dispersal retries"
+        "organizations, short ones (incomplete although enough robots waited), failed commands, robots not "
+        "back in 5 s, dispersal retries"
     )
     lines = _protocol_table(title, head, _retry_cell, summary, protocols, counts)
+    short, runs = sum(r["short"] for r in summary), sum(r["runs"] for r in summary)
+    lines.append(f"ended short of the requested count while enough robots waited: {short} of {runs} organizations")
     errors = sorted({e for r in summary for e in r["errors"]})
     return lines + [f"error: {e}" for e in errors]
 

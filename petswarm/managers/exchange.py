@@ -1,7 +1,10 @@
 """Message-processing manager: requests, the responses they expect, deadlines and retries.
 
 A step of the swarm process sends a request, then waits until every expected robot has answered or the
-deadline passes; it then repeats the request to the robots still missing, a bounded number of times.
+deadline passes; it then repeats the request to the robots still missing, a bounded number of times. An open
+step (anyone may answer: the scan) cannot name the missing, so it repeats its request to everyone while the
+answers that came are not ``enough`` (the paper: the middleware retries when it determines that not all of
+the responses to the request have arrived; for the scan, fewer than the user asked for).
 Responses are matched by session and type; a duplicate (the same robot again) or a late one (after the
 step ended) is counted and otherwise ignored, so retries are idempotent.
 """
@@ -10,7 +13,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Mapping
 from dataclasses import dataclass, field
 
 from petswarm import clock
@@ -82,12 +85,22 @@ class Step:
     """
 
     def __init__(
-        self, session: int, kinds: tuple[type[SwarmMessage], ...], expected: set[int] | None, timing: StepTiming
+        self,
+        session: int,
+        kinds: tuple[type[SwarmMessage], ...],
+        expected: set[int] | None,
+        timing: StepTiming,
+        enough: Callable[[Mapping[int, Incoming]], bool] | None = None,
     ) -> None:
+        """``enough`` (open steps only): whether the answers so far end the step at the end of a window; by
+        default any answer does."""
+        if enough is not None and expected is not None:
+            raise ValueError("only an open step (expected None) decides by its answers when it has enough")
         self.session = session
         self.kinds = kinds
         self.expected = None if expected is None else set(expected)
         self.timing = timing
+        self.enough = enough
         self.responses: dict[int, Incoming] = {}
         self.attempts = 0
         self.duplicates = 0
@@ -147,7 +160,9 @@ class Step:
         return self.expected is not None and self.expected <= self.responses.keys()
 
     def _done(self) -> bool:
-        return bool(self.responses) if self.expected is None else self._complete()
+        if self.expected is not None:
+            return self._complete()
+        return bool(self.responses) if self.enough is None else self.enough(self.responses)
 
 
 class MessageProcessingManager:
@@ -188,7 +203,7 @@ class MessageProcessingManager:
 
         ``send(missing)`` puts the request on the air (``missing`` is None when ``expected`` is None, i.e.
         when anyone may answer: then the step collects until the deadline, or until answers stop for
-        ``quiet_s``, retrying only if nobody answered at all).
+        ``quiet_s``, retrying only if nobody answered at all; ``Step``'s ``enough`` sets another rule).
         """
         return await self.run(name, Step(session, kinds, expected, timing), send)
 

@@ -25,7 +25,7 @@ out, and the core has already changed its state (and the robot's, in ``SequenceM
 
 from __future__ import annotations
 
-from collections.abc import Callable, Generator, Iterable
+from collections.abc import Callable, Generator, Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -287,12 +287,12 @@ class FormationCore:
         yield self.sequence.enter(RobotState.ORGANIZING, session=session, requested=count, protocol=protocol)
         steps: dict[str, StepResult] = {}
         try:
-            steps["scan"] = yield from self._exchange(self._scan(session, slot))
+            steps["scan"] = yield from self._exchange(self._scan(session, slot, count))
             scan = steps["scan"].responses
             replies = {a: i.message for a, i in scan.items() if isinstance(i.message, m.ScanReply)}
             # everyone not already in a swarm is asked: each decides with Table 1 (a robot connected
             # to another user refuses on its own)
-            candidates = {a for a, r in replies.items() if r.state in _FREE}
+            candidates = {a for a, r in replies.items() if _free_reply(r)}
             pan = choose_pan(self.rng, {r.pan_id for r in replies.values()} | {self.config.waiting_pan})
             steps["query"] = yield from self._exchange(self._query(session, slot, candidates))
             available, refused = _answers(steps["query"])
@@ -344,11 +344,19 @@ class FormationCore:
         # the hub may be the reason organizing failed: a failure to switch back is recorded, not raised
         return [*actions, ConfigurePan(self.config.waiting_pan, where="abandon")]
 
-    def _scan(self, session: int, slot: int) -> Exchange:
+    def _scan(self, session: int, slot: int, count: int) -> Exchange:
+        """The scan is open (the master knows nobody yet), so "every answer came" means: as many free robots as
+        the user asked for answered. Until then the scan is retried, as the paper retries any step whose
+        responses have not all arrived; a robot whose answer was lost (a collision, no MAC ACK) answers again."""
+
         def requests(_: set[int] | None) -> list[Send]:
             return [Send(BROADCAST, m.Scan(session, self.user, slot), dst_pan=BROADCAST, ack=False)]
 
-        return Exchange("scan", Step(session, (m.ScanReply,), None, self._timing(slot, 8)), requests)
+        def enough(responses: Mapping[int, Incoming]) -> bool:
+            return sum(1 for i in responses.values() if _free_reply(i.message)) >= count
+
+        step = Step(session, (m.ScanReply,), None, self._timing(slot, 8), enough=enough)
+        return Exchange("scan", step, requests)
 
     def _query(self, session: int, slot: int, candidates: set[int]) -> Exchange:
         def requests(missing: set[int] | None) -> list[Send]:
@@ -800,6 +808,11 @@ def _each(actions: Iterable[Action], first: Done | None = None) -> Procedure[Don
     for action in actions:
         done = yield action
     return done
+
+
+def _free_reply(message: m.SwarmMessage) -> bool:
+    """A scan reply of a robot not in a swarm: a candidate for the joining query."""
+    return isinstance(message, m.ScanReply) and message.state in _FREE
 
 
 def _releases(session: int, robots: set[int]) -> list[Action]:

@@ -136,3 +136,38 @@ def test_an_open_step_with_a_quiet_gap_ends_once_answers_stop_and_counts_duplica
 
 def test_a_step_expecting_nobody_is_over_at_once():
     assert Step(1, (Joined,), set(), TIMING).next_action(0.0) == StepOver()
+
+
+def test_an_open_step_with_a_rule_of_enough_asks_everyone_again_until_enough_answered():
+    # the scan's rule: two answers are enough; one came in the first window, so the request goes out again
+    step = Step(1, (Joined,), None, StepTiming(deadline_s=0.1, max_retries=3), enough=lambda got: len(got) >= 2)
+    assert step.next_action(0.0) == SendRequest(None, retry=False)
+    step.sent(0.0)
+    step.offer(_incoming(4, Joined(1, 1)), 0.01)
+    assert step.next_action(0.01) == WaitUntil(0.1)  # an open step waits out its window
+    assert step.next_action(0.1) == SendRequest(None, retry=True)  # not enough: to everyone again
+    step.sent(0.1)
+    step.offer(_incoming(4, Joined(1, 1)), 0.11)  # the same robot again is no second answer
+    assert step.next_action(0.2) == SendRequest(None, retry=True)
+    step.sent(0.2)
+    step.offer(_incoming(5, Joined(1, 2)), 0.21)
+    assert step.next_action(0.31) == StepOver()
+    assert set(step.result().responses) == {4, 5} and step.result().retries == 2 and step.duplicates == 1
+
+
+def test_an_open_step_that_never_has_enough_ends_after_max_retries_with_what_came():
+    step = Step(1, (Joined,), None, StepTiming(deadline_s=0.1, max_retries=2), enough=lambda got: len(got) >= 3)
+    now, sends = 0.0, 0
+    while not isinstance(action := step.next_action(now), StepOver):
+        if isinstance(action, SendRequest):
+            sends += 1
+            step.sent(now)
+            step.offer(_incoming(4, Joined(1, 1)), now)
+        else:
+            now = action.when
+    assert sends == 3 and now == pytest.approx(0.3) and set(step.result().responses) == {4}
+
+
+def test_only_an_open_step_takes_a_rule_of_enough():
+    with pytest.raises(ValueError):
+        Step(1, (Joined,), {2}, TIMING, enough=lambda got: True)

@@ -357,10 +357,55 @@ def test_organize_scans_asks_the_candidates_notifies_the_closest_and_asks_again_
     assert figures["organize_time_s"] == pytest.approx(3.0)  # the Joined that came last (received at 3.0)
 
 
+def _scan_heard(heard: dict[int, dict[int, RobotState]]) -> Answering:
+    """The scan's answers as the master hears them: on attempt ``k`` the replies of ``heard[k]`` (the rest were
+    lost: a collision, or no MAC ACK to tell the robot so)."""
+
+    def scan(requests: list[Send], attempt: int) -> list[Incoming]:
+        [request] = requests
+        session = request.message.session_id
+        return [_incoming(a, m.ScanReply(session, int(st), WAITING_PAN, 0)) for a, st in heard.get(attempt, {}).items()]
+
+    return scan
+
+
+def test_organize_retries_the_scan_while_fewer_free_robots_answered_than_the_user_asked_for():
+    # the paper: the middleware retries a step when not all the responses to its request have arrived; for
+    # the scan that is fewer free robots than requested. Robots 3 and 4 were waiting all along, but their
+    # first replies were lost; without the retry the swarm would end with robot 2 alone
+    core = _core(1, RobotState.FOLLOWING, user=9)
+    waiting = RobotState.WAITING
+    robots = _robots({}, joins={2: 1, 3: 1, 4: 1}, rssi={2: -40.0, 3: -50.0, 4: -60.0})
+    robots["scan"] = _scan_heard({1: {2: waiting}, 2: {2: waiting, 3: waiting}, 3: {4: waiting}})
+    figures, _, attempts = carry_out(core.organize(3, "paper", 0.0), robots)
+    assert len(attempts["scan"]) == 3 and figures["step_retries"]["scan"] == 2
+    assert all(a[0].message == m.Scan(figures["session"], 9, 0) for a in attempts["scan"])  # to everyone again
+    assert figures["candidates"] == [2, 3, 4] and figures["members"] == [2, 3, 4]
+
+
+def test_a_scan_reply_of_a_robot_in_another_swarm_does_not_count_towards_the_requested_number():
+    core = _core(1, RobotState.FOLLOWING, user=9)
+    robots = _robots({}, joins={2: 1, 3: 1}, rssi={2: -40.0, 3: -50.0})
+    others = {2: RobotState.WAITING, 5: RobotState.SLAVE_DRIVING, 6: RobotState.MASTER_DRIVING}
+    robots["scan"] = _scan_heard({1: others, 2: others, 3: {**others, 3: RobotState.WAITING}})
+    figures, _, attempts = carry_out(core.organize(2, "paper", 0.0), robots)
+    assert len(attempts["scan"]) == 3  # three replies on the first attempt, but one free robot only
+    assert figures["candidates"] == [2, 3] and figures["members"] == [2, 3]
+
+
+def test_a_scan_with_enough_free_replies_in_its_first_window_is_not_retried():
+    core = _core(1, RobotState.FOLLOWING, user=9)
+    robots = _robots({2: RobotState.WAITING, 3: RobotState.WAITING}, joins={2: 1, 3: 1}, rssi={2: -40.0, 3: -50.0})
+    figures, _, attempts = carry_out(core.organize(2, "paper", 0.0), robots)
+    assert len(attempts["scan"]) == 1 and figures["retries"] == 0 and figures["members"] == [2, 3]
+
+
 def test_organize_releases_a_chosen_robot_that_never_joined_after_the_last_retry():
     core = _core(1, RobotState.LEADING, user=9)
     robots = _robots({2: RobotState.WAITING, 3: RobotState.WAITING}, joins={2: 1}, rssi={2: -40.0, 3: -45.0})
     figures, actions, attempts = carry_out(core.organize(3, "paper", 0.0), robots)
+    # two robots wait where three were asked for: the scan is retried to its limit, then goes on with them
+    assert len(attempts["scan"]) == 1 + CONFIG.step.max_retries
     assert len(attempts["notice"]) == 1 + CONFIG.step.max_retries
     assert all([r.dst for r in a] == [3] for a in attempts["notice"][1:])
     assert figures["members"] == [2] and figures["missing"] == [3]
@@ -373,7 +418,7 @@ def test_organize_with_nobody_around_waits_out_every_scan_deadline_and_goes_back
     figures, actions, attempts = carry_out(
         core.organize(3, "paper", 0.0), {"scan": _nobody, "query": _nobody, "notice": _nobody}
     )
-    assert len(attempts["scan"]) == 1 + CONFIG.step.max_retries  # an open step retries only while nobody answered
+    assert len(attempts["scan"]) == 1 + CONFIG.step.max_retries  # nobody answered, so never enough
     assert figures["members"] == [] and figures["organize_time_s"] == pytest.approx(DEADLINE * len(attempts["scan"]))
     assert actions[-3] == ConfigurePan(WAITING_PAN)
     assert _of(actions, StateChange)[-1] == StateChange(
