@@ -40,6 +40,10 @@ start the hub before its robots (they wait up to 15 s for it); every process of 
 same --world and --hub endpoint.
 
   petswarm bench organize --slaves 1-5          swarm organizing time vs slaves, paper vs slotted protocol
+  petswarm bench reaction --profile kim2017     the paper's testbed (docs/PROFILES.md): its figures beside ours
+
+--profile ideal|kim2017 (hub, robot, user, run, bench organize|reaction|ir): the testbed's properties;
+ideal (default) is the ideal air and instant processing, kim2017 the swarm paper's testbed.
 """
 
 

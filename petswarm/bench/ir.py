@@ -28,7 +28,7 @@ from petswarm.bench import paper
 from petswarm.bench.output import emit, save
 from petswarm.managers.ir_estimator import METHODS, IrEstimates, estimate_many
 from radio_hub.datasheet import IrConfig
-from radio_hub.interface import lazy_numpy, profile_tables, receiver_readings
+from radio_hub.interface import lazy_numpy, receiver_readings
 
 if TYPE_CHECKING:
     import numpy as np
@@ -87,6 +87,8 @@ def bench_ir(args: argparse.Namespace) -> int:
 def profiled_ir(profile: str) -> IrConfig:
     """The IR module as the hub emulates it under ``profile`` (its noise); the robots' calibration stays the
     datasheet's ``IrConfig()`` whatever the profile."""
+    from radio_hub.interface import profile_tables  # the hub's profiles: loaded when the bench runs, not to parse
+
     return dataclasses.replace(IrConfig(), **profile_tables(profile).get("ir", {})).validate()
 
 

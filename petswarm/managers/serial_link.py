@@ -47,30 +47,39 @@ class LinkTiming:
 
 
 class SerialLink:
-    """When frames pass the MCU and the UART, each direction one frame at a time (sans-IO: times in, times out)."""
+    """When frames pass the MCU and the UART, each direction one frame at a time (sans-IO: times in, times out).
+
+    Times are kept in whole microseconds, as the hub keeps model time: a delay's end then falls on the same
+    instant whichever clock runs it (a lockstep node's loop stands on the granted microsecond, a model-time
+    loop on the float deadline; their sub-microsecond difference must not decide the order of events).
+    """
 
     def __init__(self, timing: LinkTiming, draws: Draws) -> None:
         self.timing = timing
         self.draws = draws
-        self._tx_free = 0.0
+        self._tx_free_us = 0
         """When the UART's transmit line is free again."""
-        self._rx_free = 0.0
+        self._rx_free_us = 0
         """When the MCU has done with the last received frame (line and processing in series)."""
 
-    def _mcu_s(self) -> float:
+    def _mcu_us(self) -> int:
         low, high = self.timing.mcu_min_s, self.timing.mcu_max_s
-        return float(self.draws.uniform(low, high)) if high > low else low
+        return _us(float(self.draws.uniform(low, high)) if high > low else low)
 
     def tx_ready(self, now: float, payload_bytes: int) -> float:
         """A frame the middleware hands over at ``now`` reaches the radio then: the MCU builds it, then it
         waits for the transmit line and crosses it."""
-        start = max(now + self._mcu_s(), self._tx_free)
-        self._tx_free = start + self.timing.uart_s(payload_bytes)
-        return self._tx_free
+        start = max(_us(now) + self._mcu_us(), self._tx_free_us)
+        self._tx_free_us = start + _us(self.timing.uart_s(payload_bytes))
+        return self._tx_free_us / 1e6
 
     def rx_ready(self, now: float, payload_bytes: int) -> float:
         """A frame the radio has since ``now`` (or since the previous one was done, whichever is later)
         reaches the middleware then: it crosses the receive line, then the MCU processes it."""
-        start = max(now, self._rx_free)
-        self._rx_free = start + self.timing.uart_s(payload_bytes) + self._mcu_s()
-        return self._rx_free
+        start = max(_us(now), self._rx_free_us)
+        self._rx_free_us = start + _us(self.timing.uart_s(payload_bytes)) + self._mcu_us()
+        return self._rx_free_us / 1e6
+
+
+def _us(seconds: float) -> int:
+    return round(seconds * 1e6)
