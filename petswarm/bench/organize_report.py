@@ -120,7 +120,8 @@ def plot(results: dict[str, Any], path: Path) -> None:
     _plot_retries(retries, results["summary"], s["protocols"], s["slaves"])
     fig.suptitle(
         f"petswarm bench organize: {s['runs']} organizations per point, MAC ACK {s['mac_ack']}, "
-        f"step deadline {s['step_deadline_s'] * 1000:g} ms x {s['step_retries']} retries, seed {s['seed']}",
+        f"step deadline {s['step_deadline_s'] * 1000:g} ms x {s['step_retries']} retries, seed {s['seed']}, "
+        f"profile {s.get('profile', 'ideal')}",
         fontsize=10,
     )
     fig.tight_layout()
