@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 from petswarm.lab.arguments import bounded, robot_id, seed
 from petswarm.lab.robot_command import add_hub as _add_hub
 from petswarm.lab.robot_command import add_node_clock as _add_node_clock
-from petswarm.lab.robot_command import add_robot_arguments, robot_config
+from petswarm.lab.robot_command import add_profile, add_robot_arguments, robot_config
 from petswarm.lab.robot_command import add_tls as _add_tls
 from petswarm.lab.robot_command import add_world as _add_world
 
@@ -40,6 +40,10 @@ start the hub before its robots (they wait up to 15 s for it); every process of 
 same --world and --hub endpoint.
 
   petswarm bench organize --slaves 1-5          swarm organizing time vs slaves, paper vs slotted protocol
+  petswarm bench reaction --profile kim2017     the paper's testbed (docs/PROFILES.md): its figures beside ours
+
+--profile ideal|kim2017 (hub, robot, user, run, bench organize|reaction|ir): the testbed's properties;
+ideal (default) is the ideal air and instant processing, kim2017 the swarm paper's testbed.
 """
 
 
@@ -69,6 +73,7 @@ def build_parser() -> argparse.ArgumentParser:
     hub.add_argument(
         "--config", help="TOML or JSON file with [mac], [range], [loss], [path_loss], [capture] and [ir] tables"
     )
+    add_profile(hub, "the radio's MAC settings, the wearables' BLE link, the IR module's noise")
     hub.add_argument(
         "--pcap",
         metavar="FILE",
@@ -127,6 +132,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     user.add_argument("--record", metavar="FILE", help="append every event to this JSON-lines file as it happens")
     _add_node_clock(user)
+    add_profile(user, "the belt's recognition delay")
 
     robot = sub.add_parser("robot", help="run one robot process attached to a hub")
     add_robot_arguments(robot)
@@ -211,6 +217,7 @@ def build_parser() -> argparse.ArgumentParser:
         "on model time the hub owns, exact under any load, the same digest as model",
     )
 
+    add_profile(run, "hub, robots and user alike (MAC, BLE, IR noise; MCU and UART per frame; recognition)")
     run.add_argument(
         "--fail-fast",
         action="store_true",
@@ -289,6 +296,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=bounded(int, 0, 50),
         help="retries of an organizing step (default: the robot's, 5)",
     )
+    add_profile(borg, "hub and robots; the paper's figure printed beside the bench's, with the ratio")
     borg.add_argument("--seed", type=seed, default=1, help="seed of the hub and the robots (default %(default)s)")
     borg.add_argument("--out", default="bench-results", help="directory for JSON and plots (default %(default)s)")
     borg.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
@@ -380,6 +388,11 @@ def _hub(args: argparse.Namespace) -> int:
         if environment is not None:  # --config gives the radio and light; the scenario the world
             from_scenario.medium, from_scenario.ir = environment.medium, environment.ir
         environment = from_scenario
+    if args.profile != "ideal":  # the profile's MAC, BLE and IR values over the config's
+        from radio_hub.environment import EnvironmentConfig
+        from radio_hub.profiles import apply_profile
+
+        environment = apply_profile(environment or EnvironmentConfig(), args.profile)
     try:
         hub: Any
         if args.clock == "lockstep":
@@ -446,7 +459,9 @@ def _user(args: argparse.Namespace) -> int:
         print(f"petswarm user: {args.scenario} has no [user] table", file=sys.stderr)
         return 2
     duration = args.duration or scenario.duration_s
-    config = UserConfig(scenario.user, args.hub, args.world, duration, args.seed, beacon=scenario.surround_enabled)
+    config = UserConfig(
+        scenario.user, args.hub, args.world, duration, args.seed, beacon=scenario.surround_enabled, profile=args.profile
+    )
     sink = open(args.record, "a") if args.record else None  # noqa: SIM115 (closed below)
     try:
         if args.clock == "lockstep":
@@ -518,6 +533,7 @@ def _run(args: argparse.Namespace) -> int:
         scenario=args.scenario,
         clock=args.clock,
         fail_fast=args.fail_fast,
+        profile=args.profile,
     )
     return run(opts)
 

@@ -32,6 +32,8 @@ from petswarm.managers.messages import Blob, Ping, Pong, SwarmMessage
 from petswarm.managers.relative_location import IrModuleManager, IrTokenSchedule, RelativeLocationManager, TokenConfig
 from petswarm.managers.rf import Incoming, RfCommunicationManager
 from petswarm.managers.sequence import EventLog, RobotState, SequenceManager, TransitionError
+from petswarm.managers.serial_link import SerialLink
+from petswarm.profiles import DEFAULT_PROFILE, check_profile, robot_profile
 from petswarm.wearables.user_link import robot_node
 from radio_hub.interface import (
     BROADCAST,
@@ -57,6 +59,8 @@ AUTO_ID = 0
 FORMATIONS = ("swarm", "surround")
 """``swarm``: the leader-follower middleware (organize, token IR, master and slaves); ``surround``: every
 robot runs the surround law on its own beacons and echoes (docs/SURROUND.md)."""
+LINK_STREAM = 0x5E7A
+"""Third seed word of the serial link's draws."""
 _GRID_SPACING_M = 1.5
 _GRID_ROW = 5
 
@@ -95,10 +99,13 @@ class RobotConfig:
     """One of ``FORMATIONS``: which controller drives the robot."""
     surround: SurroundDriverConfig = field(default_factory=SurroundDriverConfig)
     """The surround law's gains and the human's beacon id (used in ``surround`` mode)."""
+    profile: str = DEFAULT_PROFILE
+    """The testbed profile (``petswarm.profiles``): the robot's MCU and UART between middleware and radio."""
 
     def __post_init__(self) -> None:
         if self.formation_mode not in FORMATIONS:
             raise ValueError(f"formation_mode must be one of {FORMATIONS}, not {self.formation_mode!r}")
+        check_profile(self.profile)
 
     def identity(self) -> RadioIdentity:
         """The robot's radio at start-up: short address = robot id."""
@@ -121,7 +128,10 @@ class Robot:
 
     def __init__(self, config: RobotConfig, radio: RadioClient) -> None:
         self.config = config
-        self.rf = RfCommunicationManager(radio)
+        timing = robot_profile(config.profile).link
+        # the link's own stream of draws: the robot's other draws stay what they are without a link
+        link = None if timing.ideal else SerialLink(timing, Draws([config.seed, config.robot_id, LINK_STREAM]))
+        self.rf = RfCommunicationManager(radio, link)
         # numpy's default_rng draws, without loading numpy.random into every robot process
         self.rng = Draws([config.seed, config.robot_id])
         self.log = EventLog(sink=open(config.record, "a", encoding="utf-8") if config.record else None)  # noqa: SIM115

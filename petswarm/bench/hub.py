@@ -93,10 +93,10 @@ class HubRun:
         return query_hub(self.session, self.keys.stats, timeout=5.0)
 
 
-def start_hub(sup: Supervisor, name: str, world: str, seed: int, config: Path | None) -> HubRun:
-    """Spawn ``petswarm hub`` on a free port and wait until it answers a stats query."""
+def start_hub(sup: Supervisor, name: str, world: str, seed: int, config: Path | None, profile: str = "ideal") -> HubRun:
+    """Spawn ``petswarm hub`` (with ``profile``) on a free port and wait until it answers a stats query."""
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-    args = ["hub", "--listen", endpoint, "--world", world, "--seed", str(seed)]
+    args = ["hub", "--listen", endpoint, "--world", world, "--seed", str(seed), "--profile", profile]
     proc = sup.spawn(name, args + (["--config", str(config)] if config else []))
     deadline = time.monotonic() + STARTUP_TIMEOUT_S
     while time.monotonic() < deadline:

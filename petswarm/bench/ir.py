@@ -17,12 +17,14 @@ positions for both estimators, and RMSE against distance) to disk.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import sys
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from petswarm.bench import paper
 from petswarm.bench.output import emit, save
 from petswarm.managers.ir_estimator import METHODS, IrEstimates, estimate_many
 from radio_hub.datasheet import IrConfig
@@ -59,7 +61,10 @@ def bench_ir(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     heading = getattr(args, "heading", 0.0)
     started = time.monotonic()
-    results = run_experiment(args.runs, args.seed, heading, IrConfig())
+    profile = getattr(args, "profile", "ideal")
+    results = run_experiment(args.runs, args.seed, heading, profiled_ir(profile))
+    results["settings"]["profile"] = profile
+    results["paper"] = paper_rows(results)
     if getattr(args, "wire", False):
         from petswarm.bench.ir_token import run_wire_benches
 
@@ -79,8 +84,28 @@ def bench_ir(args: argparse.Namespace) -> int:
 # == the experiment ===================================================================================
 
 
+def profiled_ir(profile: str) -> IrConfig:
+    """The IR module as the hub emulates it under ``profile`` (its noise); the robots' calibration stays the
+    datasheet's ``IrConfig()`` whatever the profile."""
+    from radio_hub.interface import profile_tables  # the hub's profiles: loaded when the bench runs, not to parse
+
+    return dataclasses.replace(IrConfig(), **profile_tables(profile).get("ir", {})).validate()
+
+
+def paper_rows(results: dict[str, Any]) -> list[dict[str, Any]]:
+    """Table 4's RMSE with equations (1)-(3) beside this bench's ``paper`` estimator."""
+    overall = results["methods"]["paper"]["overall"]
+    return [
+        paper.row("IR RMSE, distance (cm), eqs. (1)-(3)", paper.IR_RMSE["distance_cm"], overall["distance_rmse_cm"]),
+        paper.row(
+            "IR RMSE, direction (deg), eqs. (1)-(3)", paper.IR_RMSE["direction_deg"], overall["direction_rmse_deg"]
+        ),
+    ]
+
+
 def run_experiment(runs: int, seed: int, heading: float | str, config: IrConfig) -> dict[str, Any]:
-    """All points x ``runs`` sweeps through the light model and every estimator; the summary as a dict."""
+    """All points x ``runs`` sweeps through the light model (``config``: the module as emulated) and every
+    estimator (calibrated with the datasheet's ``IrConfig()``); the summary as a dict."""
     rng = np.random.default_rng(seed)
     dist_m, angle_rad = _placements(runs)
     heading_rad = _headings(heading, dist_m.size, rng)
@@ -91,7 +116,7 @@ def run_experiment(runs: int, seed: int, heading: float | str, config: IrConfig)
     methods = {}
     for method in METHODS:
         progress(f"estimating with {method}")
-        est = estimate_many(readings, config, method)
+        est = estimate_many(readings, IrConfig(), method)
         methods[method] = _summary(est, dist_m, true_bearing, heading_rad, runs)
     settings = {
         "runs": runs,
@@ -184,8 +209,14 @@ def plot(results: dict[str, Any], path: Path) -> None:
         _plot_points(ax, method, results["methods"][method])
     _plot_rmse(axes[1][0], results, "distance_rmse_cm", "distance RMSE (cm)")
     _plot_rmse(axes[1][1], results, "direction_rmse_deg", "direction RMSE (degrees)")
+    for ax, key in ((axes[1][0], "distance_cm"), (axes[1][1], "direction_deg")):
+        ax.axhline(paper.IR_RMSE[key], color="black", linestyle="--", label="paper, eqs. (1)-(3), overall (Table 4)")
+        ax.legend(fontsize=8)
     s = results["settings"]
-    fig.suptitle(f"petswarm bench ir: {s['runs']} sweeps per point, heading {s['heading']}, seed {s['seed']}")
+    fig.suptitle(
+        f"petswarm bench ir: {s['runs']} sweeps per point, heading {s['heading']}, seed {s['seed']}, "
+        f"profile {s.get('profile', 'ideal')}"
+    )
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -245,6 +276,8 @@ def table(results: dict[str, Any]) -> list[str]:
     lines.append(f"{'overall':>9}" + "".join(_cells(methods[m]["overall"]) for m in METHODS))
     missed = {m: methods[m]["overall"]["no_signal"] for m in METHODS}
     lines.append("RMSE of distance (cm) and direction (degrees); sweeps without an estimate: " + str(missed))
+    if "paper" in results:
+        lines += ["", *paper.lines(results["paper"], s.get("profile", "ideal"))]
     wire = results.get("over_the_wire")
     if wire:
         from petswarm.bench.ir_token import wire_lines
@@ -278,6 +311,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--out", default="bench-results", help="directory for JSON and plots (default %(default)s)")
     parser.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
+    from petswarm.lab.robot_command import add_profile
+
+    add_profile(parser, "the IR module's noise; the paper's Table 4 printed beside the bench's, with the ratio")
     parser.add_argument(
         "--no-wire",
         dest="wire",

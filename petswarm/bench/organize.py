@@ -33,6 +33,7 @@ from petswarm.bench.organize_report import report, summarise, write_results
 from petswarm.lab.processes import Supervisor, run_supervised
 from petswarm.managers.exchange import StepTiming
 from petswarm.managers.formation import PROTOCOLS, FormationConfig
+from petswarm.profiles import robot_profile
 from radio_hub.interface import HubUnavailable, RadioError, query_hub
 
 MAX_SLAVES = 14
@@ -117,6 +118,7 @@ class Swarm:
 def robot_argv(rid: int, endpoint: str, world: str, args: argparse.Namespace) -> list[str]:
     """``petswarm robot`` arguments: robot 1 is the master (connected to the user), the rest wait."""
     argv = ["robot", "--id", str(rid), "--hub", endpoint, "--world", world, "--seed", str(args.seed)]
+    argv += ["--profile", args.profile]
     if rid == MASTER:
         argv += ["--user", str(USER)]
     if args.step_deadline is not None:
@@ -143,7 +145,7 @@ def measure_count(sup: Supervisor, n: int, args: argparse.Namespace, out: Path, 
     """A fresh hub and n + 1 robots, ``runs`` organizations per protocol; the raw records and hub figures."""
     world = f"bench-org-{os.getpid()}-{args.seed}-n{n}"
     progress(f"{n} slave(s): starting a hub and {n + 1} robots")
-    hub = start_hub(sup, f"hub-n{n}", world, args.seed, config)
+    hub = start_hub(sup, f"hub-n{n}", world, args.seed, config, args.profile)
     names = [hub.name, *(f"n{n}-robot-{rid}" for rid in range(MASTER, n + 2))]
     with stopping(sup, names):
         try:
@@ -315,11 +317,12 @@ def write_no_ack_config(out: Path) -> Path:
 
 def settings(args: argparse.Namespace, config: dict[str, Any], load_average: float) -> dict[str, Any]:
     """What the bench was asked for and the medium the hub reported."""
-    step = StepTiming()
+    step = StepTiming(robot_profile(args.profile).step_deadline_s or StepTiming().deadline_s)
     mac, rng, path_loss = config["mac"], config["range"], config["path_loss"]
     return {
         "seed": args.seed,
         "clock": args.clock,
+        "profile": args.profile,
         "runs": args.runs,
         "slaves": args.slaves,
         "protocols": list(protocols_of(args.protocol)),

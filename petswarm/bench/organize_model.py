@@ -21,7 +21,7 @@ from petswarm.bench.hub import progress
 from petswarm.bench.organize_report import report, summarise, write_results
 from petswarm.clock import ModelClockLoop
 from petswarm.lab.model_run import ENDPOINT, MemoryAir, RunningRobot, cancel_leftovers, robot_config_of, start_robot
-from radio_hub.interface import EnvironmentConfig, HubUnavailable, load_config
+from radio_hub.interface import EnvironmentConfig, HubUnavailable, apply_profile, load_config
 
 ATTACH_S = 0.1
 """Model time between starting the robots and the first organization (every robot attaches at once)."""
@@ -72,9 +72,9 @@ class ModelSwarm:
         return {"mac": gained, "air": air}
 
 
-def environment(config: Path | None) -> EnvironmentConfig:
-    """The hub's tables: the bench's config file (``--mac-ack off``), else the defaults."""
-    return load_config(config) if config is not None else EnvironmentConfig()
+def environment(config: Path | None, profile: str) -> EnvironmentConfig:
+    """The hub's tables: the bench's config file (``--mac-ack off``), else the defaults; then the profile's."""
+    return apply_profile(load_config(config) if config is not None else EnvironmentConfig(), profile)
 
 
 def measure_count(n: int, args: argparse.Namespace, config: Path | None) -> dict[str, Any]:
@@ -89,7 +89,7 @@ def measure_count(n: int, args: argparse.Namespace, config: Path | None) -> dict
 async def _measure(n: int, args: argparse.Namespace, config: Path | None) -> dict[str, Any]:
     world = f"bench-org-model-{args.seed}-n{n}"
     progress(f"{n} slave(s): {n + 1} robots on model time")
-    air = MemoryAir(environment(config), args.seed)
+    air = MemoryAir(environment(config, args.profile), args.seed)
     try:
         robots = {}
         for rid in range(bench.MASTER, n + 2):

@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from petswarm.bench import paper
 from petswarm.bench.output import emit, save
 
 STEPS = ("scan", "query", "notice")
@@ -55,6 +56,19 @@ def summary_row(records: list[dict[str, Any]], protocol: str, slaves: int) -> di
     }
 
 
+def paper_rows(summary: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Fig. 22's minimum organizing time beside this bench's fastest organization without a retry, per slave
+    count the paper measured (the paper's protocol only)."""
+    rows = []
+    for r in summary:
+        if r["protocol"] != "paper" or r["slaves"] not in paper.ORGANIZE_MIN_S:
+            continue
+        fastest = r["min_no_retry_ms"] / 1000 if not math.isnan(r["min_no_retry_ms"]) else None
+        figure = f"organizing time, min, {r['slaves']} slave(s) (s)"
+        rows.append(paper.row(figure, paper.ORGANIZE_MIN_S[r["slaves"]], fastest))
+    return rows
+
+
 def ended_short(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Organizations that ended with fewer members than requested although as many robots were waiting."""
     return [
@@ -87,7 +101,9 @@ def rows_by(summary: list[dict[str, Any]]) -> dict[tuple[str, int], dict[str, An
 
 
 def write_results(results: dict[str, Any], out: Path) -> None:
-    """``bench_organize.json`` (settings, summary, every run's raw figures) and ``bench_organize.png``."""
+    """``bench_organize.json`` (settings, summary, the paper's figures beside, every run's raw figures) and
+    ``bench_organize.png``."""
+    results["paper"] = paper_rows(results["summary"])
     save(results, out, "bench_organize", plot)
 
 
@@ -104,7 +120,8 @@ def plot(results: dict[str, Any], path: Path) -> None:
     _plot_retries(retries, results["summary"], s["protocols"], s["slaves"])
     fig.suptitle(
         f"petswarm bench organize: {s['runs']} organizations per point, MAC ACK {s['mac_ack']}, "
-        f"step deadline {s['step_deadline_s'] * 1000:g} ms x {s['step_retries']} retries, seed {s['seed']}",
+        f"step deadline {s['step_deadline_s'] * 1000:g} ms x {s['step_retries']} retries, seed {s['seed']}, "
+        f"profile {s.get('profile', 'ideal')}",
         fontsize=10,
     )
     fig.tight_layout()
@@ -126,6 +143,13 @@ def _plot_times(ax: Any, summary: list[dict[str, Any]], protocols: list[str], co
         high = np.array([x["max"] for x in t]) - mean
         x = np.array(counts) + dx * 0.3
         ax.errorbar(x, mean, yerr=[low, high], marker="o", capsize=5, label=f"{protocol}: mean, min-max")
+    known = [n for n in counts if n in paper.ORGANIZE_MIN_S]
+    if known:
+        minima = [paper.ORGANIZE_MIN_S[n] * 1000 for n in known]
+        ax.plot(known, minima, "k*", markersize=10, label="paper, min (Fig. 22)")
+        mins = [rows[("paper", n)]["min_no_retry_ms"] for n in known if ("paper", n) in rows]
+        if len(mins) == len(known):
+            ax.plot(known, mins, "v", color="tab:blue", label="paper protocol here, min without retry")
     ax.set(xlabel="number of slaves", ylabel="organizing time (ms)", title="Network-organizing time")
     ax.set_xticks(counts)
     ax.set_ylim(bottom=0)
@@ -170,6 +194,8 @@ def table(results: dict[str, Any]) -> list[str]:
         *_hub_lines(results["hub"]),
         "",
         *odd_lines(results["runs"]),
+        "",
+        *(paper.lines(results["paper"], s.get("profile", "ideal")) if results.get("paper") else []),
         f"wall time {results['elapsed_s']:.0f} s; raw figures of every run in {results['files']['json']}",
     ]
 
@@ -178,7 +204,8 @@ def _settings_lines(s: dict[str, Any]) -> list[str]:
     m = s["medium"]
     step = "robot defaults" if s["step_defaults"] else "given"
     return [
-        f"petswarm bench organize: seed {s['seed']}, {s.get('clock', 'wall')} time, {s['runs']} organizations "
+        f"petswarm bench organize: seed {s['seed']}, {s.get('clock', 'wall')} time, profile "
+        f"{s.get('profile', 'ideal')}, {s['runs']} organizations "
         "per protocol and slave count "
         f"(protocols interleaved run by run: {', '.join(s['protocols'])}), slaves {_counts(s['slaves'])}, "
         f"MAC ACK {s['mac_ack']}",

@@ -18,6 +18,7 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from petswarm.bench import paper
 from petswarm.bench.output import emit, save
 from petswarm.lab.metrics import REACTION_OMEGA_RPS
 from radio_hub.interface import lazy_numpy
@@ -41,6 +42,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=seed, default=1, help="seed of the first scenario run (default %(default)s)")
     parser.add_argument("--out", default="bench-results", help="directory for JSON and plots (default %(default)s)")
     parser.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
+    from petswarm.lab.robot_command import add_profile
+
+    add_profile(parser, "hub, robots and user; the paper's figures printed beside the bench's, with the ratio")
     parser.add_argument(
         "--clock",
         choices=("wall", "model"),
@@ -59,7 +63,7 @@ def bench_reaction(args: argparse.Namespace) -> int:
         while len(trials) < args.runs and len(failures) < 3:
             record = Path(tmp) / f"run-{seed}"
             print(f"[bench reaction] run seed {seed}: {len(trials)}/{args.runs} trials so far", file=sys.stderr)
-            summary = _run(args.scenario, seed, record, args.clock)
+            summary = _run(args.scenario, seed, record, args.clock, args.profile)
             if summary is None or not summary.get("ok"):
                 why = "no summary (the run failed)" if summary is None else "; ".join(summary.get("problems", []))
                 failures.append(f"seed {seed}: {why}")
@@ -69,6 +73,7 @@ def bench_reaction(args: argparse.Namespace) -> int:
     trials = trials[: args.runs]
     results = summarise(trials)
     results.update(scenario=args.scenario, first_seed=args.seed, failed_runs=failures, clock=args.clock)
+    results.update(profile=args.profile, paper=paper_rows(results))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     save(results, out, "reaction", plot_cdfs, {**results, "trials": trials})
@@ -76,14 +81,23 @@ def bench_reaction(args: argparse.Namespace) -> int:
     return 0 if trials and not failures else 1
 
 
-def _run(scenario: str, seed: int, record: Path, clock: str) -> dict[str, Any] | None:
+def _run(scenario: str, seed: int, record: Path, clock: str, profile: str) -> dict[str, Any] | None:
     argv = [sys.executable, "-m", "cli", "run", scenario, "--seed", str(seed), "--json", "--record", str(record)]
-    argv += ["--clock", clock]
+    argv += ["--clock", clock, "--profile", profile]
     done = subprocess.run(argv, capture_output=True, text=True, timeout=600)
     try:
         return json.loads(done.stdout)
     except json.JSONDecodeError:
         return None
+
+
+def paper_rows(results: dict[str, Any]) -> list[dict[str, Any]]:
+    """The paper's 90th percentiles beside this bench's."""
+    labels = {"master_s": "reaction p90, master (s)", "slave_s": "reaction p90, slaves (s)"}
+    labels["slave_minus_master_s"] = "reaction p90, slave - master (s)"
+    return [
+        paper.row(label, paper.REACTION_P90_S[key], (results[key] or {}).get("p90")) for key, label in labels.items()
+    ]
 
 
 def summarise(trials: list[dict[str, Any]]) -> dict[str, Any]:
@@ -135,6 +149,8 @@ def table(results: dict[str, Any]) -> list[str]:
         )
     lines.append(f"missed reactions (no turn within 5 s): {results['missed_reactions']}")
     lines += [f"failed run (not counted): {failure}" for failure in results.get("failed_runs", [])]
+    if "paper" in results:
+        lines += ["", *paper.lines(results["paper"], results["profile"])]
     return lines
 
 
@@ -151,14 +167,25 @@ def plot_cdfs(results: dict[str, Any], path: Path) -> None:
         _cdf(axes[0], samples[key], label)
     axes[0].set(xlabel="time from the start of the user's rotation (s)", ylabel="CDF", title="reaction time")
     _cdf(axes[1], samples["slave_minus_master_s"], "slave - master")
+    _paper_p90(axes[0], ("master_s", "slave_s"))
+    _paper_p90(axes[1], ("slave_minus_master_s",))
     axes[1].set(xlabel="slave reaction minus master reaction (s)", title="slave - master")
     for ax in axes:
         ax.grid(alpha=0.3)
         ax.legend(loc="lower right")
-    fig.suptitle(f"petswarm bench reaction: {results['trials']} user rotations, leading swarm of 3")
+    fig.suptitle(
+        f"petswarm bench reaction: {results['trials']} user rotations, leading swarm of 3, "
+        f"profile {results.get('profile', 'ideal')}"
+    )
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
+
+
+def _paper_p90(ax: Any, keys: tuple[str, ...]) -> None:
+    """The paper's 90th percentiles as points at CDF 0.9."""
+    xs = [paper.REACTION_P90_S[k] for k in keys]
+    ax.plot(xs, [0.9] * len(xs), "k*", markersize=11, label="paper, p90 (Figs. 20-21)")
 
 
 def _cdf(ax: Any, values: list[float], label: str) -> None:

@@ -42,6 +42,7 @@ def run_lockstep(opts: RunOptions, scenario: Scenario | None) -> int:
         if scenario is not None and scenario.user is not None:
             user = ["user", "--scenario", str(scenario.path), "--hub", ctx.endpoint, "--world", ctx.world]
             user += ["--seed", str(opts.seed), "--record", str(ctx.record.events_of(scenario.user.node_id))]
+            user += ["--profile", opts.profile] if opts.profile != "ideal" else []
             ctx.sup.spawn("user", [*user, "--duration", str(scenario.duration_s), "--clock", "lockstep"])
         progress(f"lockstep: model time starts when the {nodes} nodes (robots, user, this run) are there")
         loop = LockstepLoop()

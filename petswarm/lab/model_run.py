@@ -52,6 +52,7 @@ from radio_hub.interface import (
     HubUnavailable,
     RadioClient,
     RadioIdentity,
+    apply_profile,
     environment_from_dict,
     load_config,
 )
@@ -389,14 +390,15 @@ async def _run(opts: RunOptions, scenario: Scenario | None, world: str, record: 
 
 
 def _environment(opts: RunOptions, scenario: Scenario | None) -> EnvironmentConfig:
-    """The hub's tables: ``--config``, and the scenario's world (as ``petswarm hub --scenario`` takes them)."""
+    """The hub's tables: ``--config``, the scenario's world and the profile's values (as ``petswarm hub
+    --config --scenario --profile`` takes them)."""
     config = load_config(opts.config) if opts.config else EnvironmentConfig()
-    if scenario is None:
-        return config
-    tables = environment_from_dict(scenario.hub_tables())
-    if opts.config:
-        tables.medium, tables.ir = config.medium, config.ir
-    return tables
+    if scenario is not None:
+        tables = environment_from_dict(scenario.hub_tables())
+        if opts.config:
+            tables.medium, tables.ir = config.medium, config.ir
+        config = tables
+    return config if opts.profile == "ideal" else apply_profile(config, opts.profile)
 
 
 def robot_argvs(
@@ -436,7 +438,13 @@ def _start_user(
     if scenario is None or scenario.user is None:
         return None
     config = UserConfig(
-        scenario.user, ENDPOINT, world, scenario.duration_s, opts.seed, beacon=scenario.surround_enabled
+        scenario.user,
+        ENDPOINT,
+        world,
+        scenario.duration_s,
+        opts.seed,
+        beacon=scenario.surround_enabled,
+        profile=opts.profile,
     )
     sink = open(record.events_of(scenario.user.node_id), "a")  # noqa: SIM115 (closed when the user is done)
     task = start_user(config, air, EventLog(sink=sink))

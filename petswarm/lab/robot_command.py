@@ -54,8 +54,9 @@ def add_robot_arguments(robot: argparse.ArgumentParser) -> None:
     robot.add_argument(
         "--step-deadline",
         type=bounded(float, 0.005, 10),
-        default=0.1,
-        help="seconds each organizing step waits for answers before retrying (default 0.1)",
+        default=None,
+        help="seconds each organizing step waits for answers before retrying (default 0.1; the profile's when it "
+        "sets one)",
     )
     robot.add_argument(
         "--step-retries",
@@ -64,6 +65,7 @@ def add_robot_arguments(robot: argparse.ArgumentParser) -> None:
         help="retries of an organizing step before it gives up on the missing (default 5)",
     )
     robot.add_argument("--record", metavar="FILE", help="append every event to this JSON-lines file as it happens")
+    add_profile(robot, "the robot's MCU and UART latency per frame, its organizing steps' deadline")
     robot.add_argument(
         "--heading",
         type=bounded(float, -360, 360),
@@ -135,9 +137,12 @@ def robot_config(args: argparse.Namespace) -> RobotConfig:
     from petswarm.managers.exchange import StepTiming
     from petswarm.managers.formation import FormationConfig
     from petswarm.managers.relative_location import TokenConfig
+    from petswarm.profiles import robot_profile
     from petswarm.robot import RobotConfig
 
-    timing = StepTiming(args.step_deadline, args.step_retries)
+    profile = robot_profile(args.profile)
+    deadline = args.step_deadline if args.step_deadline is not None else profile.step_deadline_s
+    timing = StepTiming(StepTiming().deadline_s if deadline is None else deadline, args.step_retries)
     formation = FormationConfig(protocol=args.protocol, step=timing, min_rssi_dbm=args.region_rssi)
     return RobotConfig(
         robot_id=args.id,
@@ -157,6 +162,20 @@ def robot_config(args: argparse.Namespace) -> RobotConfig:
         record=args.record,
         formation_mode=args.formation,
         surround=SurroundDriverConfig(law=args.surround_config or SurroundConfig(), human_id=args.surround_human),
+        profile=args.profile,
+    )
+
+
+def add_profile(p: argparse.ArgumentParser, sets: str) -> None:
+    """``--profile``: the testbed profile (docs/PROFILES.md); ``sets`` says what it sets for this command."""
+    from petswarm.profiles import DEFAULT_PROFILE, PROFILES
+
+    p.add_argument(
+        "--profile",
+        choices=PROFILES,
+        default=DEFAULT_PROFILE,
+        help=f"testbed profile (default %(default)s: today's ideal air and instant processing; kim2017: the swarm "
+        f"paper's testbed, docs/PROFILES.md): {sets}",
     )
 
 

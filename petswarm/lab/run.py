@@ -55,6 +55,8 @@ class RunOptions:
     ``lockstep``: processes on model time the hub owns (``petswarm.lab.lockstep_run``)."""
     fail_fast: bool = False
     """End the run at a robot's unexpected death instead of recording it and going on without the robot."""
+    profile: str = "ideal"
+    """The testbed profile (``petswarm.profiles``, ``radio_hub.profiles``) of the hub, the robots and the user."""
 
     def for_scenario(self, scenario: Any) -> RunOptions:
         """These options with the scenario's robot count and duration (what its record's manifest shows)."""
@@ -127,6 +129,7 @@ def supervise(
         hub_args = ["hub", "--listen", endpoint, "--world", world, "--seed", str(opts.seed)]
         # the air's frame log belongs to the record unless the user wants the capture elsewhere
         hub_args += ["--pcap", opts.pcap or str(record.path / "air.pcap"), *hub_extra(record)]
+        hub_args += ["--profile", opts.profile] if opts.profile != "ideal" else []
         sup.spawn("hub", hub_args + (["--config", opts.config] if opts.config else []))
         session = _wait_for_hub(watch, endpoint, keys, opts.startup_timeout)
         summary = phase(RunContext(opts, world, endpoint, keys, record, sup, session, watch))
@@ -189,6 +192,7 @@ def ping_robot_argv(opts: RunOptions, rid: int, endpoint: str, world: str, recor
     argv += ["--record", str(record.events_of(f"robot-{rid}"))]
     if rid == 1 and opts.organize:
         argv += ["--user", "1", "--protocol", opts.protocol]
+    argv += ["--profile", opts.profile] if opts.profile != "ideal" else []
     return [*argv, "--ping-interval", str(opts.ping_interval), "--seed", str(opts.seed)]
 
 

@@ -57,6 +57,7 @@ def _drive(ctx: RunContext, scenario: Scenario) -> dict[str, Any]:
     if scenario.user is not None:
         user_args = ["user", "--scenario", str(scenario.path), "--hub", endpoint, "--world", world]
         user_args += ["--seed", str(opts.seed), "--record", str(ctx.record.events_of(scenario.user.node_id))]
+        user_args += ["--profile", opts.profile] if opts.profile != "ideal" else []
         ctx.sup.spawn("user", [*user_args, "--duration", str(scenario.duration_s)])
     timeline = FaultTimeline(list(scenario.faults) + list(opts.faults))
     _follow(ctx.watch, ctx.session, ctx.keys, scenario.duration_s, timeline)
@@ -75,6 +76,7 @@ def scenario_robot_argv(
     argv = ["robot", "--id", str(rid), "--hub", endpoint, "--world", world, f"--pos={x},{y}"]
     argv += ["--heading", str(heading), "--seed", str(opts.seed), "--protocol", opts.protocol]
     argv += _surround_args(scenario)
+    argv += ["--profile", opts.profile] if opts.profile != "ideal" else []
     return [*argv, "--record", str(record.events_of(f"robot-{rid}"))]
 
 

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import asyncio
 from collections import Counter
 from dataclasses import dataclass, field
 
 from petswarm import clock
 from petswarm.managers.messages import MessageError, SwarmMessage, decode
+from petswarm.managers.serial_link import SerialLink
 from radio_hub.interface import BROADCAST, RadioClient, RxFrame, TxResult
 
 
@@ -26,17 +28,24 @@ class Incoming:
 
 
 class RfCommunicationManager:
-    """Sends and receives swarm messages; counts what it could not understand and how sends ended."""
+    """Sends and receives swarm messages; counts what it could not understand and how sends ended.
 
-    def __init__(self, radio: RadioClient) -> None:
+    With a ``link`` (a profile's MCU and UART) every frame waits on the loop's clock until the link has
+    passed it, both ways; without one (the ideal robot) nothing waits."""
+
+    def __init__(self, radio: RadioClient, link: SerialLink | None = None) -> None:
         self.radio = radio
+        self.link = link
         self.tx_results: Counter[str] = Counter()
         self.received = 0
         self.malformed = 0
 
     async def send(self, dst: int, message: SwarmMessage, *, dst_pan: int | None = None, ack: bool = True) -> TxResult:
         """Send one message in one frame; unicast is acknowledged unless ``ack`` is False."""
-        frame = self.radio.data_frame(dst, message.encode(), dst_pan=dst_pan, ack=ack and dst != BROADCAST)
+        payload = message.encode()
+        if self.link is not None:
+            await _until(self.link.tx_ready(clock.now(), len(payload)))
+        frame = self.radio.data_frame(dst, payload, dst_pan=dst_pan, ack=ack and dst != BROADCAST)
         result = await self.radio.send(frame)
         self.tx_results[result.status.value] += 1
         return result
@@ -45,6 +54,8 @@ class RfCommunicationManager:
         """The next frame that carries a valid message; anything else is counted and skipped."""
         while True:
             rx = await self.radio.receive()
+            if self.link is not None:
+                await _until(self.link.rx_ready(clock.now(), len(rx.frame.payload)))
             try:
                 message = decode(rx.frame.payload)
             except MessageError:
@@ -56,3 +67,8 @@ class RfCommunicationManager:
                 continue
             self.received += 1
             return Incoming(message, rx)
+
+
+async def _until(when: float) -> None:
+    """Wait on the loop's clock until ``when`` (seconds)."""
+    await asyncio.sleep(max(when - clock.now(), 0.0))

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from petswarm.managers.sequence import EventLog
+from petswarm.profiles import wearable_profile
 from petswarm.scenario import UserPlan
 from petswarm.wearables import user_link
 from petswarm.wearables.activity import ActivityRecognizer
@@ -55,6 +56,8 @@ class UserConfig:
     seed: int = 0
     beacon: bool = False
     """The person wears an IR beacon (surround scenarios): the surround robots see him by it."""
+    profile: str = "ideal"
+    """The testbed profile (``petswarm.profiles``): the belt's recognition delay."""
 
 
 class User:
@@ -72,6 +75,7 @@ class User:
         rng = np.random.default_rng([config.seed, 7])
         self.imu = BeltImu(rng)
         self.recognizer = ActivityRecognizer()
+        self.recognition_delay_s = wearable_profile(config.profile).recognition_delay_s
         self.owned = False
         self.counters = {"bursts": 0, "ignored": 0, "lf_reports": 0, "activity": 0, "requests": 0, "bad_ble": 0}
         self._pairs: dict[int, dict[str, float]] = {}
@@ -135,7 +139,12 @@ class User:
             self.log.record("rotation_detected", at=round(started, 3), user_t=round(t, 3))
         if self.owned:
             self.counters["activity"] += 1
-            self.client.ble_send(self.owner, user_link.encode("activity", t=round(t, 3), **activity.to_dict()))
+            report = user_link.encode("activity", t=round(t, 3), **activity.to_dict())
+            if self.recognition_delay_s:  # the belt's MCU takes this long to recognise and report
+                loop = asyncio.get_running_loop()
+                loop.call_later(self.recognition_delay_s, self.client.ble_send, self.owner, report)
+            else:
+                self.client.ble_send(self.owner, report)
 
     async def _belt_lf(self) -> None:
         while True:

@@ -78,6 +78,11 @@ class IrConfig:
     noise_floor_counts: float = 1.5
     """Standard deviation of the additive noise of each reading, in counts: ADC quantisation (0.3 counts)
     plus dark current and amplifier noise; dominates beyond about 1.2 m."""
+    emitter_noise: float = 0.0
+    """Standard deviation of a multiplicative variation common to all 12 readings of one sweep, as a fraction
+    of the light: the emitter's drive current and the receiver's ADC reference drifting between sweeps. It
+    moves the strength (distance) but not the ratios between receivers (direction). 0 by default (an ideal
+    emitter); the kim2017 profile sets it (docs/PROFILES.md)."""
     ambient_counts: float = 30.0
     """Mean reading with no transmitter (indoor light through the IR filter, about 3 % of full scale).
     The module knows it (a dark reading taken at start-up), so estimators subtract it."""
@@ -96,7 +101,8 @@ class IrConfig:
             raise ValueError("power_counts_at_1m must be > 0")
         if not 0 < self.near_field_m < self.max_range_m:
             raise ValueError("need 0 < near_field_m < max_range_m")
-        if min(self.relative_noise, self.noise_floor_counts, self.ambient_counts, self.detection_sigmas) < 0:
+        noises = (self.relative_noise, self.noise_floor_counts, self.emitter_noise)
+        if min(*noises, self.ambient_counts, self.detection_sigmas) < 0:
             raise ValueError("noise, ambient and detection_sigmas must be >= 0")
         if self.saturation_counts <= self.ambient_counts:
             raise ValueError("saturation_counts must be above ambient_counts")
@@ -112,7 +118,7 @@ class IrConfig:
     @property
     def noiseless(self) -> bool:
         """True when readings carry no random noise."""
-        return self.relative_noise == 0 and self.noise_floor_counts == 0
+        return self.relative_noise == 0 and self.noise_floor_counts == 0 and self.emitter_noise == 0
 
     def brighter(self, factor: float) -> IrConfig:
         """The same receivers calibrated for an emitter ``factor`` times as bright: strength scales with it
@@ -125,7 +131,7 @@ class IrConfig:
 
     def noise_free(self) -> IrConfig:
         """The same module with both noise terms off (ambient and saturation stay: they are not random)."""
-        return dataclasses.replace(self, relative_noise=0.0, noise_floor_counts=0.0)
+        return dataclasses.replace(self, relative_noise=0.0, noise_floor_counts=0.0, emitter_noise=0.0)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain dict, as accepted by ``from_dict``."""
@@ -174,11 +180,14 @@ def sense(light: ArrayLike, config: IrConfig, rng: np.random.Generator) -> np.nd
     """What the ADC reads for incident ``light`` (counts): ambient plus noise, clipped to 0..saturation.
 
     Noise is Gaussian and independent per receiver and sample, with standard deviation
-    sqrt(floor^2 + (relative x light)^2).
+    sqrt(floor^2 + (relative x light)^2); with ``emitter_noise`` a variation common to the 12 readings of a
+    sweep comes on top.
     """
     light = np.asarray(light, dtype=float)
     sigma = np.hypot(config.noise_floor_counts, config.relative_noise * light)
     raw = config.ambient_counts + light + sigma * rng.standard_normal(light.shape)
+    if config.emitter_noise:  # drawn only when set: an ideal emitter leaves the draws (and runs) as they were
+        raw += config.emitter_noise * light * rng.standard_normal((*light.shape[:-1], 1))
     return np.clip(raw, 0.0, config.saturation_counts)
 
 

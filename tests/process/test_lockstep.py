@@ -47,6 +47,20 @@ def test_robot_processes_in_lockstep_do_exactly_what_the_model_time_run_does(tmp
     assert (tmp_path / "lockstep" / "air.pcap").read_bytes() == (tmp_path / "model" / "air.pcap").read_bytes()
 
 
+@pytest.mark.timeout(400)
+def test_the_kim2017_profile_delays_frames_the_same_in_lockstep_processes_as_in_model_time(tmp_path: Path) -> None:
+    """The profile's MCU and UART delays are timers of each robot's own loop, drawn from its seed: robot
+    processes in lockstep run what the model-time run runs, and the profile really slows the organization."""
+    runs = {clock: _run(tmp_path / "kim2017", clock, "--profile", "kim2017") for clock in ("model", "lockstep")}
+    model, lockstep = runs["model"], runs["lockstep"]
+    assert model["ok"] and lockstep["ok"], (model["problems"], lockstep["problems"])
+    assert lockstep["digest"] == model["digest"]
+    ideal = _run(tmp_path / "ideal", "model")
+    assert ideal["digest"] != model["digest"]
+    # the step deadline alone is 0.5 s under the profile, against 0.1 s ideal
+    assert model["organization"]["organize_time_s"] > ideal["organization"]["organize_time_s"] + 0.3
+
+
 FORMATION_MEDIAN_BOUND_M = 0.25
 """The bound tests/model/test_driving.py asserts on the same scenario and seed in model time."""
 
