@@ -92,19 +92,27 @@ class SurroundConfig:
     """Which law the robots run: ``paper`` (this module, the spec's) or ``improved`` (``surround_improved``,
     beyond the paper: docs/SURROUND.md). The fields below are the improved law's only; the paper's ignores them."""
     pull_force: float = 3.0
-    """Improved law: the pull (m/s^2) toward the human on a robot he has left behind (farther than ``pull_radius_m``)."""
+    """Improved law: the pull (m/s^2) toward the human on a robot he left behind (farther than ``pull_radius_m``)."""
     pull_radius_m: float = 0.8
     """Improved law: within this distance of the human no pull acts (the local forces alone shape the swarm)."""
     pull_ramp_m: float = 0.4
     """Improved law: the pull grows linearly from 0 at ``pull_radius_m`` to ``pull_force`` this much further out."""
-    velocity_match: float = 2.0
+    centring: float = 2.0
+    """Improved law: a spring (/s^2) toward the human on every robot, so the swarm's centre settles on him."""
+    lead_s: float = 0.4
+    """Improved law: the pull aims at where the human will be this much later (his position plus his velocity
+    times it), not where he is."""
+    brake_mps2: float = 1.5
+    """Improved law: the deceleration a robot counts on to stop; an obstacle point (a wall, the human's body) is
+    repelled as if it were nearer by the distance braking from the robot's speed toward it takes."""
+    velocity_match: float = 6.0
     """Improved law: the gain (/s) pulling the robot's velocity to the human's (the paper's drag, relative to him)."""
 
     def __post_init__(self) -> None:
         if self.law not in LAWS:
             raise ValueError(f"law must be one of {LAWS}, not {self.law!r}")
         positive = ("sight_m", "avoidance_m", "max_speed_mps", "max_accel_mps2", "robot_radius_m", "dt_s")
-        positive += ("body_mass", "stiffness", "pull_ramp_m")
+        positive += ("body_mass", "stiffness", "pull_ramp_m", "brake_mps2")
         for name in dataclasses.fields(self):
             if name.name == "law":
                 continue

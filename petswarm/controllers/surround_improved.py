@@ -1,28 +1,32 @@
 """The improved surround law: beyond the paper, a swarm that keeps its human inside it while he walks.
 
 The paper's law (``surround.SurroundController``) moves the swarm only through the surround force of its rear
-robots, c_i ~ 1 where the local centroid lies toward the human; a robot between its local swarm and the human
-has c_i = 0. Measured in petswarm (docs/RESULTS.md), a swarm under it trails a walking human as a tail and
-jams at a corridor's mouth. This law keeps the paper's local forces (the impedance toward the local centroid,
-the repulsion within A) and replaces the surround force and the drag by two terms a robot works out from the
-same sensing (the human's IR beacon, tracked; its own odometry):
+robots (c_i ~ 1 where the local centroid lies toward the human; a robot between its local swarm and the human
+has c_i = 0) against a drag on ground speed. Measured in petswarm (docs/RESULTS.md), a swarm under it trails a
+walking human as a tail (2 m behind him at the median) and stalls at a corridor's mouth. This law keeps the
+paper's impedance toward the local centroid, and changes the rest, each from the same sensing (the tracked IR
+beacons of the human and the neighbours, the echoes, the odometry):
 
-    f_i = f_R + f_O + f_P + f_M
-    f_P = F_P * clip((|p_G| - rho) / w, 0, 1) * p_G / |p_G|      (pull on robots the human has left behind)
-    f_M = D (v_G - v_i)                                          (move with the human)
+    f_i = f_R + f_O' + f_P + f_M
+    f_P = (C |q| + F_P clip((|q| - rho) / w, 0, 1)) q / |q|,   q = p_G + T v_G   (centring, and a pull on
+                                                                                 robots left behind)
+    f_M = D (v_G - v_i)                                                          (move with the human)
+    f_O' = - sum Q / d_eff^2 p / |p|,   d_eff = |p| - closing^2 / (2 a_b)        (repulsion on braking distance)
 
-- f_M, the velocity match: the paper's drag (-drag v) measured against the human's velocity v_G instead of
-  the ground. A swarm under the paper's law needs a standing lag behind a walking human for its rear to push
-  it along; with f_M the whole swarm moves at his pace with no lag, front robots included, so those ahead of
-  him stay ahead.
-- f_P, the pull: zero within rho of the human, so round him the local forces alone shape the swarm (its extent
-  stays the paper's r*), growing to F_P over w beyond it. Every robot the human has left behind (past an
-  obstacle that held it, at the tail of a swarm squeezed through a gap) is drawn back to him whatever its
-  local centroid says; a robot facing an obstacle's edge slides along it toward the side he is on.
+- f_M, the velocity match: the paper's drag measured against the human's velocity v_G (his beacon's track)
+  instead of the ground. Under the paper's law the swarm needs a standing lag for its rear to push it along;
+  with f_M every robot, front ones included, moves at his pace.
+- f_P: a soft spring C toward the human on every robot, so the swarm's centre settles on him (what keeps him
+  inside, not at its front edge), and beyond rho a pull growing to F_P on robots he has left behind (held by
+  an obstacle, at the tail of a file through a gap). It aims T seconds ahead of him (q = p_G + T v_G):
+  obstacles and the stop rules only ever hold robots back, so the swarm aims a little ahead to end round him.
+- f_O': the paper's repulsion, but a point the robot is closing on counts as nearer by the distance braking
+  takes (closing speed: its own toward an obstacle point, the human's body included, as he may stop at any
+  step; relative to a neighbour's tracked velocity for a neighbour). The paper's Q / d^2 ignores speed, and
+  a robot closing at 0.4 m/s on a slower neighbour or on the back of a human who stops touched it.
 
-Without the human's beacon (not seen yet, or lost) both terms fall back to the paper's: no pull, drag on
-the robot's own velocity. The force becomes a velocity as in the paper's law (unit virtual mass, clipped
-acceleration and speed).
+Without the human's beacon (not seen yet, or lost) f_P is zero and f_M falls back to the paper's drag. The
+force becomes a velocity as in the paper's law (unit virtual mass, clipped acceleration and speed).
 """
 
 from __future__ import annotations
@@ -30,7 +34,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from petswarm.controllers.surround import SurroundConfig, SurroundController
+from petswarm.controllers.surround import MIN_RANGE_M, SurroundConfig, SurroundController
 
 
 class ImprovedSurroundController(SurroundController):
@@ -48,9 +52,11 @@ class ImprovedSurroundController(SurroundController):
         velocity: Sequence[float],
         dt: float,
         human_velocity: Sequence[float] | None = None,
+        neighbour_velocities: Sequence[Sequence[float]] | None = None,
     ) -> tuple[float, float]:
         """The velocity command; as the paper's ``step_plain``, with the human's own velocity ``human_velocity``
-        (his tracked beacon's, in this robot's frame; None when unknown)."""
+        (his tracked beacon's, in this robot's frame; None when unknown) and the neighbours' own velocities
+        ``neighbour_velocities`` (their tracks', in the order of ``neighbours``; None: taken to be still)."""
         if not dt > 0:
             raise ValueError(f"dt must be > 0, not {dt!r}")
         c = self.config
@@ -62,11 +68,56 @@ class ImprovedSurroundController(SurroundController):
             c.inertia * accel[0] + c.damping * rate[0] + c.stiffness * g[0],
             c.inertia * accel[1] + c.damping * rate[1] + c.stiffness * g[1],
         )
-        f_o = self._repulsion(neighbours, distances, near, obstacles)
-        f_p = self._pull(human)
+        moving = neighbour_velocities if neighbour_velocities is not None else [(0.0, 0.0)] * len(neighbours)
+        f_o = self._braking_repulsion(neighbours, moving, distances, near, obstacles, velocity)
+        f_p = self._pull(self._aim(human, human_velocity))
         self._forces = (f_r, f_o, f_p)
         force = (f_r[0] + f_o[0] + f_p[0], f_r[1] + f_o[1] + f_p[1])
         return self._matched_command(force, velocity, human if human is None else human_velocity, dt)
+
+    def _braking_repulsion(
+        self,
+        neighbours: Sequence[Sequence[float]],
+        moving: Sequence[Sequence[float]],
+        distances: list[float],
+        near: list[bool],
+        obstacles: Sequence[Sequence[float]],
+        velocity: Sequence[float],
+    ) -> tuple[float, float]:
+        """f_O: the paper's Q / d^2 from neighbours within A, and from obstacle points at the distance left once
+        the robot has braked: d - v_toward^2 / (2 brake), v_toward its own speed toward the point. A robot
+        closing on a wall's end, or on the back of a human who may stop at any step, is pushed off early
+        enough to stop; sliding past sideways costs nothing."""
+        c = self.config
+        sx = sy = 0.0
+        vx, vy = velocity
+        for (x, y), (ux, uy), d, seen in zip(neighbours, moving, distances, near, strict=True):
+            if not (seen and d > 0):
+                continue
+            closing = max(0.0, ((vx - ux) * x + (vy - uy) * y) / d)
+            left = d - closing * closing / (2 * c.brake_mps2)
+            if left <= c.avoidance_m:
+                reach = max(left, MIN_RANGE_M)
+                magnitude = c.repulsion / (reach * reach)
+                sx, sy = sx + magnitude * x / d, sy + magnitude * y / d
+        for x, y in obstacles:
+            d = math.sqrt(x * x + y * y)
+            if not d > 0:
+                continue
+            toward = max(0.0, (vx * x + vy * y) / d)
+            left = d - toward * toward / (2 * c.brake_mps2)
+            if left <= c.avoidance_m:
+                reach = max(left, MIN_RANGE_M)
+                magnitude = c.repulsion / (reach * reach)
+                sx, sy = sx + magnitude * x / d, sy + magnitude * y / d
+        return -sx, -sy
+
+    def _aim(self, human: Sequence[float] | None, human_velocity: Sequence[float] | None) -> Sequence[float] | None:
+        """Where the pull aims: the human, led by ``lead_s`` of his velocity when it is known."""
+        lead = self.config.lead_s
+        if human is None or human_velocity is None or lead <= 0:
+            return human
+        return human[0] + lead * human_velocity[0], human[1] + lead * human_velocity[1]
 
     def _pull(self, human: Sequence[float] | None) -> tuple[float, float]:
         """f_P: toward the human, growing from 0 at ``pull_radius_m`` to ``pull_force`` ``pull_ramp_m`` further."""
@@ -75,9 +126,11 @@ class ImprovedSurroundController(SurroundController):
         c = self.config
         hx, hy = human
         distance = math.sqrt(hx * hx + hy * hy)
-        if distance <= c.pull_radius_m:
+        if not distance > 0:
             return 0.0, 0.0
-        strength = c.pull_force * min(1.0, (distance - c.pull_radius_m) / c.pull_ramp_m)
+        strength = c.centring * distance
+        if distance > c.pull_radius_m:
+            strength += c.pull_force * min(1.0, (distance - c.pull_radius_m) / c.pull_ramp_m)
         return strength * hx / distance, strength * hy / distance
 
     def _matched_command(

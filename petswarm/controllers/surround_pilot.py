@@ -131,8 +131,10 @@ class SurroundPilot:
         velocity = (float(sensors.odometry[0]), float(sensors.odometry[1]))
         controller = self.controller
         if isinstance(controller, ImprovedSurroundController):
+            names, moving = tracker.names, tracker.velocities.tolist()
+            others = [v for name, v in zip(names, moving, strict=True) if name != config.human_id]
             own = tracker.velocity_of(config.human_id)
-            vx, vy = controller.step_plain(neighbours, obstacles, human, velocity, dt, own)
+            vx, vy = controller.step_plain(neighbours, obstacles, human, velocity, dt, own, others)
         else:
             vx, vy = controller.step_plain(neighbours, obstacles, human, velocity, dt)
         # the law's repulsion acts on IR estimates up to a sweep old; the ultrasonic ring is the last word

@@ -160,6 +160,11 @@ class BeaconTracker:
         """The tracked beacons' positions now (k, 2), in the order of ``names``."""
         return self._position
 
+    @property
+    def velocities(self) -> np.ndarray:
+        """The tracked beacons' own velocities (k, 2), in the order of ``names``, in the robot's frame."""
+        return self._velocity
+
     def velocity_of(self, name: str) -> tuple[float, float] | None:
         """The tracked velocity of beacon ``name`` (its own, not relative to us, in our frame), or None untracked."""
         row = self._rows.get(name)

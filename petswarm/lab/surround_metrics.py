@@ -59,9 +59,7 @@ def surround_metrics(world: list[dict[str, Any]], sight_m: float = SIGHT_M) -> d
         "r_end_off": round(abs(r_end - R_STAR_M) / R_STAR_M, 4),
         "centre_to_human_end_m": _centre_to_human(ticks[-1]),
         "obstacle_pass": obstacle_pass(world, ticks),
-        "series": [
-            [round(t["t"], 2), round(_extent(t["robots"]), 4), _centre_to_human(t)] for t in ticks[::25]
-        ],
+        "series": [[round(t["t"], 2), round(_extent(t["robots"]), 4), _centre_to_human(t)] for t in ticks[::25]],
     }
 
 
