@@ -23,16 +23,18 @@ def is_surround_run(world: list[dict[str, Any]]) -> bool:
 
 
 def snapshot_instants(world: list[dict[str, Any]], count: int = SNAPSHOTS) -> list[int]:
-    """Indices of ``count`` states: the swarm gathered before the walk, evenly through the walk, and the end."""
-    times = [s["t_us"] for s in world]
+    """Indices of ``count`` states (at least 3): the swarm gathered a second before the human walks, evenly
+    through his walk, and the end of the run (without a walk: evenly through the run)."""
+    count = max(3, count)
     walking = [i for i, s in enumerate(world) if _user_speed(s) > WALKING_MPS]
-    if not walking or count < 3:
-        step = max(1, len(world) // max(count, 1))
-        return list(range(len(world) - 1, -1, -step))[:count][::-1]
-    first, last = walking[0], walking[-1]
-    start = _index_at(times, times[first] - 1_000_000)
-    middle = [first + round(k * (last - first) / (count - 2)) for k in range(count - 2)] if count > 3 else [first]
-    return sorted({start, *middle[1:], last, len(world) - 1} | ({first} if count > 3 else set()))[:count]
+    last = len(world) - 1
+    if not walking:
+        return sorted({round(k * last / (count - 1)) for k in range(count)})
+    first, final = walking[0], walking[-1]
+    start = _index_at([s["t_us"] for s in world], world[first]["t_us"] - 1_000_000)
+    inner = count - 2
+    during = [first + round(k * (final - first) / max(1, inner - 1)) for k in range(inner)]
+    return sorted({start, *during, last})
 
 
 def plot_snapshots(world: list[dict[str, Any]], path: Path, title: str = "") -> Path:
