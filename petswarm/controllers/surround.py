@@ -91,7 +91,7 @@ class SurroundConfig:
     law: str = "paper"
     """Which law the robots run: ``paper`` (this module, the spec's) or ``improved`` (``surround_improved``,
     beyond the paper: docs/SURROUND.md). The fields below are the improved law's only; the paper's ignores them."""
-    pull_force: float = 3.0
+    pull_force: float = 1.5
     """Improved law: the pull (m/s^2) toward the human on a robot he left behind (farther than ``pull_radius_m``)."""
     pull_radius_m: float = 0.8
     """Improved law: within this distance of the human no pull acts (the local forces alone shape the swarm)."""
@@ -105,6 +105,10 @@ class SurroundConfig:
     brake_mps2: float = 1.5
     """Improved law: the deceleration a robot counts on to stop; an obstacle point (a wall, the human's body) is
     repelled as if it were nearer by the distance braking from the robot's speed toward it takes."""
+    human_clearance_m: float = 0.3
+    """Improved law: the human's body as the law keeps off it, from his centre (his 0.25 m disc and 5 cm more):
+    he is repelled from this surface, on the faster of the robot's closing and his (he may stop, or walk into
+    it)."""
     velocity_match: float = 6.0
     """Improved law: the gain (/s) pulling the robot's velocity to the human's (the paper's drag, relative to him)."""
 

@@ -70,6 +70,8 @@ class ImprovedSurroundController(SurroundController):
         )
         moving = neighbour_velocities if neighbour_velocities is not None else [(0.0, 0.0)] * len(neighbours)
         f_o = self._braking_repulsion(neighbours, moving, distances, near, obstacles, velocity)
+        f_h = self._human_repulsion(human, human_velocity, velocity)
+        f_o = (f_o[0] + f_h[0], f_o[1] + f_h[1])
         f_p = self._pull(self._aim(human, human_velocity))
         self._forces = (f_r, f_o, f_p)
         force = (f_r[0] + f_o[0] + f_p[0], f_r[1] + f_o[1] + f_p[1])
@@ -111,6 +113,32 @@ class ImprovedSurroundController(SurroundController):
                 magnitude = c.repulsion / (reach * reach)
                 sx, sy = sx + magnitude * x / d, sy + magnitude * y / d
         return -sx, -sy
+
+    def _human_repulsion(
+        self, human: Sequence[float] | None, human_velocity: Sequence[float] | None, velocity: Sequence[float]
+    ) -> tuple[float, float]:
+        """Q / d_eff^2 away from the human's body (``human_clearance_m`` from his centre), d_eff his surface's
+        distance less the braking distance of the faster closing: the robot's own speed toward him (he may
+        stop), or the speed he comes at it (he walks into a robot held in front of him)."""
+        if human is None:
+            return 0.0, 0.0
+        c = self.config
+        hx, hy = human
+        centre = math.sqrt(hx * hx + hy * hy)
+        if not centre > 0:
+            return 0.0, 0.0
+        ux, uy = hx / centre, hy / centre
+        vx, vy = velocity
+        closing = vx * ux + vy * uy
+        if human_velocity is not None:
+            closing = max(closing, closing - (human_velocity[0] * ux + human_velocity[1] * uy))
+        closing = max(0.0, closing)
+        left = centre - c.human_clearance_m - closing * closing / (2 * c.brake_mps2)
+        if left > c.avoidance_m:
+            return 0.0, 0.0
+        reach = max(left, MIN_RANGE_M)
+        magnitude = c.repulsion / (reach * reach)
+        return -magnitude * ux, -magnitude * uy
 
     def _aim(self, human: Sequence[float] | None, human_velocity: Sequence[float] | None) -> Sequence[float] | None:
         """Where the pull aims: the human, led by ``lead_s`` of his velocity when it is known."""

@@ -134,7 +134,10 @@ class SurroundPilot:
             names, moving = tracker.names, tracker.velocities.tolist()
             others = [v for name, v in zip(names, moving, strict=True) if name != config.human_id]
             own = tracker.velocity_of(config.human_id)
-            vx, vy = controller.step_plain(neighbours, obstacles, human, velocity, dt, own, others)
+            # the improved law keeps off the human's body itself (his centre and velocity): his surface point,
+            # which sensing put last among the obstacles, is left out
+            echoes = obstacles if human is None else obstacles[:-1]
+            vx, vy = controller.step_plain(neighbours, echoes, human, velocity, dt, own, others)
         else:
             vx, vy = controller.step_plain(neighbours, obstacles, human, velocity, dt)
         # the law's repulsion acts on IR estimates up to a sweep old; the ultrasonic ring is the last word
