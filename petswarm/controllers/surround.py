@@ -105,6 +105,8 @@ class SurroundConfig:
     brake_mps2: float = 1.5
     """Improved law: the deceleration a robot counts on to stop; an obstacle point (a wall, the human's body) is
     repelled as if it were nearer by the distance braking from the robot's speed toward it takes."""
+    surround_share: float = 1.0
+    """Improved law: how much of the paper's surround force f_G (``surround_force`` c_i toward the human) it keeps."""
     human_clearance_m: float = 0.3
     """Improved law: the human's body as the law keeps off it, from his centre (his 0.25 m disc and 5 cm more):
     he is repelled from this surface, on the faster of the robot's closing and his (he may stop, or walk into

@@ -73,6 +73,9 @@ class ImprovedSurroundController(SurroundController):
         f_h = self._human_repulsion(human, human_velocity, velocity)
         f_o = (f_o[0] + f_h[0], f_o[1] + f_h[1])
         f_p = self._pull(self._aim(human, human_velocity))
+        if c.surround_share > 0:
+            f_g = self._surround(g, human, velocity)
+            f_p = (f_p[0] + c.surround_share * f_g[0], f_p[1] + c.surround_share * f_g[1])
         self._forces = (f_r, f_o, f_p)
         force = (f_r[0] + f_o[0] + f_p[0], f_r[1] + f_o[1] + f_p[1])
         return self._matched_command(force, velocity, human if human is None else human_velocity, dt)
