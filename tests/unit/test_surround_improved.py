@@ -89,7 +89,17 @@ def _state(t: float, bodies: list[dict[str, Any]], collisions: int, obstacles: l
 
 
 def _robot(name: str, x: float, y: float) -> dict[str, Any]:
-    return {"id": name, "kind": "robot", "x": x, "y": y, "yaw": 0.0, "vx": 0.0, "vy": 0.0, "radius": 0.1, "ir": "beacon"}
+    return {
+        "id": name,
+        "kind": "robot",
+        "x": x,
+        "y": y,
+        "yaw": 0.0,
+        "vx": 0.0,
+        "vy": 0.0,
+        "radius": 0.1,
+        "ir": "beacon",
+    }
 
 
 def _user(x: float, vx: float) -> dict[str, Any]:
