@@ -4,10 +4,11 @@ The paper's law (``surround.SurroundController``) moves the swarm only through t
 robots (c_i ~ 1 where the local centroid lies toward the human; a robot between its local swarm and the human
 has c_i = 0) against a drag on ground speed. Measured in petswarm (docs/RESULTS.md), a swarm under it trails a
 walking human as a tail (2 m behind him at the median) and stalls at a corridor's mouth. This law keeps the
-paper's impedance toward the local centroid, and changes the rest, each from the same sensing (the tracked IR
-beacons of the human and the neighbours, the echoes, the odometry):
+paper's impedance toward the local centroid and its surround force, and changes the rest, each from the same
+sensing (the tracked IR beacons of the human and the neighbours, the echoes, the odometry):
 
-    f_i = f_R + f_O' + f_P + f_M
+    f_i = f_R + f_O' + s f_G + f_P + f_M                                         (f_R, f_G the paper's;
+                                                                                 s = ``surround_share``)
     f_P = (C |q| + F_P clip((|q| - rho) / w, 0, 1)) q / |q|,   q = p_G + T v_G   (centring, and a pull on
                                                                                  robots left behind)
     f_M = D (v_G - v_i)                                                          (move with the human)
