@@ -5,13 +5,17 @@ one schedule (world ticks, body sensors, IR beacons) and every robot and the use
 processes run, on model time. It is deterministic per seed and independent of the machine's load; a process
 run of the same scenario (``--clock wall``) differs only by the processes' scheduling.
 
-Figures per run come from the same ``petswarm.lab.metrics.driving_metrics`` as a process run's, over the world's
-ground truth at 10 Hz; the plot draws how far each run's swarm centre is from its human over time.
+``--law`` picks the law the robots run (the paper's, the improved one, or both in turn), whatever the scenario file
+says. Figures per run come from ``petswarm.lab.surround_metrics`` over the world's ground truth at 50 Hz (contacts
+by kind, connected share, centre to human while he walks, robots ahead of him, r at the end against r*, the time
+to pass the obstacle), with the older ``driving_metrics`` figures beside them; the plot draws r(t) (as the
+paper's Figs. 7 and 9) and the swarm centre's distance from its human, one colour per law.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import sys
 import tempfile
@@ -51,6 +55,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="also the pure simulation of the paper's setups (exact sensing, no hub): r* from both lattices, "
         "thin- and solid-walled corridor and cylinder, each also with noisy sensing",
     )
+    parser.add_argument(
+        "--law",
+        choices=("paper", "improved", "both"),
+        default="paper",
+        help="the law the robots run, whatever the scenario file says: the paper's, the improved one "
+        "(docs/SURROUND.md), or each in turn (default %(default)s)",
+    )
     parser.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
 
 
@@ -61,7 +72,7 @@ def bench_surround(args: argparse.Namespace) -> int:
     from petswarm.bench.surround_sim import surround_figures
     from petswarm.scenario import load
 
-    results: dict[str, Any] = {"first_seed": args.seed, "runs": {}}
+    results: dict[str, Any] = {"first_seed": args.seed, "laws": _laws(args.law), "runs": {}}
     try:  # every file is read before the long runs start
         scenarios = [load(path) for path in args.scenarios]
     except ValueError as err:
@@ -72,12 +83,14 @@ def bench_surround(args: argparse.Namespace) -> int:
             print(f"petswarm bench surround: {path} is not a surround scenario ([surround] enabled)", file=sys.stderr)
             return 2
     for scenario in scenarios:
-        runs = []
-        for seed in range(args.seed, args.seed + args.seeds):
-            print(f"[bench surround] {scenario.name} seed {seed}", file=sys.stderr)
-            world = model_time_run(scenario, seed)
-            runs.append({"seed": seed, **summarise(world)})
-        results["runs"][scenario.name] = runs
+        results["runs"][scenario.name] = {}
+        for law in results["laws"]:
+            runs = []
+            for seed in range(args.seed, args.seed + args.seeds):
+                print(f"[bench surround] {scenario.name} law {law} seed {seed}", file=sys.stderr)
+                world = model_time_run(with_law(scenario, law), seed)
+                runs.append({"seed": seed, **summarise(world)})
+            results["runs"][scenario.name][law] = runs
     if args.paper:
         print("[bench surround] the paper's setups, pure simulation", file=sys.stderr)
         results["pure_simulation"] = surround_figures(args.seed)
@@ -88,8 +101,17 @@ def bench_surround(args: argparse.Namespace) -> int:
     return 0
 
 
+def _laws(choice: str) -> list[str]:
+    return ["paper", "improved"] if choice == "both" else [choice]
+
+
+def with_law(scenario: Scenario, law: str) -> Scenario:
+    """``scenario`` with its robots running ``law`` (its other ``[surround]`` settings kept)."""
+    return dataclasses.replace(scenario, surround={**scenario.surround, "law": law})
+
+
 def model_time_run(scenario: Scenario, seed: int, record_dir: str | Path | None = None) -> list[dict[str, Any]]:
-    """One ``--clock model`` run of ``scenario``: the world's states at 10 Hz, from the run's world.jsonl."""
+    """One ``--clock model`` run of ``scenario``: the world's states at 50 Hz, from the run's world.jsonl."""
     from petswarm.lab.model_run import execute  # the hub's side: see bench_surround
     from petswarm.lab.run import RunOptions
 
@@ -107,53 +129,40 @@ def model_time_run(scenario: Scenario, seed: int, record_dir: str | Path | None 
             clock="model",
         )
         execute(opts, scenario)
-        return read_world(record / "world.jsonl")[RECORD_EVERY - 1 :: RECORD_EVERY]
+        return read_world(record / "world.jsonl")
 
 
 def summarise(world: list[dict[str, Any]]) -> dict[str, Any]:
-    """A run's surround figures, and its centre-to-human distance over time (for the plot)."""
-    figures = driving_metrics(world)
-    series = []
-    for state in world[::5]:  # 2 Hz is plenty for the plot, and keeps the JSON readable
-        user = next(b for b in state["bodies"] if b["kind"] == "user")
-        robots = np.array([(b["x"], b["y"]) for b in state["bodies"] if b["kind"] == "robot"])
-        series.append(
-            [round(state["t_us"] / 1e6, 2), round(float(np.hypot(*(robots.mean(axis=0) - (user["x"], user["y"])))), 3)]
-        )
+    """A run's surround figures (``surround_metrics``), the older driving ones on the 10 Hz states they were
+    defined on, and the centre-to-human distance over time (for the plot)."""
+    from petswarm.lab.surround_metrics import surround_metrics
+
+    figures = surround_metrics(world)
+    sampled = world[RECORD_EVERY - 1 :: RECORD_EVERY]
+    driving = driving_metrics(sampled)
     keys = ("collisions", "connected_fraction", "centre_to_user_m", "centre_to_user_end_m", "extent_end_m")
-    ahead = _ahead_while_walking(world)
-    return {**{k: figures[k] for k in keys}, "ahead_while_walking": ahead, "centre_to_user_series": series}
-
-
-def _ahead_while_walking(world: list[dict[str, Any]]) -> float | None:
-    """The mean fraction of robots ahead of the human (past him along his heading) while he walks faster than
-    0.5 m/s: a swarm that surrounds him keeps some ahead; one that trails him as a tail keeps none."""
-    fractions = []
-    for state in world:
-        user = next(b for b in state["bodies"] if b["kind"] == "user")
-        if math.hypot(user["vx"], user["vy"]) < 0.5:
-            continue
-        heading = np.array([math.cos(user["yaw"]), math.sin(user["yaw"])])
-        robots = np.array([(b["x"], b["y"]) for b in state["bodies"] if b["kind"] == "robot"])
-        fractions.append(float(np.mean((robots - (user["x"], user["y"])) @ heading > 0)))
-    return round(float(np.mean(fractions)), 3) if fractions else None
+    series = figures.pop("series")
+    return {
+        **{k: driving[k] for k in keys},
+        **figures,
+        "centre_to_user_series": [[t, centre] for t, _, centre in series],
+        "extent_series": [[t, r] for t, r, _ in series],
+    }
 
 
 def table(results: dict[str, Any]) -> list[str]:
-    """One line per run."""
-    head = f"{'scenario':20s} {'seed':>4s} {'contacts':>8s} {'connected':>9s} {'centre-human median':>19s}"
-    lines = [f"{head} {'end':>6s} {'r end':>6s} {'ahead walking':>13s}"]
-    for name, runs in results["runs"].items():
-        for run in runs:
-            median = (run["centre_to_user_m"] or {}).get("median", float("nan"))
-            lines.append(
-                f"{name:20s} {run['seed']:4d} {run['collisions']:8d} {run['connected_fraction']:9.3f} "
-                f"{median:19.2f} {run['centre_to_user_end_m']:6.2f} {run['extent_end_m']:6.3f} "
-                f"{run['ahead_while_walking'] if run['ahead_while_walking'] is not None else float('nan'):13.2f}"
-            )
+    """One line per run: contacts by kind (robot-robot/robot-obstacle/robot-human), connected share, the
+    centre-to-human median and p90 while he walks, the share of robots ahead of him, r at the end, the time
+    to pass the obstacle (human reaching it to last robot leaving it)."""
+    head = f"{'scenario':26s} {'law':8s} {'seed':>4s} {'contacts rr/ro/rh':>17s} {'connected':>9s}"
+    lines = [f"{head} {'centre-human med/p90':>20s} {'ahead':>5s} {'r end':>6s} {'pass (s)':>8s}"]
+    for name, laws in results["runs"].items():
+        for law, runs in laws.items():
+            for run in runs:
+                lines.append(_row(name, law, run))
     pure = results.get("pure_simulation")
     if pure:
-        lines.append(f"pure simulation (seed {pure['seed']}): r* {pure['r_star']}")
+        lines.append(f"pure simulation, the paper's law (seed {pure['seed']}): r* {pure['r_star']}")
         for name, fig in pure.items():
             if isinstance(fig, dict) and "trailing_m" in fig:
                 contacts = fig["robot_robot_contacts"] + fig["robot_obstacle_contacts"] + fig["robot_human_contacts"]
@@ -164,24 +173,55 @@ def table(results: dict[str, Any]) -> list[str]:
     return lines
 
 
+def _row(name: str, law: str, run: dict[str, Any]) -> str:
+    c = run["contacts"]
+    kinds = f"{c['robot_robot']}/{c['robot_obstacle']}/{c['robot_human']}" + (
+        f"+{c['unattributed']}" if c["unattributed"] else ""
+    )
+    centre = run["centre_to_human_walking_m"] or {"median": math.nan, "p90": math.nan}
+    ahead = run["ahead_while_walking"] if run["ahead_while_walking"] is not None else math.nan
+    passing = (run["obstacle_pass"] or {}).get("time_to_pass_s")
+    return (
+        f"{name:26s} {law:8s} {run['seed']:4d} {kinds:>17s} {run['connected_fraction']:9.3f} "
+        f"{centre['median']:9.2f}/{centre['p90']:<10.2f} {ahead:5.2f} {run['r_end_m']:6.3f} "
+        f"{'-' if passing is None else f'{passing:.1f}':>8s}"
+    )
+
+
+LAW_COLOURS = {"paper": "#c44e52", "improved": "#4c72b0"}
+
+
 def plot(results: dict[str, Any], path: Path) -> None:
-    """The swarm centre's distance from its human over time, one panel per scenario, one line per seed."""
+    """Per scenario, r(t) of every run (as the paper's Figs. 7 and 9, r* dashed) and the swarm centre's
+    distance from the human; one colour per law."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from petswarm.lab.surround_metrics import R_STAR_M
+
     names = list(results["runs"])
-    fig, axes = plt.subplots(len(names), 1, figsize=(8, 3 * len(names)), squeeze=False)
-    for ax, name in zip(axes[:, 0], names, strict=True):
-        for run in results["runs"][name]:
-            t, d = np.array(run["centre_to_user_series"]).T
-            ax.plot(t, d, label=f"seed {run['seed']}: {run['collisions']} contacts")
-        ax.set_title(f"{name} (model time)")
-        ax.set_xlabel("time (s)")
-        ax.set_ylabel("swarm centre to human (m)")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
+    fig, axes = plt.subplots(len(names), 2, figsize=(13, 3.2 * len(names)), squeeze=False)
+    for (ax_r, ax_c), name in zip(axes, names, strict=True):
+        for law, runs in results["runs"][name].items():
+            for k, run in enumerate(runs):
+                label = f"{law} ({len(runs)} seeds)" if k == 0 else None
+                colour = LAW_COLOURS.get(law)
+                t, r = np.array(run["extent_series"], dtype=float).T
+                ax_r.plot(t, r, color=colour, lw=0.8, alpha=0.7, label=label)
+                t, d = np.array(run["centre_to_user_series"], dtype=float).T
+                ax_c.plot(t, d, color=colour, lw=0.8, alpha=0.7, label=label)
+        ax_r.axhline(R_STAR_M, ls="--", color="k", lw=0.8, label="r* 0.65 m")
+        ax_r.axhspan(0.9 * R_STAR_M, 1.1 * R_STAR_M, color="k", alpha=0.07)
+        ax_r.set_title(f"{name}: extent r(t) (model time)", fontsize=10)
+        ax_r.set_ylabel("r (m)")
+        ax_c.set_title(f"{name}: swarm centre to human", fontsize=10)
+        ax_c.set_ylabel("distance (m)")
+        for ax in (ax_r, ax_c):
+            ax.set_xlabel("time (s)")
+            ax.grid(alpha=0.3)
+            ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)

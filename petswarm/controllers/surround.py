@@ -47,6 +47,8 @@ else:
 MIN_RANGE_M = 0.02
 """Sensed points closer than this are taken to be this far: a point at the centre has no direction, and
 the repulsion Q / d^2 must stay finite (robots touch at 0.2 m, walls at 0.1 m, far above it)."""
+LAWS = ("paper", "improved")
+"""The surround laws a robot can run (``SurroundConfig.law``)."""
 STILL_MPS = 1e-3
 """Below this speed the robot's own heading theta_v is undefined: the velocity factor of c_i is then 1/2."""
 
@@ -86,11 +88,40 @@ class SurroundConfig:
     body_mass: float = 1.0
     drag: float = 0.3
     centroid_filter_s: float = 0.0
+    law: str = "paper"
+    """Which law the robots run: ``paper`` (this module, the spec's) or ``improved`` (``surround_improved``,
+    beyond the paper: docs/SURROUND.md). The fields below are the improved law's only; the paper's ignores them."""
+    pull_force: float = 1.5
+    """Improved law: the pull (m/s^2) toward the human on a robot he left behind (farther than ``pull_radius_m``)."""
+    pull_radius_m: float = 0.8
+    """Improved law: within this distance of the human no pull acts (the local forces alone shape the swarm)."""
+    pull_ramp_m: float = 0.4
+    """Improved law: the pull grows linearly from 0 at ``pull_radius_m`` to ``pull_force`` this much further out."""
+    centring: float = 2.0
+    """Improved law: a spring (/s^2) toward the human on every robot, so the swarm's centre settles on him."""
+    lead_s: float = 0.4
+    """Improved law: the pull aims at where the human will be this much later (his position plus his velocity
+    times it), not where he is."""
+    brake_mps2: float = 1.5
+    """Improved law: the deceleration a robot counts on to stop; an obstacle point (a wall, the human's body) is
+    repelled as if it were nearer by the distance braking from the robot's speed toward it takes."""
+    surround_share: float = 1.0
+    """Improved law: how much of the paper's surround force f_G (``surround_force`` c_i toward the human) it keeps."""
+    human_clearance_m: float = 0.3
+    """Improved law: the human's body as the law keeps off it, from his centre (his 0.25 m disc and 5 cm more):
+    he is repelled from this surface, on the faster of the robot's closing and his (he may stop, or walk into
+    it)."""
+    velocity_match: float = 6.0
+    """Improved law: the gain (/s) pulling the robot's velocity to the human's (the paper's drag, relative to him)."""
 
     def __post_init__(self) -> None:
+        if self.law not in LAWS:
+            raise ValueError(f"law must be one of {LAWS}, not {self.law!r}")
         positive = ("sight_m", "avoidance_m", "max_speed_mps", "max_accel_mps2", "robot_radius_m", "dt_s")
-        positive += ("body_mass", "stiffness")
+        positive += ("body_mass", "stiffness", "pull_ramp_m", "brake_mps2")
         for name in dataclasses.fields(self):
+            if name.name == "law":
+                continue
             value = getattr(self, name.name)
             if not isinstance(value, int | float) or isinstance(value, bool) or not math.isfinite(value):
                 raise ValueError(f"{name.name} must be a finite number, not {value!r}")

@@ -12,8 +12,9 @@ instant, and steps on without one when a sample comes alone):
    and steps on its echoes alone, so it still keeps off walls and slows to a stop);
 2. the tracked beacons and the ultrasonic echoes become neighbours, obstacles and the human
    (``surround_sensing.sense``);
-3. the surround law (``surround.SurroundController``) turns them into a velocity, with the fresh odometry as
-   the law's own velocity;
+3. the surround law (``surround.SurroundController``, or ``surround_improved.ImprovedSurroundController`` when
+   the config's ``law`` is ``improved``, which also takes the human's tracked velocity) turns them into a
+   velocity, with the fresh odometry as the law's own velocity;
 4. the Pet-Bot's safety stage on the ultrasonic ring (``SAFETY``) has the last word.
 
 Why every sensor sample: stepping only per sweep (50 ms) made the swarm bounce (the repulsion Q / d^2 is
@@ -36,6 +37,7 @@ from petswarm.controllers.driving import EchoRanges
 from petswarm.controllers.motion import DriveLimits, MotorCommand
 from petswarm.controllers.pet_controller import PetControllerConfig, safety
 from petswarm.controllers.surround import SurroundConfig, SurroundController
+from petswarm.controllers.surround_improved import ImprovedSurroundController
 from petswarm.controllers.surround_sensing import BeaconTracker, SensingConfig, beacon_fixes, echo_list, sense_lists
 from radio_hub.interface import BeaconSweep, IrConfig, OwnSensors, lazy_numpy
 
@@ -77,7 +79,8 @@ class SurroundPilot:
 
     def __init__(self, config: SurroundDriverConfig) -> None:
         self.config = config
-        self.controller = SurroundController(config.law)
+        improved = config.law.law == "improved"
+        self.controller = ImprovedSurroundController(config.law) if improved else SurroundController(config.law)
         self.tracker = BeaconTracker()
         self.command = np.zeros(2)
         self.engaged = False
@@ -126,7 +129,17 @@ class SurroundPilot:
             return None
         self.engaged = True
         velocity = (float(sensors.odometry[0]), float(sensors.odometry[1]))
-        vx, vy = self.controller.step_plain(neighbours, obstacles, human, velocity, dt)
+        controller = self.controller
+        if isinstance(controller, ImprovedSurroundController):
+            names, moving = tracker.names, tracker.velocities.tolist()
+            others = [v for name, v in zip(names, moving, strict=True) if name != config.human_id]
+            own = tracker.velocity_of(config.human_id)
+            # the improved law keeps off the human's body itself (his centre and velocity): his surface point,
+            # which sensing put last among the obstacles, is left out
+            echoes = obstacles if human is None else obstacles[:-1]
+            vx, vy = controller.step_plain(neighbours, echoes, human, velocity, dt, own, others)
+        else:
+            vx, vy = controller.step_plain(neighbours, obstacles, human, velocity, dt)
         # the law's repulsion acts on IR estimates up to a sweep old; the ultrasonic ring is the last word
         safe = safety(MotorCommand(vx, vy, 0.0), self._echoes.ranges(sensors), SAFETY)
         self.command = np.array([safe.vx, safe.vy])

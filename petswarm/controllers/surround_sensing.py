@@ -160,6 +160,19 @@ class BeaconTracker:
         """The tracked beacons' positions now (k, 2), in the order of ``names``."""
         return self._position
 
+    @property
+    def velocities(self) -> np.ndarray:
+        """The tracked beacons' own velocities (k, 2), in the order of ``names``, in the robot's frame."""
+        return self._velocity
+
+    def velocity_of(self, name: str) -> tuple[float, float] | None:
+        """The tracked velocity of beacon ``name`` (its own, not relative to us, in our frame), or None untracked."""
+        row = self._rows.get(name)
+        if row is None:
+            return None
+        vx, vy = self._velocity[row].tolist()
+        return vx, vy
+
     def predict(self, own_velocity: np.ndarray, dt: float) -> None:
         """Move every track ``dt`` seconds on: it drives at its velocity, we at ``own_velocity`` (odometry)."""
         if not dt >= 0:

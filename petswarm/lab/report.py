@@ -3,7 +3,9 @@
 Works on a finished run and on one that was killed midway (only the summary it wrote while running, or
 none: the events still tell the story).
 A scenario run also leaves the hub's ground truth (``world.jsonl``); from it come the driving figures, the
-bodies' paths (``trajectories.png``) and each slave's formation error over time (``formation_error.png``).
+bodies' paths (``trajectories.png``) and each slave's formation error over time (``formation_error.png``); a
+surround run (robots in IR beacon mode round a user) also gets the swarm and its human at six instants
+(``surround_snapshots.png``, as the surround paper's Fig. 8).
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from typing import Any
 
 from petswarm.lab.metrics import describe_driving, driving_metrics, read_world, rotation_starts
 from petswarm.lab.records import read_events
+from petswarm.lab.surround_plots import is_surround_run, plot_snapshots
 
 STATE_COLOURS = {
     "waiting": "#bbbbbb",
@@ -72,7 +75,16 @@ def plot_world(world_log: Path, summary: dict[str, Any] | None, out: Path) -> tu
     plots = [out / "trajectories.png", out / "formation_error.png"]
     plot_trajectories(world, plots[0])
     plot_formation_error(driving, rotation_starts(world), faults, plots[1])
+    if is_surround_run(world):
+        # the swarm and its human at a few instants, as the surround paper's Fig. 8
+        name = (summary or {}).get("scenario")
+        title = _snapshot_title(name if isinstance(name, str) else None)
+        plots.append(plot_snapshots(world, out / "surround_snapshots.png", title=title))
     return driving, plots
+
+
+def _snapshot_title(name: str | None) -> str:
+    return f"{name or 'surround run'}: robots (blue), the human (red, arrow his heading), swarm centre (x)"
 
 
 def describe(manifest: dict[str, Any], summary: dict[str, Any] | None, events: dict[str, list]) -> list[str]:

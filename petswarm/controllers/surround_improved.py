@@ -1,0 +1,189 @@
+"""The improved surround law: beyond the paper, a swarm that keeps its human inside it while he walks.
+
+The paper's law (``surround.SurroundController``) moves the swarm only through the surround force of its rear
+robots (c_i ~ 1 where the local centroid lies toward the human; a robot between its local swarm and the human
+has c_i = 0) against a drag on ground speed. Measured in petswarm (docs/RESULTS.md), a swarm under it trails a
+walking human as a tail (2 m behind him at the median) and stalls at a corridor's mouth. This law keeps the
+paper's impedance toward the local centroid and its surround force, and changes the rest, each from the same
+sensing (the tracked IR beacons of the human and the neighbours, the echoes, the odometry):
+
+    f_i = f_R + f_O' + s f_G + f_P + f_M                                         (f_R, f_G the paper's;
+                                                                                 s = ``surround_share``)
+    f_P = (C |q| + F_P clip((|q| - rho) / w, 0, 1)) q / |q|,   q = p_G + T v_G   (centring, and a pull on
+                                                                                 robots left behind)
+    f_M = D (v_G - v_i)                                                          (move with the human)
+    f_O' = - sum Q / d_eff^2 p / |p|,   d_eff = |p| - closing^2 / (2 a_b)        (repulsion on braking distance)
+
+- f_M, the velocity match: the paper's drag measured against the human's velocity v_G (his beacon's track)
+  instead of the ground. Under the paper's law the swarm needs a standing lag for its rear to push it along;
+  with f_M every robot, front ones included, moves at his pace.
+- f_P: a soft spring C toward the human on every robot, so the swarm's centre settles on him (what keeps him
+  inside, not at its front edge), and beyond rho a pull growing to F_P on robots he has left behind (held by
+  an obstacle, at the tail of a file through a gap). It aims T seconds ahead of him (q = p_G + T v_G):
+  obstacles and the stop rules only ever hold robots back, so the swarm aims a little ahead to end round him.
+- f_O': the paper's repulsion, but a point the robot is closing on counts as nearer by the distance braking
+  takes (closing speed: its own toward an obstacle point, the human's body included, as he may stop at any
+  step; relative to a neighbour's tracked velocity for a neighbour). The paper's Q / d^2 ignores speed, and
+  a robot closing at 0.4 m/s on a slower neighbour or on the back of a human who stops touched it.
+
+Without the human's beacon (not seen yet, or lost) f_P is zero and f_M falls back to the paper's drag. The
+force becomes a velocity as in the paper's law (unit virtual mass, clipped acceleration and speed).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+from petswarm.controllers.surround import MIN_RANGE_M, SurroundConfig, SurroundController
+
+
+class ImprovedSurroundController(SurroundController):
+    """One robot's improved surround law, in its own frame, in plain floats (see the module's docstring)."""
+
+    def __init__(self, config: SurroundConfig | None = None) -> None:
+        super().__init__(config)
+        self._human_velocity: tuple[float, float] | None = None
+
+    def step_plain(
+        self,
+        neighbours: Sequence[Sequence[float]],
+        obstacles: Sequence[Sequence[float]],
+        human: Sequence[float] | None,
+        velocity: Sequence[float],
+        dt: float,
+        human_velocity: Sequence[float] | None = None,
+        neighbour_velocities: Sequence[Sequence[float]] | None = None,
+    ) -> tuple[float, float]:
+        """The velocity command; as the paper's ``step_plain``, with the human's own velocity ``human_velocity``
+        (his tracked beacon's, in this robot's frame; None when unknown) and the neighbours' own velocities
+        ``neighbour_velocities`` (their tracks', in the order of ``neighbours``; None: taken to be still)."""
+        if not dt > 0:
+            raise ValueError(f"dt must be > 0, not {dt!r}")
+        c = self.config
+        distances = [math.sqrt(x * x + y * y) for x, y in neighbours]
+        near = [d <= c.sight_m for d in distances]
+        g, count = self._centroid(neighbours, near, dt)
+        rate, accel = self._derivatives(g, count, dt)
+        f_r = (
+            c.inertia * accel[0] + c.damping * rate[0] + c.stiffness * g[0],
+            c.inertia * accel[1] + c.damping * rate[1] + c.stiffness * g[1],
+        )
+        moving = neighbour_velocities if neighbour_velocities is not None else [(0.0, 0.0)] * len(neighbours)
+        f_o = self._braking_repulsion(neighbours, moving, distances, near, obstacles, velocity)
+        f_h = self._human_repulsion(human, human_velocity, velocity)
+        f_o = (f_o[0] + f_h[0], f_o[1] + f_h[1])
+        f_p = self._pull(self._aim(human, human_velocity))
+        if c.surround_share > 0:
+            f_g = self._surround(g, human, velocity)
+            f_p = (f_p[0] + c.surround_share * f_g[0], f_p[1] + c.surround_share * f_g[1])
+        self._forces = (f_r, f_o, f_p)
+        force = (f_r[0] + f_o[0] + f_p[0], f_r[1] + f_o[1] + f_p[1])
+        return self._matched_command(force, velocity, human if human is None else human_velocity, dt)
+
+    def _braking_repulsion(
+        self,
+        neighbours: Sequence[Sequence[float]],
+        moving: Sequence[Sequence[float]],
+        distances: list[float],
+        near: list[bool],
+        obstacles: Sequence[Sequence[float]],
+        velocity: Sequence[float],
+    ) -> tuple[float, float]:
+        """f_O: the paper's Q / d^2 from neighbours within A, and from obstacle points at the distance left once
+        the robot has braked: d - v_toward^2 / (2 brake), v_toward its own speed toward the point. A robot
+        closing on a wall's end, or on the back of a human who may stop at any step, is pushed off early
+        enough to stop; sliding past sideways costs nothing."""
+        c = self.config
+        sx = sy = 0.0
+        vx, vy = velocity
+        for (x, y), (ux, uy), d, seen in zip(neighbours, moving, distances, near, strict=True):
+            if not (seen and d > 0):
+                continue
+            closing = max(0.0, ((vx - ux) * x + (vy - uy) * y) / d)
+            left = d - closing * closing / (2 * c.brake_mps2)
+            if left <= c.avoidance_m:
+                reach = max(left, MIN_RANGE_M)
+                magnitude = c.repulsion / (reach * reach)
+                sx, sy = sx + magnitude * x / d, sy + magnitude * y / d
+        for x, y in obstacles:
+            d = math.sqrt(x * x + y * y)
+            if not d > 0:
+                continue
+            toward = max(0.0, (vx * x + vy * y) / d)
+            left = d - toward * toward / (2 * c.brake_mps2)
+            if left <= c.avoidance_m:
+                reach = max(left, MIN_RANGE_M)
+                magnitude = c.repulsion / (reach * reach)
+                sx, sy = sx + magnitude * x / d, sy + magnitude * y / d
+        return -sx, -sy
+
+    def _human_repulsion(
+        self, human: Sequence[float] | None, human_velocity: Sequence[float] | None, velocity: Sequence[float]
+    ) -> tuple[float, float]:
+        """Q / d_eff^2 away from the human's body (``human_clearance_m`` from his centre), d_eff his surface's
+        distance less the braking distance of the faster closing: the robot's own speed toward him (he may
+        stop), or the speed he comes at it (he walks into a robot held in front of him)."""
+        if human is None:
+            return 0.0, 0.0
+        c = self.config
+        hx, hy = human
+        centre = math.sqrt(hx * hx + hy * hy)
+        if not centre > 0:
+            return 0.0, 0.0
+        ux, uy = hx / centre, hy / centre
+        vx, vy = velocity
+        closing = vx * ux + vy * uy
+        if human_velocity is not None:
+            closing = max(closing, closing - (human_velocity[0] * ux + human_velocity[1] * uy))
+        closing = max(0.0, closing)
+        left = centre - c.human_clearance_m - closing * closing / (2 * c.brake_mps2)
+        if left > c.avoidance_m:
+            return 0.0, 0.0
+        reach = max(left, MIN_RANGE_M)
+        magnitude = c.repulsion / (reach * reach)
+        return -magnitude * ux, -magnitude * uy
+
+    def _aim(self, human: Sequence[float] | None, human_velocity: Sequence[float] | None) -> Sequence[float] | None:
+        """Where the pull aims: the human, led by ``lead_s`` of his velocity when it is known."""
+        lead = self.config.lead_s
+        if human is None or human_velocity is None or lead <= 0:
+            return human
+        return human[0] + lead * human_velocity[0], human[1] + lead * human_velocity[1]
+
+    def _pull(self, human: Sequence[float] | None) -> tuple[float, float]:
+        """f_P: toward the human, growing from 0 at ``pull_radius_m`` to ``pull_force`` ``pull_ramp_m`` further."""
+        if human is None:
+            return 0.0, 0.0
+        c = self.config
+        hx, hy = human
+        distance = math.sqrt(hx * hx + hy * hy)
+        if not distance > 0:
+            return 0.0, 0.0
+        strength = c.centring * distance
+        if distance > c.pull_radius_m:
+            strength += c.pull_force * min(1.0, (distance - c.pull_radius_m) / c.pull_ramp_m)
+        return strength * hx / distance, strength * hy / distance
+
+    def _matched_command(
+        self,
+        force: tuple[float, float],
+        velocity: Sequence[float],
+        human_velocity: Sequence[float] | None,
+        dt: float,
+    ) -> tuple[float, float]:
+        """The unit body's next velocity under ``force`` and f_M (or the paper's drag without the human)."""
+        c = self.config
+        vx, vy = velocity
+        if human_velocity is None:
+            mx, my = -c.drag * vx, -c.drag * vy
+        else:
+            mx, my = c.velocity_match * (human_velocity[0] - vx), c.velocity_match * (human_velocity[1] - vy)
+        ax, ay = _clip(force[0] + mx, force[1] + my, c.max_accel_mps2)
+        return _clip(vx + ax * dt, vy + ay * dt, c.max_speed_mps)
+
+
+def _clip(x: float, y: float, limit: float) -> tuple[float, float]:
+    """The vector (x, y) shortened to ``limit`` if longer."""
+    scale = min(1.0, limit / max(math.sqrt(x * x + y * y), 1e-12))
+    return x * scale, y * scale

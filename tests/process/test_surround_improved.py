@@ -1,0 +1,69 @@
+"""The improved surround law (docs/SURROUND.md) as 20 robot processes and the human's process in lockstep: each
+robot senses only its IR beacons, its echoes and its odometry, and the swarm must keep its human inside it
+past the obstacle. The bounds are issue 17's, asserted as they are written (docs/RESULTS.md has the 10-seed
+model-time figures and the 5-of-5 process runs):
+
+- no contact of any kind (robot-robot, robot-obstacle, robot-human);
+- connected at least 99 % of the time;
+- the swarm's centre within 0.5 m of the walking human at the median;
+- r at the end within 10 % of r* (0.65 m).
+
+One seed per scenario keeps each run near a minute. The corridor is expected to fail: its thin walls' ends
+are invisible to the ultrasonic ring until a robot on their line touches them, and the swarm lags in it
+(docs/RESULTS.md); the test is strict, so it reports the day the law meets the bounds there.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from petswarm.lab.metrics import read_world
+from petswarm.lab.surround_metrics import R_STAR_M, surround_metrics
+
+pytestmark = pytest.mark.process
+ROOT = Path(__file__).resolve().parents[2]
+
+CONNECTED_FRACTION = 0.99
+CENTRE_MEDIAN_M = 0.5
+EXTENT_OFF = 0.10
+"""|r_end - r*| / r* at most this."""
+
+CORRIDOR_MISSES = pytest.mark.xfail(
+    strict=True,
+    reason="the improved law does not meet the bounds in the thin-walled corridor yet (docs/RESULTS.md)",
+)
+
+
+@pytest.mark.timeout(400)
+@pytest.mark.parametrize(
+    "scenario",
+    ["surround-cylinder-improved", pytest.param("surround-corridor-improved", marks=CORRIDOR_MISSES)],
+)
+def test_improved_surround_robot_processes_keep_their_human_inside_past_the_obstacle(
+    tmp_path: Path, scenario: str
+) -> None:
+    record = tmp_path / "run"
+    argv = [sys.executable, "-m", "cli", "run", str(ROOT / "scenarios" / f"{scenario}.toml"), "--seed", "1"]
+    done = subprocess.run(
+        [*argv, "--clock", "lockstep", "--json", "--record", str(record)],
+        capture_output=True,
+        text=True,
+        timeout=380,
+        cwd=ROOT,
+    )
+    assert done.stdout, done.stderr[-2000:]
+    summary = json.loads(done.stdout)
+    assert summary["ok"], summary["problems"]
+    exit_codes = json.loads((record / "summary.json").read_text()).get("exit_codes", {})
+    # every robot ran (a robot slow to leave once model time is over may be killed: not the law's concern)
+    assert len([name for name in exit_codes if name.startswith("robot-")]) == 20
+    figures = surround_metrics(read_world(record / "world.jsonl"))
+    assert figures["contacts"]["total"] == 0, figures["contacts"]
+    assert figures["connected_fraction"] >= CONNECTED_FRACTION, figures["connected_fraction"]
+    assert figures["centre_to_human_walking_m"]["median"] <= CENTRE_MEDIAN_M, figures["centre_to_human_walking_m"]
+    assert abs(figures["r_end_m"] - R_STAR_M) <= EXTENT_OFF * R_STAR_M, figures["r_end_m"]

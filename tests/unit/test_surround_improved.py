@@ -1,0 +1,172 @@
+"""The improved surround law (petswarm/controllers/surround_improved.py), its selection, and the surround figures
+and snapshot instants drawn from world lines (petswarm/lab/surround_metrics.py, surround_plots.py)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import pytest
+
+from petswarm.controllers.surround import SurroundConfig, SurroundController
+from petswarm.controllers.surround_improved import ImprovedSurroundController
+from petswarm.controllers.surround_pilot import SurroundDriverConfig, SurroundPilot
+from petswarm.lab.surround_metrics import contacts, obstacle_pass, surround_metrics
+from petswarm.lab.surround_plots import is_surround_run, snapshot_instants
+from petswarm.scenario import _surround
+
+IMPROVED = SurroundConfig(law="improved")
+DT = 0.04
+
+
+def test_the_law_is_named_and_checked_and_the_paper_stays_the_default() -> None:
+    assert SurroundConfig().law == "paper"
+    with pytest.raises(ValueError, match="law must be one of"):
+        SurroundConfig(law="better")
+    with pytest.raises(ValueError, match="brake_mps2"):
+        SurroundConfig(law="improved", brake_mps2=0.0)
+    assert SurroundConfig.from_dict(IMPROVED.to_dict()) == IMPROVED
+    assert _surround({"enabled": True, "law": "improved"})["law"] == "improved"
+    with pytest.raises(ValueError, match="law"):
+        _surround({"enabled": True, "law": 3})
+
+
+def test_the_pilot_runs_the_law_its_config_names() -> None:
+    assert type(SurroundPilot(SurroundDriverConfig()).controller) is SurroundController
+    assert type(SurroundPilot(SurroundDriverConfig(law=IMPROVED)).controller) is ImprovedSurroundController
+
+
+def test_a_lone_robot_beside_a_walking_human_takes_up_his_pace() -> None:
+    """Velocity match: the paper's law has only the rear's surround force to move a robot level with him."""
+    improved = ImprovedSurroundController(IMPROVED)
+    velocity = (0.0, 0.0)
+    for _ in range(50):  # 2 s; the human walks at 1 m/s along x, 0.5 m to the robot's left
+        velocity = improved.step_plain([], [], (0.0, 0.5), velocity, DT, human_velocity=(1.0, 0.0))
+    assert velocity[0] == pytest.approx(1.0, abs=0.15)
+    paper = SurroundController(SurroundConfig())
+    still = (0.0, 0.0)
+    for _ in range(50):
+        still = paper.step_plain([], [], (0.0, 0.5), still, DT)
+    assert abs(still[0]) < 0.05  # level with him, c_i gives no push along his walk
+
+
+def test_a_robot_the_human_left_behind_is_pulled_to_him_harder_than_one_beside_him() -> None:
+    far, near = ImprovedSurroundController(IMPROVED), ImprovedSurroundController(IMPROVED)
+    v_far = far.step_plain([], [], (2.0, 0.0), (0.0, 0.0), DT, human_velocity=(0.0, 0.0))
+    v_near = near.step_plain([], [], (0.85, 0.0), (0.0, 0.0), DT, human_velocity=(0.0, 0.0))
+    assert v_far[0] > v_near[0] > 0
+    assert abs(v_far[1]) < 1e-12
+
+
+def test_closing_on_an_obstacle_point_repels_harder_than_standing_off_it() -> None:
+    wall = [(0.45, 0.0)]
+    closing, still = ImprovedSurroundController(IMPROVED), ImprovedSurroundController(IMPROVED)
+    v_closing = closing.step_plain([], wall, None, (1.0, 0.0), DT)
+    v_still = still.step_plain([], wall, None, (0.0, 0.0), DT)
+    # 0.45 m off: within A either way, but the braking distance of 1 m/s brings the wall much nearer
+    assert closing.last_forces[1][0] < 10 * still.last_forces[1][0] < 0
+    assert v_closing[0] < 1.0 and v_still[0] < 0.0
+
+
+def test_a_human_walking_into_a_robot_held_in_front_of_him_pushes_it_off() -> None:
+    ahead, beside = ImprovedSurroundController(IMPROVED), ImprovedSurroundController(IMPROVED)
+    # the robot stands 0.7 m ahead of him (he is behind it, at -x), he comes at 1 m/s
+    pushed = ahead.step_plain([], [], (-0.7, 0.0), (0.0, 0.0), DT, human_velocity=(1.0, 0.0))
+    calm = beside.step_plain([], [], (-0.7, 0.0), (0.0, 0.0), DT, human_velocity=(0.0, 0.0))
+    assert pushed[0] > calm[0]
+
+
+def test_a_neighbour_closing_from_behind_is_repelled_by_its_tracked_speed() -> None:
+    fast, slow = ImprovedSurroundController(IMPROVED), ImprovedSurroundController(IMPROVED)
+    behind = [(-0.45, 0.0)]
+    v_fast = fast.step_plain(behind, [], None, (0.0, 0.0), DT, neighbour_velocities=[(1.0, 0.0)])
+    v_slow = slow.step_plain(behind, [], None, (0.0, 0.0), DT, neighbour_velocities=[(0.0, 0.0)])
+    assert v_fast[0] > v_slow[0]
+
+
+def _state(t: float, bodies: list[dict[str, Any]], collisions: int, obstacles: list | None = None) -> dict:
+    return {"t_us": round(t * 1e6), "bodies": bodies, "collisions": collisions, "obstacles": obstacles or []}
+
+
+def _robot(name: str, x: float, y: float) -> dict[str, Any]:
+    return {
+        "id": name,
+        "kind": "robot",
+        "x": x,
+        "y": y,
+        "yaw": 0.0,
+        "vx": 0.0,
+        "vy": 0.0,
+        "radius": 0.1,
+        "ir": "beacon",
+    }
+
+
+def _user(x: float, vx: float) -> dict[str, Any]:
+    return {"id": "user", "kind": "user", "x": x, "y": 0.0, "yaw": 0.0, "vx": vx, "vy": 0.0, "radius": 0.25}
+
+
+def test_new_contacts_are_put_down_to_the_pairs_touching_when_the_count_rose() -> None:
+    wall = [{"kind": "wall", "x0": 0.0, "y0": 1.0, "x1": 5.0, "y1": 1.0}]
+    world = [
+        _state(0.02, [_robot("robot-1", 0, -1), _robot("robot-2", 1, -1), _user(3, 0)], 0, wall),
+        # robot-1 touches robot-2 (0.2 m apart), robot-3 the wall, robot-4 the human: three new contacts
+        _state(
+            0.04,
+            [
+                _robot("robot-1", 0.8, -1),
+                _robot("robot-2", 1.0, -1),
+                _robot("robot-3", 2.0, 0.9),
+                _robot("robot-4", 3.35, 0.0),
+                _user(3, 0),
+            ],
+            3,
+            wall,
+        ),
+        _state(0.06, [_robot("robot-1", 0, -1), _user(3, 0)], 4, wall),  # one nobody can be blamed for
+    ]
+    assert contacts(world) == {
+        "robot_robot": 1,
+        "robot_obstacle": 1,
+        "robot_human": 1,
+        "unattributed": 1,
+        "total": 4,
+    }
+
+
+def _walk() -> list[dict[str, Any]]:
+    """A human standing 2 s, then walking along x at 1 m/s past a cylinder (x 4..6) to x 8, then standing to
+    11 s; two robots 0.5 m behind him, abreast."""
+    cylinder = [{"kind": "circle", "x": 5.0, "y": 2.0, "r": 1.0}]
+    world = []
+    for k in range(1, 551):
+        t = k * 0.02
+        x = min(max(t - 2.0, 0.0), 8.0)
+        robots = [_robot("robot-1", x - 0.5, 0.3), _robot("robot-2", x - 0.5, -0.3)]
+        world.append(_state(t, [*robots, _user(x, 1.0 if 2.0 < t < 10.0 else 0.0)], 0, cylinder))
+    return world
+
+
+def test_the_figures_of_a_walk_past_an_obstacle() -> None:
+    figures = surround_metrics(_walk())
+    assert figures["contacts"]["total"] == 0
+    assert figures["connected_fraction"] == 1.0
+    assert figures["centre_to_human_walking_m"]["median"] == pytest.approx(0.5, abs=1e-3)
+    assert figures["ahead_while_walking"] == 0.0
+    assert figures["r_end_m"] == pytest.approx(0.3)
+    passing = obstacle_pass(_walk())
+    assert passing["human_reached_s"] == pytest.approx(6.0, abs=0.03)
+    assert passing["human_past_s"] == pytest.approx(8.02, abs=0.03)
+    assert passing["swarm_past_s"] == pytest.approx(8.52, abs=0.03)
+    assert passing["time_to_pass_s"] == pytest.approx(2.52, abs=0.03)
+    assert passing["lag_s"] == pytest.approx(0.5, abs=0.03)
+
+
+def test_snapshots_show_the_gathered_swarm_the_walk_and_the_end() -> None:
+    world = _walk()
+    instants = snapshot_instants(world, 6)
+    times = [world[i]["t_us"] / 1e6 for i in instants]
+    assert len(instants) == 6 and times[-1] == pytest.approx(11.0)
+    assert times == sorted(times) and all(not math.isnan(t) for t in times)
+    assert is_surround_run(world)
+    assert not is_surround_run([_state(0.02, [{**_robot("robot-1", 0, 0), "ir": "idle"}, _user(0, 0)], 0)])
