@@ -15,6 +15,7 @@ from __future__ import annotations
 import functools
 import math
 import operator
+from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 from typing import Any, ClassVar
 
@@ -444,20 +445,51 @@ holds at most 64 values."""
 
 
 def _check_types(msg: Message) -> None:
-    for name, nullable, kind, accepted, lengths in _checks(type(msg)):
+    for name, ok in _field_checks(type(msg)):
         value: Any = getattr(msg, name)
-        if value is None and nullable:
-            continue
-        if kind == _STRINGS:
-            ok = isinstance(value, list) and (
+        if not ok(value):
+            raise WireError(f"{msg.TYPE}.{name} has the wrong type ({type(value).__name__})")
+
+
+@functools.cache
+def _field_checks(cls: type[Message]) -> tuple[tuple[str, Callable[[Any], bool]], ...]:
+    """Per field of a message type, a test of its value made once from ``_checks``: every message a node or
+    the hub receives is checked, field by field."""
+    return tuple(
+        (name, _value_check(nullable, kind, accepted, lengths))
+        for name, nullable, kind, accepted, lengths in _checks(cls)
+    )
+
+
+def _value_check(nullable: bool, kind: int, accepted: tuple[type, ...], lengths: Any) -> Callable[[Any], bool]:
+    """The test of one field: the type rules of ``_checks``, with the plain types msgpack decodes to tried first."""
+    if kind == _STRINGS:
+
+        def ok(value: Any) -> bool:
+            return isinstance(value, list) and (
                 _STR.issuperset(map(type, value)) or all(isinstance(v, str) for v in value)
             )
-        elif kind == _NUMBERS:
-            ok = isinstance(value, list) and len(value) in lengths and _numbers(value)
-        else:
-            ok = isinstance(value, accepted) and (kind == _BOOL) == isinstance(value, bool) and _in_range(value)
-        if not ok:
-            raise WireError(f"{msg.TYPE}.{name} has the wrong type ({type(value).__name__})")
+
+    elif kind == _NUMBERS:
+
+        def ok(value: Any) -> bool:
+            return isinstance(value, list) and len(value) in lengths and _numbers(value)
+
+    else:
+        want_bool = kind == _BOOL
+        plain = {t for t in (int, float, str, bytes) if t in accepted and not want_bool}
+        if want_bool:
+            plain.add(bool)
+
+        def ok(value: Any) -> bool:
+            kind_of = type(value)
+            if kind_of in plain:  # an exact type the field takes: only its range is left to check
+                return _in_range(value)
+            return isinstance(value, accepted) and want_bool == isinstance(value, bool) and _in_range(value)
+
+    if not nullable:
+        return ok
+    return lambda value: value is None or ok(value)
 
 
 _STRINGS, _NUMBERS, _BOOL, _SCALAR = range(4)
