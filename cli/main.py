@@ -268,6 +268,12 @@ def build_parser() -> argparse.ArgumentParser:
     bhub.add_argument("--seed", type=seed, default=1, help="seed of the hubs and the load (default %(default)s)")
     bhub.add_argument("--out", default="bench-results", help="directory for JSON and plots (default %(default)s)")
     bhub.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
+    bhub.add_argument(
+        "--check",
+        action="store_true",
+        help="exit 1 (naming each on stderr) when a target is missed: round trip ratio p50 <= 1.5, "
+        "throughput >= min(10000, the air's capacity) frames/s, hub lag p99 <= 2 ms",
+    )
     borg = bench_sub.add_parser("organize", help="swarm organizing time vs number of slaves, per protocol")
     borg.add_argument(
         "--slaves", type=_slave_counts, default=[1, 2, 3, 4, 5], help="slave counts: N, A-B or N,M,... (default 1-5)"

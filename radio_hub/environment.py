@@ -230,8 +230,11 @@ class Environment:
 
     def next_event_us(self) -> int:
         """When the next scheduled thing is due: a medium outcome, an IR sweep, a BLE delivery or a world tick."""
-        events = (self.medium.next_event_us(), self.ir.next_event_us(), self.ble.next_event_us(), self._next_tick_us)
-        return min(t for t in events if t is not None)
+        due = self._next_tick_us
+        for t in (self.medium.next_event_us(), self.ir.next_event_us(), self.ble.next_event_us()):
+            if t is not None and t < due:
+                due = t
+        return due
 
     def advance(self, now_us: int) -> None:
         """Carry out everything due by ``now_us``, in one fixed order: medium, world tick, IR, BLE."""
@@ -364,7 +367,8 @@ class Environment:
     # -- inputs ----------------------------------------------------------------------------------
     def _on_up(self, node_id: str, data: bytes) -> None:
         try:
-            check_name("node", node_id)
+            if node_id not in self._kinds:  # an attached id's name was checked when it attached
+                check_name("node", node_id)
             msg = wire.decode(data, wire.MAX_UP_BYTES)
         except ValueError as err:
             self.counters.malformed += 1
@@ -419,14 +423,15 @@ class Environment:
             self._send_down(node_id, wire.Error(token=msg.token, reason="a user has no 802.15.4 radio"))
             return
         node = self.medium.nodes.get(node_id)
-        src = _source_of(msg.psdu)
+        frame = _frame_of(msg.psdu)
+        src = None if frame is None or frame.frame_type is FrameType.ACK else frame.src
         if node is not None and src is not None and src != node.short_addr:
             self.counters.spoofed += 1
             reason = f"source address 0x{src:04x} is not this node's (0x{node.short_addr:04x})"
             report = TxReport(node_id, msg.token, TxStatus.REFUSED, 0, 0, self.now_us(), self.now_us(), reason)
             self._send_down(node_id, _tx_done(report))
             return
-        self._dispatch(self.medium.submit(node_id, msg.psdu, msg.token, self.now_us()))
+        self._dispatch(self.medium.submit(node_id, msg.psdu, msg.token, self.now_us(), frame))
 
     def _on_relay(self, node_id: str, msg: wire.Relay) -> None:
         """The control channel: to another node as it is, or a question to the hub answered at once."""
@@ -647,37 +652,57 @@ class Environment:
     def _dispatch(self, outputs: list[Output]) -> None:
         if not outputs:
             return
+        # every frame passes here twice (its delivery and its sender's result): encoded straight from the
+        # medium's output, without a wire message in between
         now = self.now_us()
         lag = self.counters.lag_us
+        send = self.downlink.send
         for out in outputs:
-            if isinstance(out, Reception):
+            node_id = out.node_id
+            if type(out) is Reception:
                 lag.append(now - out.handed_up_us)  # a chaos delay is model time, not hub lag
-                msg: wire.Message = wire.Received(
-                    psdu=out.psdu,
-                    rssi_dbm=out.rssi_dbm,
-                    lqi=out.lqi,
-                    start_us=out.start_us,
-                    end_us=out.end_us,
-                    submitted_us=out.submitted_us,
+                data = wire.encode_received(
+                    self._next_down_seq(node_id),
+                    out.psdu,
+                    out.rssi_dbm,
+                    out.lqi,
+                    out.start_us,
+                    out.end_us,
+                    out.submitted_us,
                 )
             else:
-                if out.status != TxStatus.REFUSED:  # refusals are immediate, not scheduled deliveries
+                if out.status is not TxStatus.REFUSED:  # refusals are immediate, not scheduled deliveries
                     lag.append(now - out.done_us)
-                msg = _tx_done(out)
-
-            self._send_down(out.node_id, msg)
+                data = wire.encode_tx_done(
+                    self._next_down_seq(node_id),
+                    out.token,
+                    out.status.value,
+                    out.retries,
+                    out.backoffs,
+                    out.submitted_us,
+                    out.done_us,
+                    out.reason,
+                )
+            send(node_id, data)
 
     def send_to(self, node_id: str, msg: wire.Message) -> None:
         """A message to a node, numbered in its stream like every other (a lockstep ``Grant``)."""
         self._send_down(node_id, msg)
 
     def _send_down(self, node_id: str, msg: wire.Message) -> None:
-        if node_id not in self._down_seq and node_id not in self._kinds:
-            self._forget_gone(node_id)  # an answer to an id that never attached: its numbering is bounded too
-        seq = self._down_seq.get(node_id, 0) + 1
-        self._down_seq[node_id] = seq
-        msg.n = seq
+        msg.n = self._next_down_seq(node_id)
         self.downlink.send(node_id, msg.encode())
+
+    def _next_down_seq(self, node_id: str) -> int:
+        """The number of the next message to ``node_id`` (its stream starts at 1 on every attach)."""
+        seq = self._down_seq.get(node_id)
+        if seq is None:
+            if node_id not in self._kinds:
+                self._forget_gone(node_id)  # an answer to an id that never attached: its numbering is bounded too
+            seq = 0
+        seq += 1
+        self._down_seq[node_id] = seq
+        return seq
 
     def _write_pcap(self, tx: Transmission) -> None:
         pcap = self._pcap
@@ -762,13 +787,13 @@ def _reference(master: dict[str, Any] | None, slot: list[float] | None) -> list[
     return [round(master["x"] + c * slot[0] - s * slot[1], 4), round(master["y"] + s * slot[0] + c * slot[1], 4)]
 
 
-def _source_of(psdu: bytes) -> int | None:
-    """The short source address of a data or command frame (None: an ACK, or no frame; the medium judges)."""
+def _frame_of(psdu: bytes) -> Frame | None:
+    """The frame a transmit request carries, decoded once for the source check and the medium (None: not a
+    valid frame, which the medium refuses with the reason)."""
     try:
-        frame = Frame.decode(psdu)
+        return Frame.decode(psdu)
     except FrameError:
         return None
-    return None if frame.frame_type == FrameType.ACK else frame.src
 
 
 def _is_name(node_id: str) -> bool:

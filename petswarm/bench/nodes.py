@@ -7,12 +7,13 @@ the pinger runs in the bench process itself. All are plain asyncio nodes on ``Ra
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import itertools
 import signal
 import struct
 import sys
 import time
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -22,6 +23,7 @@ import zenoh
 from radio_hub.interface import (
     Frame,
     FrameType,
+    HubUnavailable,
     Keys,
     RadioClient,
     RadioIdentity,
@@ -74,15 +76,114 @@ class LoadNode:
     partner: int | None
 
 
-def load_node(index: int, total: int) -> LoadNode:
-    """Pair ``index // 2`` sits alone at x = 1000 m x pair on channel 11 + pair % 16."""
+def load_node(index: int, total: int, group: int = 0) -> LoadNode:
+    """Pair ``index // 2`` sits alone at x = 1000 m x pair on channel 11 + pair % 16. ``group`` (the first index of
+    the node's load generator) begins its id, so one key expression covers one generator's downlinks."""
     pair, role = divmod(index, 2)
     short = index + 1
     identity = RadioIdentity(
-        f"load-{index}", EXT_BASE + 0x1000 + index, short, PAN_ID, 11 + pair % 16, (pair * PAIR_SPACING_M + role, 0.0)
+        f"{load_prefix(group)}{index}",
+        EXT_BASE + 0x1000 + index,
+        short,
+        PAN_ID,
+        11 + pair % 16,
+        (pair * PAIR_SPACING_M + role, 0.0),
     )
     sends = role == 0 and index + 1 < total
     return LoadNode(identity, short + 1 if sends else None)
+
+
+def load_prefix(group: int) -> str:
+    """The start of the ids of one load generator's nodes."""
+    return f"load{group}-"
+
+
+class SharedDownlinks:
+    """One load generator's ports to the hub: every node's downlink on one subscriber (``down/load<group>-$*``)
+    and the hub's liveliness on one, handed to the generator's loop in batches. With a subscriber per node, a
+    generator of 25 nodes had 50 zenoh callback threads taking turns at its GIL for every message, and spent
+    more CPU per frame than the hub it was measuring; a robot process has one radio, so one of each anyway."""
+
+    def __init__(self, session: zenoh.Session, world: str, group: int) -> None:
+        self.session = session
+        self.keys = Keys(world)
+        self._loop = asyncio.get_running_loop()
+        self._nodes: dict[str, Callable[[bytes], None]] = {}
+        self._hub_watchers: list[Callable[[bool], None]] = []
+        self._waiting: deque[tuple[str, bytes]] = deque()
+        self._drain_due = False
+        self._decls = [
+            session.declare_subscriber(self.keys.down(f"{load_prefix(group)}$*"), self._down),
+            session.liveliness().declare_subscriber(self.keys.hub_alive, self._hub),
+        ]
+
+    def link(self) -> SharedLink:
+        """A node's port (``HubLink``) on the shared subscribers."""
+        return SharedLink(self)
+
+    def close(self) -> None:
+        """Undeclare the shared subscribers."""
+        for decl in self._decls:
+            decl.undeclare()
+
+    def _down(self, sample: zenoh.Sample) -> None:  # zenoh's thread: hand over, one loop wake-up per batch
+        self._waiting.append((str(sample.key_expr), sample.payload.to_bytes()))
+        if not self._drain_due:
+            self._drain_due = True
+            self._loop.call_soon_threadsafe(self._drain)
+
+    def _drain(self) -> None:
+        self._drain_due = False
+        while self._waiting:
+            key, data = self._waiting.popleft()
+            on_down = self._nodes.get(self.keys.node_of(key))
+            if on_down is not None:
+                on_down(data)
+
+    def _hub(self, sample: zenoh.Sample) -> None:
+        present = sample.kind == zenoh.SampleKind.PUT
+        for watcher in list(self._hub_watchers):
+            self._loop.call_soon_threadsafe(watcher, present)
+
+
+class SharedLink:
+    """One load node's ``HubLink`` on its generator's ``SharedDownlinks``: its own liveliness token and up
+    publisher, the shared subscribers."""
+
+    def __init__(self, shared: SharedDownlinks) -> None:
+        self.shared = shared
+        self.session = shared.session
+        self._node_id = ""
+        self._decls: list[Any] = []
+        self._pub: zenoh.Publisher | None = None
+
+    def open(
+        self, node_id: str, instance: str, on_down: Callable[[bytes], None], on_hub: Callable[[bool], None]
+    ) -> None:
+        """Declare the node's token and publisher; its messages come through the shared subscriber."""
+        shared, keys = self.shared, self.shared.keys
+        self._node_id = node_id
+        shared._nodes[node_id] = on_down
+        shared._hub_watchers.append(on_hub)
+        self._pub = reliable_publisher(self.session, keys.up(node_id))
+        self._decls = [self.session.liveliness().declare_token(keys.alive(node_id, instance)), self._pub]
+
+    def put(self, data: bytes) -> None:
+        """One message to the hub."""
+        if self._pub is None:
+            raise HubUnavailable("the link is not open")
+        try:
+            self._pub.put(data)
+        except zenoh.ZError as err:
+            raise HubUnavailable(f"cannot reach the hub: {err}") from None
+
+    async def close(self) -> None:
+        """Leave: undeclare the token and the publisher."""
+        self.shared._nodes.pop(self._node_id, None)
+        for decl in self._decls:
+            with contextlib.suppress(zenoh.ZError):
+                decl.undeclare()
+        self._decls, self._pub = [], None
 
 
 def load_slices(nodes: int, processes: int) -> list[tuple[int, int]]:
@@ -152,9 +253,10 @@ async def load_main(endpoint: str, world: str, first: int, last: int, total: int
     ]
     counts: Counter[str] = Counter()
     radios: list[RadioClient] = []
+    shared = SharedDownlinks(session, world, first)
     try:
-        nodes = [load_node(i, total) for i in range(first, last)]
-        radios = list(await asyncio.gather(*(_connect_shared(n, endpoint, world, session) for n in nodes)))
+        nodes = [load_node(i, total, first) for i in range(first, last)]
+        radios = list(await asyncio.gather(*(_connect_shared(n, endpoint, world, shared) for n in nodes)))
         print(f"load: {len(radios)} nodes attached", file=sys.stderr, flush=True)
         await _first_set(go, stop)
         if not stop.is_set():
@@ -162,6 +264,7 @@ async def load_main(endpoint: str, world: str, first: int, last: int, total: int
     finally:
         for radio in radios:
             await radio.close()
+        shared.close()
         for decl in decls:
             decl.undeclare()
         await asyncio.to_thread(session.close)
@@ -169,8 +272,8 @@ async def load_main(endpoint: str, world: str, first: int, last: int, total: int
     return 0
 
 
-async def _connect_shared(node: LoadNode, endpoint: str, world: str, session: zenoh.Session) -> RadioClient:
-    return await RadioClient.connect(node.identity, endpoint, world, session=session)
+async def _connect_shared(node: LoadNode, endpoint: str, world: str, shared: SharedDownlinks) -> RadioClient:
+    return await RadioClient.connect(node.identity, endpoint, world, link=shared.link())
 
 
 async def _first_set(*events: asyncio.Event) -> None:

@@ -69,7 +69,24 @@ def report(results: dict[str, Any], as_json: bool) -> None:
 
 def table(results: dict[str, Any]) -> list[str]:
     """Every figure as text lines."""
-    return [*_settings_lines(results["settings"]), "", *_rtt_lines(results["rtt"]), "", *_load_lines(results)]
+    lines = [*_settings_lines(results["settings"]), "", *_rtt_lines(results["rtt"]), "", *_load_lines(results)]
+    if "targets" in results:
+        lines += ["", *_target_lines(results["targets"])]
+    return lines
+
+
+def _load(load: dict[str, float]) -> str:
+    """A phase's 1-minute load average, at its start and its end."""
+    return f"load {load['start']:.2f}->{load['end']:.2f}"
+
+
+def _target_lines(targets: list[dict[str, Any]]) -> list[str]:
+    lines = ["targets (each with the machine's 1-minute load average over its phase)"]
+    for t in targets:
+        lines.append(
+            f"  {_verdict(t['pass'])}  {t['name']}: {t['value']:.2f} (target {t['target']}; {_load(t['load_average'])})"
+        )
+    return lines
 
 
 def _settings_lines(s: dict[str, Any]) -> list[str]:
@@ -103,7 +120,8 @@ def _rtt_lines(rtt: dict[str, Any]) -> list[str]:
     verdict = "PASS" if rtt["pass"] else "MISS"
     hub = rtt["hub"]
     lines += [
-        f"ratio adjusted/plain p50: {rtt['ratio_p50']:.2f}  (target <= {rtt['target_ratio']:g})  {verdict}",
+        f"ratio adjusted/plain p50: {rtt['ratio_p50']:.2f}  (target <= {rtt['target_ratio']:g})  {verdict}  "
+        f"({_load(rtt['load_average'])})",
         f"lost rounds: plain {rtt['lost']['plain']}, radio {rtt['lost']['radio']}; hub delivery lag over the phase: "
         f"p50 {hub['lag_p50_us']:.0f} us, p99 {hub['lag_p99_us']:.0f} us ({hub['lag_samples']} samples)",
     ]
@@ -128,6 +146,7 @@ def _load_lines(results: dict[str, Any]) -> list[str]:
             f"{load['model_utilisation']:>7.0%}{hub['lag_p50_us']:>7.0f}us{hub['lag_p99_us']:>7.0f}us"
             f"{load['hub_cpu_pct']:>8.0f}%{load['hub_job_thread_cpu_pct']:>8.0f}%{load['load_gen_cpu_pct']:>9.0f}%"
             f"{load['machine_cpu_busy_pct']:>9.0f}%  {_verdict(load['pass'])} (target >= {load['target_fps']:.0f}/s)"
+            f"  {_load(load['load_average'])}"
         )
         lines.append(
             f"{'':<12}{load['delivered']} delivered / {load['sent']} sent in {load['window_s']:.2f} s of hub clock; "

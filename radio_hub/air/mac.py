@@ -6,6 +6,7 @@ FCS), so their size on air is exact and a frame log can later be written as pcap
 
 from __future__ import annotations
 
+import binascii
 import enum
 import struct
 from dataclasses import dataclass
@@ -31,26 +32,22 @@ class FrameError(ValueError):
     """A PSDU that is not a valid frame, or a frame that cannot be sent."""
 
 
-def _crc_table() -> list[int]:
-    # ITU-T CRC-16 (poly x^16 + x^12 + x^5 + 1), reflected, as 802.15.4 specifies for the FCS.
-    table = []
-    for byte in range(256):
-        crc = byte
-        for _ in range(8):
-            crc = (crc >> 1) ^ 0x8408 if crc & 1 else crc >> 1
-        table.append(crc)
-    return table
-
-
-_CRC_TABLE = _crc_table()
+_BIT_REVERSED = bytes(int(f"{byte:08b}"[::-1], 2) for byte in range(256))
+"""Each byte with its bits in reverse order."""
 
 
 def fcs(data: bytes) -> int:
-    """The 802.15.4 frame check sequence (CRC-16/KERMIT) of ``data``."""
-    crc = 0
-    for byte in data:
-        crc = (crc >> 8) ^ _CRC_TABLE[(crc ^ byte) & 0xFF]
-    return crc
+    """The 802.15.4 frame check sequence (CRC-16/KERMIT) of ``data``.
+
+    KERMIT is CRC-CCITT (polynomial 0x1021, initial value 0) with every byte fed least significant bit first
+    and the result reflected; ``binascii.crc_hqx`` is the same CRC fed most significant bit first. So the
+    bytes are reversed bitwise, run through ``crc_hqx`` in C, and its result reversed: a per-byte loop in
+    Python cost the hub more than the rest of a frame's decoding (``test_mac`` holds it to the bitwise
+    definition)."""
+    if not isinstance(data, bytes | bytearray):
+        data = bytes(data)
+    crc = binascii.crc_hqx(data.translate(_BIT_REVERSED), 0)
+    return _BIT_REVERSED[crc & 0xFF] << 8 | _BIT_REVERSED[crc >> 8]
 
 
 @dataclass(frozen=True, slots=True)
@@ -102,15 +99,14 @@ class Frame:
             raise FrameError(f"PSDU of {len(psdu)} bytes exceeds the 802.15.4 limit of {MAX_PSDU}")
         if len(psdu) < 5:
             raise FrameError(f"PSDU of {len(psdu)} bytes is shorter than any frame")
-        body, (crc,) = psdu[:-FCS_LEN], struct.unpack("<H", psdu[-FCS_LEN:])
-        if fcs(body) != crc:
+        body = psdu[:-FCS_LEN]
+        if fcs(body) != _U16.unpack_from(psdu, len(psdu) - FCS_LEN)[0]:
             raise FrameError("bad FCS")
-        fc, seq = struct.unpack_from("<HB", body)
-        try:
-            frame_type = FrameType(fc & 0x7)
-        except ValueError:
-            raise FrameError(f"reserved frame type {fc & 0x7}") from None
-        if frame_type == FrameType.ACK:
+        fc, seq = _FC_SEQ.unpack_from(body)
+        frame_type = _FRAME_TYPES[fc & 0x7]
+        if frame_type is None:
+            raise FrameError(f"reserved frame type {fc & 0x7}")
+        if frame_type is FrameType.ACK:
             return cls(FrameType.ACK, seq)
         if (fc >> 10) & 3 != _FC_ADDR_SHORT or (fc >> 14) & 3 != _FC_ADDR_SHORT:
             raise FrameError("only short addressing is supported")
@@ -118,10 +114,15 @@ class Frame:
         header_len = 9 if compressed else 11
         if len(body) < header_len:
             raise FrameError("truncated MAC header")
-        dst_pan, dst = struct.unpack_from("<HH", body, 3)
-        src_pan = dst_pan if compressed else struct.unpack_from("<H", body, 7)[0]
-        (src,) = struct.unpack_from("<H", body, header_len - 2)
+        dst_pan, dst = _TWO_U16.unpack_from(body, 3)
+        src_pan = dst_pan if compressed else _U16.unpack_from(body, 7)[0]
+        (src,) = _U16.unpack_from(body, header_len - 2)
         return cls(frame_type, seq, dst_pan, dst, src_pan, src, bytes(body[header_len:]), bool(fc & (1 << 5)))
+
+
+_U16, _TWO_U16, _FC_SEQ = struct.Struct("<H"), struct.Struct("<HH"), struct.Struct("<HB")
+_FRAME_TYPES: tuple[FrameType | None, ...] = (*FrameType, None, None, None, None)
+"""Frame types by the frame control's low three bits (4-7 are reserved)."""
 
 
 def max_payload(pan_compressed: bool = True) -> int:

@@ -17,6 +17,7 @@ from __future__ import annotations
 import enum
 import heapq
 import itertools
+import math
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field, fields
@@ -102,11 +103,16 @@ class Counters:
     def count(self, outcome: RxOutcome) -> None:
         """Count one arrival and its outcome."""
         self.heard += 1
-        setattr(self, outcome.value, getattr(self, outcome.value) + 1)
+        name = _OUTCOME_FIELDS[outcome]
+        setattr(self, name, getattr(self, name) + 1)
 
     def to_dict(self) -> dict[str, int]:
         """Plain dict for the wire and summaries."""
         return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+_OUTCOME_FIELDS = {outcome: str(outcome.value) for outcome in RxOutcome}
+"""Each outcome's counter (a plain str: reading an enum's ``value`` costs a descriptor call per frame)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -157,10 +163,10 @@ class _Job:
     retries: int = 0
     backoffs: int = 0
     done: bool = False
+    wants_ack: bool = field(init=False)
 
-    @property
-    def wants_ack(self) -> bool:
-        return self.frame.ack_request and not self.frame.is_broadcast
+    def __post_init__(self) -> None:
+        self.wants_ack = self.frame.ack_request and not self.frame.is_broadcast
 
 
 @dataclass
@@ -228,7 +234,12 @@ class Medium:
         self._burst = GilbertElliott(config.loss.gilbert_elliott)
         self.chaos = Chaos()
         self._queues: dict[str, deque[_Job]] = {}
-        self._air: list[Transmission] = []
+        self._air: dict[int, list[Transmission]] = {ch: [] for ch in CHANNELS}
+        """Per channel, the transmissions that may still overlap one being judged (a channel's frames meet only
+        frames of their own channel, so each is judged against a handful, not the whole air)."""
+        self._on_channel: dict[int, list[RadioNode]] | None = None
+        """Per channel, the attached nodes tuned to it in attach order (worked out again after an attach,
+        update or detach; the order of receivers is the order of their random draws)."""
         self._acking_until: dict[str, int] = {}
         """Per node, when the last ACK its MAC committed to send leaves the air: the radio is busy until then."""
         self._events: list[tuple[int, int, Callable[..., None], tuple[Any, ...]]] = []
@@ -246,6 +257,7 @@ class Medium:
         self.nodes[node.node_id] = node
         self.node_counters.setdefault(node.node_id, Counters())
         self._queues[node.node_id] = deque()
+        self._on_channel = None
 
     def update(self, node_id: str, **changes: Any) -> RadioNode:
         """Change a node's PAN, short address, channel or position at run time."""
@@ -253,15 +265,27 @@ class Medium:
         candidate = RadioNode(**{**node.__dict__, **changes})
         candidate.validate()
         node.__dict__.update(candidate.__dict__)
+        self._on_channel = None
         return node
 
     def detach(self, node_id: str) -> None:
         """Take a node off the air; its queued requests are dropped without a report."""
         self.nodes.pop(node_id, None)
+        self._on_channel = None
         self._acking_until.pop(node_id, None)
         for job in self._queues.pop(node_id, ()):
             job.done = True
         self._burst.forget(node_id)
+
+    def _nodes_on(self, channel: int) -> list[RadioNode]:
+        """The attached nodes tuned to ``channel``, in attach order."""
+        on_channel = self._on_channel
+        if on_channel is None:
+            on_channel = {ch: [] for ch in CHANNELS}
+            for node in self.nodes.values():
+                on_channel[node.channel].append(node)
+            self._on_channel = on_channel
+        return on_channel[channel]
 
     # -- time ------------------------------------------------------------------------------------
 
@@ -279,16 +303,18 @@ class Medium:
         out, self._out = self._out, []
         return out
 
-    def submit(self, node_id: str, psdu: bytes, token: int, now_us: int) -> list[Output]:
-        """A MAC data request from ``node_id`` at ``now_us``; returns every output due by then."""
+    def submit(self, node_id: str, psdu: bytes, token: int, now_us: int, frame: Frame | None = None) -> list[Output]:
+        """A MAC data request from ``node_id`` at ``now_us``; returns every output due by then. ``frame`` is
+        ``psdu`` decoded, when the caller has done so already (it is not decoded twice)."""
         out = self.advance(now_us)
         node = self.nodes.get(node_id)
         if node is None:
             return [*out, self._refusal(node_id, token, "node is not attached")]
-        try:
-            frame = Frame.decode(psdu)
-        except FrameError as err:
-            return [*out, self._refusal(node_id, token, str(err))]
+        if frame is None:
+            try:
+                frame = Frame.decode(psdu)
+            except FrameError as err:
+                return [*out, self._refusal(node_id, token, str(err))]
         if frame.frame_type == FrameType.ACK:
             return [*out, self._refusal(node_id, token, "ACK frames are sent by the MAC itself")]
         queue = self._queues[node_id]
@@ -366,14 +392,18 @@ class Medium:
 
     def _energy_detected(self, node: RadioNode, start_us: int, end_us: int) -> bool:
         reach = self.config.range.interference_range_m
-        return any(
-            tx.channel == node.channel
-            and tx.sender != node.node_id
-            and tx.overlaps(start_us, end_us)
-            and distance(tx.position, node.position) <= reach
-            and not self.chaos.separated(tx.sender, node.node_id)
-            for tx in self._air
-        )
+        chaos = self.chaos if self.chaos.faults else None
+        node_id, (x, y) = node.node_id, node.position
+        for tx in self._air[node.channel]:
+            if (
+                tx.start_us < end_us
+                and tx.end_us > start_us
+                and tx.sender != node_id
+                and math.hypot(tx.position[0] - x, tx.position[1] - y) <= reach
+                and (chaos is None or not chaos.separated(tx.sender, node_id))
+            ):
+                return True
+        return False
 
     # -- transmissions ---------------------------------------------------------------------------
 
@@ -392,7 +422,7 @@ class Medium:
         )
         ratio = self.config.range.success_ratio_tx
         tx.left_sender = ratio >= 1.0 or self.rng.random() < ratio
-        self._air.append(tx)
+        self._air[tx.channel].append(tx)
         return tx
 
     def _on_tx_start(self, job: _Job) -> None:
@@ -405,15 +435,16 @@ class Medium:
         self._at(tx.end_us, self._on_tx_end, tx)
 
     def _on_tx_end(self, tx: Transmission) -> None:
-        self._prune_air()
+        self._prune_air(tx.channel)
         job = tx.job
         assert job is not None
+        channel_counters = self.channel_counters[tx.channel]
         for node in self._receivers(tx):
             outcome = self._judge(tx, node, filtered=not _addressed_to(tx.frame, node))
             tx.outcomes[node.node_id] = outcome
             self.node_counters[node.node_id].count(outcome)
-            self.channel_counters[tx.channel].count(outcome)
-            if outcome == RxOutcome.DELIVERED:
+            channel_counters.count(outcome)
+            if outcome is RxOutcome.DELIVERED:
                 self._deliver(tx, node, job.psdu)
                 if job.wants_ack and node.short_addr == tx.frame.dst:
                     ack_start = self.now_us + self.config.mac.turnaround_us
@@ -431,13 +462,14 @@ class Medium:
 
     def _receivers(self, tx: Transmission) -> list[RadioNode]:
         reach = self.config.range.tx_range_m
+        chaos = self.chaos if self.chaos.faults else None
+        sender, (x, y) = tx.sender, tx.position
         return [
             n
-            for n in self.nodes.values()
-            if n.channel == tx.channel
-            and n.node_id != tx.sender
-            and distance(tx.position, n.position) <= reach
-            and not self.chaos.separated(tx.sender, n.node_id)
+            for n in self._nodes_on(tx.channel)
+            if n.node_id != sender
+            and math.hypot(x - n.position[0], y - n.position[1]) <= reach
+            and (chaos is None or not chaos.separated(sender, n.node_id))
         ]
 
     def _judge(self, tx: Transmission, node: RadioNode, filtered: bool) -> RxOutcome:
@@ -452,16 +484,18 @@ class Medium:
 
     def _collided(self, tx: Transmission, node: RadioNode) -> bool:
         reach = self.config.range.interference_range_m
+        chaos = self.chaos if self.chaos.faults else None
+        start, end, node_id, (x, y) = tx.start_us, tx.end_us, node.node_id, node.position
         interferers = []
-        for other in self._air:
-            if other is tx or other.channel != tx.channel or not other.overlaps(tx.start_us, tx.end_us):
+        for other in self._air[tx.channel]:
+            if other is tx or not (other.start_us < end and other.end_us > start):
                 continue
-            if other.sender == node.node_id:
+            if other.sender == node_id:
                 return True  # half duplex: a node that is transmitting receives nothing
             if (
                 other.sender != tx.sender
-                and distance(other.position, node.position) <= reach
-                and not self.chaos.separated(other.sender, node.node_id)
+                and math.hypot(other.position[0] - x, other.position[1] - y) <= reach
+                and (chaos is None or not chaos.separated(other.sender, node_id))
             ):
                 interferers.append(other)
         if not interferers:
@@ -481,7 +515,7 @@ class Medium:
         base = self.config.loss.base
         if base > 0.0 and rng.random() < base:
             return True
-        if self._burst.lost((tx.sender, node.node_id), rng):
+        if self._burst.cfg.enabled and self._burst.lost((tx.sender, node.node_id), rng):
             return True
         if not self.chaos.faults:
             return False
@@ -603,10 +637,12 @@ class Medium:
         for counters in (self.node_counters[node_id], self.channel_counters[node.channel]):
             setattr(counters, name, getattr(counters, name) + 1)
 
-    def _prune_air(self) -> None:
+    def _prune_air(self, channel: int) -> None:
+        # what ended before the horizon can overlap nothing still to be judged
         horizon = self.now_us - _AIR_HORIZON_US
-        if self._air and self._air[0].end_us < horizon:
-            self._air = [tx for tx in self._air if tx.end_us >= horizon]
+        air = self._air[channel]
+        if air and air[0].end_us < horizon:
+            self._air[channel] = [tx for tx in air if tx.end_us >= horizon]
 
 
 def _addressed_to(frame: Frame, node: RadioNode) -> bool:

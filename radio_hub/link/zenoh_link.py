@@ -13,8 +13,8 @@ import contextlib
 import json
 import re
 import sys
-import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from typing import Any
 
@@ -218,9 +218,14 @@ class ZenohLink:
         self.dropped = 0
         """Messages from the hub dropped: longer than ``wire.MAX_MESSAGE_BYTES``, or ``DOWN_PENDING_LIMIT``
         already waiting for the node's event loop."""
-        self._pending = 0
-        self._pending_bytes = 0
-        self._lock = threading.Lock()
+        self._waiting: deque[bytes] = deque()
+        """Messages from the hub that zenoh's thread handed over and the node's loop has not taken yet."""
+        self._bytes_in = 0
+        """Bytes ever put in ``_waiting`` (written by zenoh's thread only)."""
+        self._bytes_out = 0
+        """Bytes ever taken from it (written by the node's loop only): waiting = in - out, without a lock."""
+        self._drain_due = False
+        """A drain of ``_waiting`` is scheduled on the node's loop and has not started yet."""
 
     @classmethod
     async def connect(cls, endpoint: str, world: str, session: zenoh.Session | None = None) -> ZenohLink:
@@ -237,30 +242,40 @@ class ZenohLink:
         loop = asyncio.get_running_loop()
         session, keys = self.session, self.keys
 
-        def down(sample: zenoh.Sample) -> None:  # zenoh's thread: hand over and return at once
-            size = len(sample.payload)
-            with self._lock:
-                if (
-                    size > wire.MAX_MESSAGE_BYTES
-                    or self._pending >= DOWN_PENDING_LIMIT
-                    or (self._pending_bytes + size > DOWN_PENDING_BYTES)
-                ):
-                    self.dropped += 1
-                    return
-                self._pending += 1
-                self._pending_bytes += size
-            try:
-                loop.call_soon_threadsafe(handed, sample.payload.to_bytes())
-            except RuntimeError:  # the node's loop has closed (the process is ending): nobody to hand it to
-                with self._lock:
-                    self._pending -= 1
-                    self._pending_bytes -= size
+        waiting = self._waiting
 
-        def handed(data: bytes) -> None:  # the node's loop
-            with self._lock:
-                self._pending -= 1
-                self._pending_bytes -= len(data)
-            on_down(data)
+        def down(sample: zenoh.Sample) -> None:  # zenoh's thread (one per subscriber): hand over, return at once
+            size = len(sample.payload)
+            if (
+                size > wire.MAX_MESSAGE_BYTES
+                or len(waiting) >= DOWN_PENDING_LIMIT
+                or self._bytes_in - self._bytes_out + size > DOWN_PENDING_BYTES
+            ):
+                self.dropped += 1
+                return
+            waiting.append(sample.payload.to_bytes())
+            self._bytes_in += size
+            if not self._drain_due:
+                # one wake-up of the loop for whatever arrives until it drains: a wake-up per message (a
+                # Handle, a write to the loop's self-pipe, a select) cost a node three times the message itself
+                self._drain_due = True
+                try:
+                    loop.call_soon_threadsafe(drain)
+                except RuntimeError:  # the node's loop has closed (the process is ending): nobody to hand it to
+                    waiting.clear()
+
+        def drain() -> None:  # the node's loop: every message waiting, in arrival order
+            self._drain_due = False  # first: what arrives from now on schedules another drain
+            while waiting:
+                data = waiting.popleft()
+                self._bytes_out += len(data)
+                try:
+                    on_down(data)
+                except BaseException:  # the rest must not wait for the next message: they get a drain of their own
+                    if waiting and not self._drain_due:
+                        self._drain_due = True
+                        loop.call_soon(drain)
+                    raise
 
         def hub(sample: zenoh.Sample) -> None:  # a hub appeared (again: it knows nothing of us) or went away
             with contextlib.suppress(RuntimeError):  # the node's loop has closed

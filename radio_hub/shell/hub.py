@@ -116,9 +116,9 @@ class RadioHub:
         self._stop = threading.Event()
         self._session: zenoh.Session | None = None
         self._decls: list[Any] = []
-        self._waiting: Counter[str] = Counter()
-        self._waiting_bytes: Counter[str] = Counter()
-        """Inbox items per bucket: an attached node's id, ``""`` for every other id, ``"?"`` for the rest."""
+        self._waiting: dict[str, list[int]] = {}
+        """Inbox items and their bytes per bucket: an attached node's id, ``""`` for every other id, ``"?"`` for
+        the rest (a bucket that empties goes, so no key per departed node stays behind)."""
         self._waiting_lock = threading.Lock()
         self.inbox_dropped: Counter[str] = Counter()
         """Items refused at the inbox: ``node`` (an attached node past its limit), ``stranger``, ``other``,
@@ -179,50 +179,60 @@ class RadioHub:
         """Run the job loop until ``stop``. Nothing a client sends ends it: a handler's exception is counted
         (``stats()["hub"]["faults"]``) and the loop goes on."""
         _tight_timer_slack()
-        inbox, env = self._inbox, self.env
+        inbox, env, now_us = self._inbox, self.env, self.now_us
         while not self._stop.is_set():
-            until_due = env.next_event_us() - self.now_us()
-            until_due = min(until_due, _IDLE_WAKE_US)
-            try:
-                if until_due > _SPIN_US:
-                    item: tuple[Any, ...] | None = inbox.get(timeout=(until_due - _SPIN_US) / 1e6)
-                else:
-                    item = inbox.get_nowait()
-            except queue.Empty:
-                item = None
-                if 0 < until_due <= _SPIN_US:
-                    # a timed wait wakes tens of microseconds late; yield-spin the last stretch instead
+            due = env.next_event_us()
+            until_due = min(due - now_us(), _IDLE_WAKE_US)
+            item: tuple[Any, ...] | None = None
+            if until_due > _SPIN_US:
+                with contextlib.suppress(queue.Empty):
+                    item = inbox.get(timeout=(until_due - _SPIN_US) / 1e6)
+            else:
+                # a timed wait wakes tens of microseconds late: yield-spin the last stretch, watching only the
+                # clock and the inbox (no environment work until something is due or has come)
+                while inbox.empty() and now_us() < due:
                     os.sched_yield()
-            taken = 0
-            while item is not None:  # take what arrived meanwhile before advancing time, a batch at most
-                self._handle_safely(item)
-                taken += 1
-                item = None
-                if taken < BATCH:
-                    with contextlib.suppress(queue.Empty):
-                        item = inbox.get_nowait()
-            self._advance_safely()
+                if not inbox.empty():
+                    item = inbox.get_nowait()
+            if item is not None:
+                self._take(item)
+            # what the items scheduled may be due already; with nothing due, advancing would only cost time
+            if now_us() >= min(env.next_event_us(), self._next_expiry_us):
+                self._advance_safely()
+
+    def _take(self, item: tuple[Any, ...]) -> None:
+        """``item`` and whatever arrived meanwhile, ``BATCH`` at most, before time advances (a flood never holds up
+        the air)."""
+        inbox = self._inbox
+        self._handle_safely(item)
+        for _ in range(min(inbox.qsize(), BATCH - 1)):
+            self._handle_safely(inbox.get_nowait())
 
     def _admit(self, item: tuple[Any, ...]) -> None:
-        """Zenoh's threads: into the inbox if its bucket has room, else dropped and counted."""
+        """Zenoh's threads: into the inbox if its bucket has room, else dropped and counted. A node's message
+        goes in as ``("up", node id, bytes, bucket)``: its key is read here, once."""
         size = 0
         if item[0] == "up":
             node_id, size = self.keys.node_of(item[1]), len(item[2])
             bucket, limit = (node_id, INBOX_PER_NODE) if node_id in self.env.kinds else ("", INBOX_STRANGERS)
             if not bucket and not self._stranger_admitted():
                 return
+            item = ("up", node_id, item[2])
         else:
             bucket, limit = "?", INBOX_OTHER
         with self._waiting_lock:
-            full = self._waiting[bucket] >= limit or self._waiting_bytes[bucket] + size > INBOX_BUCKET_BYTES
+            waiting = self._waiting.get(bucket)
+            if waiting is None:
+                waiting = self._waiting[bucket] = [0, 0]
+            full = waiting[0] >= limit or waiting[1] + size > INBOX_BUCKET_BYTES
             if full:
                 self.inbox_dropped["other" if bucket == "?" else "stranger" if bucket == "" else "node"] += 1
+                if not waiting[0]:
+                    del self._waiting[bucket]
             else:
-                self._waiting[bucket] += 1
-                if size:
-                    self._waiting_bytes[bucket] += size
-        refused = full
-        if refused:
+                waiting[0] += 1
+                waiting[1] += size
+        if full:
             if item[0] in ("stats", "air", "world", "chaos"):
                 item[1].drop()  # the query ends unanswered
             return
@@ -250,13 +260,12 @@ class RadioHub:
             return
         bucket, size = item[-1], len(item[2]) if item[0] == "up" else 0
         with self._waiting_lock:
-            left = self._waiting[bucket] - 1
-            if left > 0:
-                self._waiting[bucket] = left
-                self._waiting_bytes[bucket] -= size
+            waiting = self._waiting[bucket]
+            if waiting[0] > 1:
+                waiting[0] -= 1
+                waiting[1] -= size
             else:  # no key per departed node stays behind
                 del self._waiting[bucket]
-                del self._waiting_bytes[bucket]
         try:
             self._handle(item[:-1])
         except Exception as err:
@@ -275,7 +284,7 @@ class RadioHub:
     def _handle(self, item: tuple[Any, ...]) -> None:
         kind = item[0]
         if kind == "up":
-            node_id = self.keys.node_of(item[1])
+            node_id = item[1]
             known = node_id in self.env.kinds
             if not known and self._refuse_unproven(node_id, item[2]):
                 return
@@ -356,7 +365,7 @@ class RadioHub:
         """The environment's counters, with this hub's world name and model clock."""
         stats = {"world": self.keys.world, **self.env.stats(self.now_us()), "process": process_usage()}
         with self._waiting_lock:
-            waiting, dropped = sum(self._waiting.values()), dict(self.inbox_dropped)
+            waiting, dropped = sum(count for count, _ in self._waiting.values()), dict(self.inbox_dropped)
         stats["inbox"] = {
             "waiting": waiting,
             "dropped": dropped,

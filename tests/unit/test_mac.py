@@ -15,6 +15,22 @@ def test_fcs_is_crc16_kermit():
     assert fcs(b"123456789") == 0x2189
 
 
+def _kermit_bitwise(data: bytes) -> int:
+    """CRC-16/KERMIT by its definition: reflected polynomial 0x8408, one bit at a time, initial value 0."""
+    crc = 0
+    for byte in data:
+        crc ^= byte
+        for _ in range(8):
+            crc = (crc >> 1) ^ 0x8408 if crc & 1 else crc >> 1
+    return crc
+
+
+@given(st.binary(max_size=MAX_PSDU + 8))
+def test_fcs_matches_the_bitwise_definition(data):
+    assert fcs(data) == _kermit_bitwise(data)
+    assert fcs(bytearray(data)) == fcs(memoryview(data)) == fcs(data)
+
+
 def test_intra_pan_data_frame_has_an_11_byte_overhead():
     frame = Frame(FrameType.DATA, 7, 0x1000, 2, 0x1000, 1, b"hello")
     assert len(frame.encode()) == 11 + 5

@@ -70,3 +70,42 @@ def test_swarm_messages_are_small_and_round_trip():
     assert messages.decode(messages.Blob(1, b"abc").encode()) == messages.Blob(1, b"abc")
     with pytest.raises(messages.MessageError, match="unknown message type"):
         messages.decode(msgpack.packb([1, 99]))
+
+
+_u64 = st.integers(min_value=0, max_value=2**63 - 1)
+
+
+@given(
+    n=_u64,
+    psdu=st.binary(max_size=127),
+    rssi=st.floats(-100, 0),
+    lqi=st.integers(0, 255),
+    times=st.tuples(_u64, _u64, _u64),
+)
+def test_the_hubs_received_encoding_is_the_messages(n, psdu, rssi, lqi, times):
+    start, end, submitted = times
+    msg = wire.Received(psdu=psdu, rssi_dbm=rssi, lqi=lqi, start_us=start, end_us=end, submitted_us=submitted, n=n)
+    assert wire.encode_received(n, psdu, rssi, lqi, start, end, submitted) == msg.encode()
+
+
+@given(
+    n=_u64,
+    token=_u64,
+    status=st.sampled_from(["success", "no_ack", "channel_access_failure", "refused"]),
+    counts=st.tuples(st.integers(0, 7), st.integers(0, 7)),
+    times=st.tuples(_u64, _u64),
+    reason=st.text(max_size=40),
+)
+def test_the_hubs_tx_done_encoding_is_the_messages(n, token, status, counts, times, reason):
+    (retries, backoffs), (submitted, done) = counts, times
+    msg = wire.TxDone(
+        token=token,
+        status=status,
+        retries=retries,
+        backoffs=backoffs,
+        submitted_us=submitted,
+        done_us=done,
+        reason=reason,
+        n=n,
+    )
+    assert wire.encode_tx_done(n, token, status, retries, backoffs, submitted, done, reason) == msg.encode()
