@@ -311,6 +311,18 @@ class SurroundController:
         dt: float,
     ) -> tuple[float, float]:
         """``step`` on points as plain float pairs, unchecked (the pilot's own sensing, finite by making)."""
+        distances, near, g, f_r = self._centring(neighbours, dt)
+        f_o = self._repulsion(neighbours, distances, near, obstacles)
+        f_g = self._surround(g, human, velocity)
+        self._forces = (f_r, f_o, f_g)
+        force = (f_r[0] + f_o[0] + f_g[0], f_r[1] + f_o[1] + f_g[1])
+        return self._command(force, velocity, dt)
+
+    def _centring(
+        self, neighbours: Sequence[Sequence[float]], dt: float
+    ) -> tuple[list[float], list[bool], tuple[float, float], tuple[float, float]]:
+        """What both laws start from: each neighbour's distance, whether it is in sight, the centroid g of those
+        in sight, and the spring-damper-inertia force f_r on g (raises ValueError unless dt > 0)."""
         if not dt > 0:
             raise ValueError(f"dt must be > 0, not {dt!r}")
         c = self.config
@@ -322,11 +334,7 @@ class SurroundController:
             c.inertia * accel[0] + c.damping * rate[0] + c.stiffness * g[0],
             c.inertia * accel[1] + c.damping * rate[1] + c.stiffness * g[1],
         )
-        f_o = self._repulsion(neighbours, distances, near, obstacles)
-        f_g = self._surround(g, human, velocity)
-        self._forces = (f_r, f_o, f_g)
-        force = (f_r[0] + f_o[0] + f_g[0], f_r[1] + f_o[1] + f_g[1])
-        return self._command(force, velocity, dt)
+        return distances, near, g, f_r
 
     def _centroid(
         self, neighbours: Sequence[Sequence[float]], near: list[bool], dt: float

@@ -58,17 +58,8 @@ class ImprovedSurroundController(SurroundController):
         """The velocity command; as the paper's ``step_plain``, with the human's own velocity ``human_velocity``
         (his tracked beacon's, in this robot's frame; None when unknown) and the neighbours' own velocities
         ``neighbour_velocities`` (their tracks', in the order of ``neighbours``; None: taken to be still)."""
-        if not dt > 0:
-            raise ValueError(f"dt must be > 0, not {dt!r}")
+        distances, near, g, f_r = self._centring(neighbours, dt)
         c = self.config
-        distances = [math.sqrt(x * x + y * y) for x, y in neighbours]
-        near = [d <= c.sight_m for d in distances]
-        g, count = self._centroid(neighbours, near, dt)
-        rate, accel = self._derivatives(g, count, dt)
-        f_r = (
-            c.inertia * accel[0] + c.damping * rate[0] + c.stiffness * g[0],
-            c.inertia * accel[1] + c.damping * rate[1] + c.stiffness * g[1],
-        )
         moving = neighbour_velocities if neighbour_velocities is not None else [(0.0, 0.0)] * len(neighbours)
         f_o = self._braking_repulsion(neighbours, moving, distances, near, obstacles, velocity)
         f_h = self._human_repulsion(human, human_velocity, velocity)
