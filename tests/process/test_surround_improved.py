@@ -8,9 +8,10 @@ model-time figures and the 5-of-5 process runs):
 - the swarm's centre within 0.5 m of the walking human at the median;
 - r at the end within 10 % of r* (0.65 m).
 
-One seed per scenario keeps each run near a minute. The corridor is expected to fail: its thin walls' ends
-are invisible to the ultrasonic ring until a robot on their line touches them, and the swarm lags in it
-(docs/RESULTS.md); the test is strict, so it reports the day the law meets the bounds there.
+One seed keeps the run near a minute. Only the cylinder is asserted: in the corridor the law does not meet
+these bounds yet (its thin walls' ends are invisible to the ultrasonic ring until a robot on their line touches
+them), which `petswarm bench surround scenarios/surround-corridor.toml --law improved` shows in model time
+(docs/RESULTS.md) without a minute of 20 processes spent on a known failure in every test run.
 """
 
 from __future__ import annotations
@@ -33,22 +34,12 @@ CENTRE_MEDIAN_M = 0.5
 EXTENT_OFF = 0.10
 """|r_end - r*| / r* at most this."""
 
-CORRIDOR_MISSES = pytest.mark.xfail(
-    strict=True,
-    reason="the improved law does not meet the bounds in the thin-walled corridor yet (docs/RESULTS.md)",
-)
-
 
 @pytest.mark.timeout(400)
-@pytest.mark.parametrize(
-    "scenario",
-    ["surround-cylinder-improved", pytest.param("surround-corridor-improved", marks=CORRIDOR_MISSES)],
-)
-def test_improved_surround_robot_processes_keep_their_human_inside_past_the_obstacle(
-    tmp_path: Path, scenario: str
-) -> None:
+def test_improved_surround_robot_processes_keep_their_human_inside_past_the_cylinder(tmp_path: Path) -> None:
     record = tmp_path / "run"
-    argv = [sys.executable, "-m", "cli", "run", str(ROOT / "scenarios" / f"{scenario}.toml"), "--seed", "1"]
+    scenario = ROOT / "scenarios" / "surround-cylinder-improved.toml"
+    argv = [sys.executable, "-m", "cli", "run", str(scenario), "--seed", "1"]
     done = subprocess.run(
         [*argv, "--clock", "lockstep", "--json", "--record", str(record)],
         capture_output=True,
