@@ -107,6 +107,7 @@ class Step:
         self._deadline: float | None = None
         """End of the current attempt's window; None before the first send and between attempts."""
         self._last_answer = 0.0
+        self._sent_at = 0.0
 
     @property
     def missing(self) -> set[int] | None:
@@ -128,6 +129,7 @@ class Step:
     def sent(self, now: float) -> None:
         """The request of the current attempt is on the air: its answer window starts now."""
         self._deadline = now + self.timing.deadline_s
+        self._sent_at = now
 
     def next_action(self, now: float) -> StepAction:
         """What to do at ``now``."""
@@ -153,7 +155,8 @@ class Step:
         assert self._deadline is not None
         quiet = self.timing.quiet_s
         if self.expected is None and quiet is not None and self.responses:
-            return min(self._deadline, self._last_answer + quiet)  # answers have stopped coming
+            # answers have stopped coming; a resend's answers get a whole gap of their own
+            return min(self._deadline, max(self._last_answer, self._sent_at) + quiet)
         return self._deadline
 
     def _complete(self) -> bool:

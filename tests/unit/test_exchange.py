@@ -155,6 +155,23 @@ def test_an_open_step_with_a_rule_of_enough_asks_everyone_again_until_enough_ans
     assert set(step.result().responses) == {4, 5} and step.result().retries == 2 and step.duplicates == 1
 
 
+def test_a_retried_open_step_gives_its_answers_a_whole_quiet_gap_from_the_resend():
+    # the slotted scan: answers stop coming for the quiet gap, not enough came, so it asks again; the new
+    # request's answers need their slots too. Counting the gap from the last answer of the first window ended
+    # every retry at once: five resends in 8 ms, and a robot whose first answer was lost answered too late.
+    timing = StepTiming(deadline_s=0.1, max_retries=5, quiet_s=0.04)
+    step = Step(1, (Joined,), None, timing, enough=lambda got: len(got) >= 2)
+    step.next_action(0.0)
+    step.sent(0.0)
+    step.offer(_incoming(4, Joined(1, 1)), 0.01)
+    assert step.next_action(0.05) == SendRequest(None, retry=True)  # quiet since 0.01, one answer of two
+    step.sent(0.05)
+    assert step.next_action(0.051) == WaitUntil(pytest.approx(0.09))  # the resend's own quiet gap
+    step.offer(_incoming(5, Joined(1, 2)), 0.07)
+    assert step.next_action(0.12) == StepOver()  # quiet since 0.07, and enough
+    assert set(step.result().responses) == {4, 5} and step.result().retries == 1
+
+
 def test_an_open_step_that_never_has_enough_ends_after_max_retries_with_what_came():
     step = Step(1, (Joined,), None, StepTiming(deadline_s=0.1, max_retries=2), enough=lambda got: len(got) >= 3)
     now, sends = 0.0, 0
