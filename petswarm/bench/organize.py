@@ -238,14 +238,22 @@ def evidence(swarm: Swarm, seconds: float) -> dict[str, Any]:
         log = query_hub(swarm.hub.session, swarm.hub.keys.air, timeout=5.0)["transmissions"]
     except HubUnavailable as err:
         return {"error": str(err)}
+    since_us = stats["now_us"] - seconds * 1e6
+    gained = counters_gained(stats["nodes"], swarm.counters, MAC_COUNTERS)
+    return {"mac": gained, "air": [tx for tx in log if tx["end_us"] >= since_us]}
+
+
+def counters_gained(
+    nodes: dict[str, dict[str, Any]], before: dict[str, dict[str, int]], counters: tuple[str, ...]
+) -> dict[str, dict[str, int]]:
+    """Per node, the ``counters`` that grew since ``before`` and by how much (nodes with no gain left out)."""
     gained = {}
-    for name, node in stats["nodes"].items():
-        before = swarm.counters.get(name, {})
-        delta = {k: node.get(k, 0) - before.get(k, 0) for k in MAC_COUNTERS}
+    for name, node in nodes.items():
+        was = before.get(name, {})
+        delta = {k: node.get(k, 0) - was.get(k, 0) for k in counters}
         if any(delta.values()):
             gained[name] = {k: v for k, v in delta.items() if v}
-    since_us = stats["now_us"] - seconds * 1e6
-    return {"mac": gained, "air": [tx for tx in log if tx["end_us"] >= since_us]}
+    return gained
 
 
 def disperse(swarm: Swarm) -> dict[str, Any]:
@@ -276,12 +284,14 @@ def settle(swarm: Swarm) -> dict[str, Any]:
 def misplaced(swarm: Swarm, rid: int) -> str:
     """'' when the robot is where a new organization expects it, else what it is instead."""
     status = swarm.command(rid, "status")
-    if "error" in status:
-        return status["error"]
+    return status["error"] if "error" in status else misplaced_as(status, rid)
+
+
+def misplaced_as(status: dict[str, Any], rid: int) -> str:
+    """'' when a robot with this ``status`` is where a new organization expects it, else what it is instead."""
     state, pan = status["state"], status["radio"]["pan_id"]
-    if rid == MASTER:
-        return "" if state == "following" and pan == WAITING_PAN else f"{state} on PAN {pan:#06x}"
-    return "" if state == "waiting" and pan == WAITING_PAN else f"{state} on PAN {pan:#06x}"
+    wanted = "following" if rid == MASTER else "waiting"
+    return "" if state == wanted and pan == WAITING_PAN else f"{state} on PAN {pan:#06x}"
 
 
 def hub_figures(stats: dict[str, Any]) -> dict[str, Any]:

@@ -61,15 +61,9 @@ class ModelSwarm:
     def evidence(self, seconds: float, counters: tuple[str, ...]) -> dict[str, Any]:
         """The air's transmissions that ended in the last ``seconds`` and each robot's MAC counters' gain."""
         stats = self.stats()
-        gained = {}
-        for name, node in stats["nodes"].items():
-            before = self.counters.get(name, {})
-            delta = {k: node.get(k, 0) - before.get(k, 0) for k in counters}
-            if any(delta.values()):
-                gained[name] = {k: v for k, v in delta.items() if v}
         since_us = stats["now_us"] - seconds * 1e6
         air = [tx for tx in self.air.env.air()["transmissions"] if tx["end_us"] >= since_us]
-        return {"mac": gained, "air": air}
+        return {"mac": bench.counters_gained(stats["nodes"], self.counters, counters), "air": air}
 
 
 def environment(config: Path | None, profile: str) -> EnvironmentConfig:
@@ -166,10 +160,7 @@ async def settle(swarm: ModelSwarm) -> dict[str, Any]:
 
 def misplaced(robot: RunningRobot, rid: int) -> str:
     """'' when the robot is where a new organization expects it, else what it is instead."""
-    status = robot.robot.status()
-    state, pan = status["state"], status["radio"]["pan_id"]
-    wanted = "following" if rid == bench.MASTER else "waiting"
-    return "" if state == wanted and pan == bench.WAITING_PAN else f"{state} on PAN {pan:#06x}"
+    return bench.misplaced_as(robot.robot.status(), rid)
 
 
 def run_counts(args: argparse.Namespace, out: Path) -> dict[str, Any]:
