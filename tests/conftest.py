@@ -1,5 +1,8 @@
 """Every test keeps its run records out of the working tree: ``./runs`` is for people's runs.
 
+The session also compiles the project's sources to bytecode once, before any test starts a process (see
+``pytest_sessionstart``).
+
 ``petswarm run`` and ``petswarm experiment`` write to ``$PETSWARM_RUNS`` (default ``./runs``) unless given
 ``--record`` / ``--out``; the whole session points it into pytest's temporary directory, and the child
 processes the tests start inherit it. Each test then checks that it left nothing new in ``./runs``.
@@ -7,6 +10,7 @@ processes the tests start inherit it. Each test then checks that it left nothing
 
 from __future__ import annotations
 
+import compileall
 import os
 from collections.abc import Iterator
 from pathlib import Path
@@ -14,6 +18,20 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+SOURCES = ("petswarm", "radio_hub", "cli")
+
+
+def pytest_sessionstart(session: pytest.Session) -> None:
+    """Write the sources' bytecode before the tests start hundreds of hub, robot and user processes.
+
+    Where PYTHONDONTWRITEBYTECODE is set (as on the CI machines), no process writes a ``.pyc``, so every child
+    would compile every module it imports from source again: a third of a robot process's start (0.55 -> 0.37
+    CPU-s measured). Processes still read bytecode that exists; ``compileall`` writes it whatever the setting.
+    Only the controlling process does it (an xdist worker has ``workerinput``), before the workers start."""
+    if hasattr(session.config, "workerinput"):
+        return
+    for package in SOURCES:
+        compileall.compile_dir(ROOT / package, quiet=1)
 
 
 @pytest.fixture(scope="session", autouse=True)
