@@ -10,7 +10,7 @@ import signal
 import sys
 from typing import TYPE_CHECKING, Any
 
-from petswarm.lab.arguments import bounded, robot_id, seed
+from petswarm.lab.arguments import CLOCKS, bounded, robot_id, seed
 from petswarm.lab.robot_command import add_hub as _add_hub
 from petswarm.lab.robot_command import add_node_clock as _add_node_clock
 from petswarm.lab.robot_command import add_profile, add_robot_arguments, robot_config
@@ -209,7 +209,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     run.add_argument(
         "--clock",
-        choices=("wall", "model", "lockstep"),
+        choices=CLOCKS,
         default="wall",
         help="wall (default): a hub process and robot processes over zenoh, in real time; model: the hub's "
         "environment and every robot in this one process on a virtual clock, as fast as the CPU allows, "
@@ -245,6 +245,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--out", help="directory for the records and results (default runs/experiment-<time>, or under $PETSWARM_RUNS)"
     )
     exp.add_argument("--json", action="store_true", help="print the results as JSON on stdout (the table on stderr)")
+    exp.add_argument(
+        "--clock",
+        choices=CLOCKS,
+        default=None,
+        help="every run's clock, over the file's [run] clock (default: the file's, else wall): model repeats a run "
+        "exactly from its seed (each run's digest is in the results), wall runs real processes over zenoh",
+    )
 
     rep = sub.add_parser("report", help="print a run record's summary and render its plots to PNG")
     rep.add_argument("run", help="a run record directory (runs/<time>-<seed>)")

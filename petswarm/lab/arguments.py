@@ -12,6 +12,9 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from petswarm.controllers.surround import SurroundConfig
 
+CLOCKS = ("wall", "model", "lockstep")
+"""The clocks a run takes (``petswarm run --clock``, an experiment's ``[run] clock``; docs/DESIGN.md "Time")."""
+
 
 def int_auto(text: str) -> int:
     """An integer in decimal or with a 0x / 0o / 0b prefix (PAN IDs are usually written in hex)."""

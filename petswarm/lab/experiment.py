@@ -4,8 +4,8 @@
     repetitions = 5            # runs, with seeds seed, seed + 1, ... unless `seeds` lists them
     seed = 1
     require = []               # checks of `petswarm run` a run must also pass (default: all_pairs_heard, full_swarm)
-    [run]                      # any `petswarm run` option: robots, duration, organize, protocol, config
-    robots = 5
+    [run]                      # any `petswarm run` option: robots, duration, organize, protocol, config,
+    robots = 5                 # clock (wall, model, lockstep; --clock overrides it), profile
     duration = 2
     organize = 3
     [[faults]]                 # `petswarm chaos` requests, `at` seconds into the traffic phase
@@ -17,7 +17,9 @@
     clear = true
 
 Each repetition is a full `petswarm run` with its own record under the experiment's directory; the
-results (a table per repetition and the aggregates) go to stdout, ``results.json`` and ``results.png``.
+results (a table per repetition and the aggregates) go to stdout, ``results.json`` and ``results.png``. In
+model or lockstep time each run's ``digest`` is in the results: the same file and seeds repeat every run exactly,
+on any machine.
 
 A run passes when it completed and is consistent: no process failed, every robot's state agreed with the
 master's after organizing and after dispersing, the record's invariants hold and the transport lost
@@ -43,6 +45,7 @@ from typing import Any
 import numpy as np
 
 from petswarm.bench.output import emit, save
+from petswarm.lab.arguments import CLOCKS
 from petswarm.lab.launch import run
 from petswarm.lab.records import runs_dir
 from petswarm.lab.run import RunOptions
@@ -58,7 +61,7 @@ WAIVABLE = {
 }
 """The checks of `petswarm run` an experiment's ``require`` may leave out, by the wording of the problem the
 run reports for each (petswarm/lab/run.py; a unit test keeps the two in step). Every other problem fails a run."""
-_RUN_KEYS = ("robots", "duration", "ping_interval", "organize", "protocol", "config")
+_RUN_KEYS = ("robots", "duration", "ping_interval", "organize", "protocol", "config", "clock", "profile")
 
 
 def load(path: Path) -> dict[str, Any]:
@@ -81,6 +84,7 @@ def _check(data: dict[str, Any]) -> dict[str, Any]:
         raise ValueError(f"require is a list of {', '.join(WAIVABLE)} (or []), not {require!r}")
     for i, fault in enumerate(data.get("faults", [])):
         check_timed_fault(fault, f"[[faults]][{i}]")
+    _check_clock_and_profile(data.get("run", {}))
     config = data.get("run", {}).get("config")
     if config is not None:
         from radio_hub.interface import load_config
@@ -94,6 +98,16 @@ def _check(data: dict[str, Any]) -> dict[str, Any]:
     return {**data, "seeds": seeds, "require": require}
 
 
+def _check_clock_and_profile(run_table: dict[str, Any]) -> None:
+    clock = run_table.get("clock", "wall")
+    if clock not in CLOCKS:
+        raise ValueError(f"[run] clock is one of {', '.join(CLOCKS)}, not {clock!r}")
+    if "profile" in run_table:
+        from petswarm.profiles import check_profile
+
+        check_profile(run_table["profile"])
+
+
 def experiment_command(args: argparse.Namespace) -> int:
     """Run every repetition with a progress bar; 0 when every run was OK."""
     try:
@@ -101,11 +115,16 @@ def experiment_command(args: argparse.Namespace) -> int:
     except (OSError, ValueError, tomllib.TOMLDecodeError) as err:
         print(f"petswarm experiment: {args.file}: {err}", file=sys.stderr)
         return 2
+    if getattr(args, "clock", None):
+        spec["run"] = {**spec.get("run", {}), "clock": args.clock}
     out = Path(args.out or runs_dir() / f"experiment-{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}")
     out.mkdir(parents=True, exist_ok=True)
     rows: list[dict[str, Any]] = []
     seeds = spec["seeds"]
-    print(f"[experiment] {spec.get('name') or args.file}: {len(seeds)} runs", file=sys.stderr, flush=True)
+    clock = spec.get("run", {}).get("clock", "wall")
+    print(
+        f"[experiment] {spec.get('name') or args.file}: {len(seeds)} runs, {clock} clock", file=sys.stderr, flush=True
+    )
     for i, seed in enumerate(seeds):
         rows.append(_one_run(spec, seed, out / f"run-{i + 1}-seed-{seed}"))
         print(progress_line(len(rows), len(seeds), rows[-1]), file=sys.stderr, flush=True)
@@ -150,6 +169,8 @@ def _one_run(spec: dict[str, Any], seed: int, record: Path) -> dict[str, Any]:
     ok, problems, waived = judge(code, summary.get("problems", []), spec["require"])
     return {
         "seed": seed,
+        "clock": opts.clock,
+        "digest": summary.get("digest"),
         "exit_code": code,
         "ok": ok,
         "record": str(record),
@@ -204,7 +225,7 @@ def table(results: dict[str, Any]) -> list[str]:
         f"experiment {results['name'] or results['file']}: {len(results['runs'])} runs; a run passes when it is "
         f"consistent{''.join(f' and {check}' for check in require)}",
         f"{'seed':>6}{'ok':>5}{'all pairs':>11}{'members':>9}{'org ms':>9}{'retries':>9}{'sent':>7}"
-        f"{'delivered':>11}{'collided':>10}{'lost':>7}",
+        f"{'delivered':>11}{'collided':>10}{'lost':>7}  digest",
     ]
     for r in results["runs"]:
         org = "-" if r["organize_ms"] is None else f"{r['organize_ms']:.1f}"
@@ -213,7 +234,7 @@ def table(results: dict[str, Any]) -> list[str]:
         retries = "-" if r["retries"] is None else r["retries"]
         lines.append(
             f"{r['seed']:>6}{'yes' if r['ok'] else 'NO':>5}{pairs:>11}{members:>9}{org:>9}{retries:>9}"
-            f"{r['sent']:>7}{r['delivered']:>11}{r['collided']:>10}{r['lost']:>7}"
+            f"{r['sent']:>7}{r['delivered']:>11}{r['collided']:>10}{r['lost']:>7}  {(r.get('digest') or '-')[:8]}"
         )
         lines += [f"        problem: {p}" for p in r["problems"]]
         lines += [f"        measured, not required: {p}" for p in r.get("waived", [])]

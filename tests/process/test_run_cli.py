@@ -173,22 +173,44 @@ def test_an_experiment_file_runs_every_seed_with_its_fault_timeline(tmp_path):
     assert refused.returncode == 2 and "robotz" in refused.stderr
 
 
-def test_the_shipped_example_experiment_passes(tmp_path):
+def test_the_shipped_example_experiment_passes_and_repeats_exactly_in_model_time(tmp_path):
+    results = []
+    for out in (tmp_path / "out", tmp_path / "again"):
+        proc = subprocess.run(
+            _petswarm("experiment", "examples/experiment-loss.toml", "--out", str(out)),
+            capture_output=True,
+            text=True,
+            timeout=300,
+            cwd=Path(__file__).resolve().parents[2],
+        )
+        assert proc.returncode == 0, proc.stdout + proc.stderr
+        # the runs' own progress goes to their records: nothing runs into the experiment's progress lines
+        assert all(line.startswith("[experiment] ") for line in proc.stderr.splitlines()), proc.stderr
+        assert "3/3 runs; seed 3 ok" in proc.stderr and (out / "run-1-seed-1" / "progress.log").stat().st_size > 0
+        results.append(json.loads((out / "results.json").read_text()))
+    first, again = ([r["digest"] for r in result["runs"]] for result in results)
+    runs = results[0]["runs"]
+    assert len(runs) == 3 and all(r["ok"] and r["clock"] == "model" for r in runs)
+    assert all(r["organize_ms"] is not None and r["members"] >= 1 for r in runs)  # every run organized
+    assert len(set(first)) == 3 and first == again  # each seed its own run, and the same run every time
+
+
+def test_an_experiment_runs_over_real_processes_with_clock_wall(tmp_path):
+    """The example's first seed over a hub process and robot processes (``--clock wall`` over the file's model
+    clock): the experiment's runner drives the wall-clock path too."""
+    spec = tmp_path / "one.toml"
+    example = (Path(__file__).resolve().parents[2] / "examples" / "experiment-loss.toml").read_text()
+    spec.write_text(example.replace("repetitions = 3", "repetitions = 1"))
     out = tmp_path / "out"
     proc = subprocess.run(
-        _petswarm("experiment", "examples/experiment-loss.toml", "--out", str(out)),
+        _petswarm("experiment", str(spec), "--out", str(out), "--clock", "wall"),
         capture_output=True,
         text=True,
         timeout=300,
-        cwd=Path(__file__).resolve().parents[2],
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    # the runs' own progress goes to their records: nothing runs into the experiment's progress lines
-    assert all(line.startswith("[experiment] ") for line in proc.stderr.splitlines()), proc.stderr
-    assert "3/3 runs; seed 3 ok" in proc.stderr and (out / "run-1-seed-1" / "progress.log").stat().st_size > 0
-    results = json.loads((out / "results.json").read_text())
-    assert len(results["runs"]) == 3 and all(r["ok"] for r in results["runs"])
-    assert all(r["organize_ms"] is not None and r["members"] >= 1 for r in results["runs"])  # every run organized
+    [run] = json.loads((out / "results.json").read_text())["runs"]
+    assert run["ok"] and run["clock"] == "wall" and run["digest"] is None and run["members"] >= 1
 
 
 def test_organizing_more_robots_than_the_run_has_warns_and_says_why_fewer_joined(tmp_path):

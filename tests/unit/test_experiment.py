@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
 from petswarm.lab.experiment import judge, load
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -38,6 +40,24 @@ def test_the_example_experiment_requires_what_it_is_about() -> None:
     assert spec["require"] == []  # the swarm's size and the ping phase under loss are measured, not required
     assert spec["run"]["organize"] == 3 and spec["faults"][0]["p"] == 0.3
     assert spec["faults"][0]["at"] == 0  # the whole run under the fault, so the measured loss is the fault's
+    assert spec["run"]["clock"] == "model"  # each seed's run repeats exactly, whatever the machine's load
+
+
+@pytest.mark.parametrize(
+    ("run_table", "error"),
+    [
+        ('clock = "sundial"', "[run] clock is one of wall, model, lockstep, not 'sundial'"),
+        ('profile = "mars"', "unknown profile 'mars'"),
+    ],
+)
+def test_an_experiment_with_an_unknown_clock_or_profile_is_refused_naming_it(
+    tmp_path: Path, run_table: str, error: str
+) -> None:
+    path = tmp_path / "bad.toml"
+    path.write_text(f"repetitions = 1\n[run]\nrobots = 2\n{run_table}\n")
+    with pytest.raises(ValueError, match=r"bad\.toml") as refused:
+        load(path)
+    assert error in str(refused.value)
 
 
 def test_the_lost_fraction_of_a_30_percent_loss_fault_reads_about_0_3() -> None:
