@@ -1,4 +1,6 @@
-"""Forming and dispersing swarm networks with real hub and robot processes."""
+"""Forming and dispersing swarm networks with real hub and robot processes: the real-socket path of network
+formation. What depends on timing (two masters organizing at once, loss and retried steps, every row of Tables
+1-2) is asserted in model time, where it repeats exactly: tests/model/test_formation.py."""
 
 from __future__ import annotations
 
@@ -6,7 +8,6 @@ import json
 import math
 import subprocess
 import sys
-import threading
 import time
 
 import pytest
@@ -80,35 +81,6 @@ def test_outside_the_region_or_connected_to_another_user_refuses(make_air):
     assert organized["refused"] == {"outside_region": [3], "connected_to_user": [4]}
     assert air.cmd(3, "status")["state"] == "waiting"
     assert air.cmd(4, "status")["state"] == "following"
-
-
-@pytest.mark.parametrize("protocol", ["paper", "slotted"])
-def test_two_masters_at_once_get_different_pans_and_disjoint_members(make_air, protocol):
-    air = make_air()
-    _master(air, 1, 1, (0.0, 0.0))
-    _master(air, 2, 2, (3.0, 0.0))
-    for rid, pos in {3: (1.0, 1.0), 4: (2.0, 1.0), 5: (1.0, -1.0), 6: (2.0, -1.0)}.items():
-        air.robot(rid, pos)
-    results: dict[int, dict] = {}
-
-    def organize(master: int) -> None:
-        results[master] = air.cmd(master, "organize", timeout=30, count=2, protocol=protocol)
-
-    threads = [threading.Thread(target=organize, args=(m,)) for m in (1, 2)]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join(40)
-    one, two = results[1], results[2]
-    assert "error" not in one and "error" not in two, results
-    assert one["pan_id"] != two["pan_id"]
-    assert not set(one["members"]) & set(two["members"])
-    assert one["members"] or two["members"]
-    time.sleep(0.3)
-    for master, result in results.items():
-        for rid in result["members"]:
-            swarm = air.cmd(rid, "status")["swarm"]
-            assert swarm["master"] == master and swarm["pan_id"] == result["pan_id"]
 
 
 def test_heavy_loss_ends_in_a_bounded_outcome_and_consistent_states(make_air):
