@@ -133,6 +133,8 @@ def beacon_fixes_batch(jobs: list[SweepJob], ir: IrConfig, method: str = "lsq") 
     are batched (finite readings, gains > 0): the others go alone too, so a bad one fails as it would alone.
     """
     together = [job for job in jobs if _batchable(job)]
+    if together and not np.isfinite(np.concatenate([job.readings for job in together])).all():
+        together = [job for job in together if np.isfinite(job.readings).all()]
     found = dict(zip(map(id, together), _fixes_together(together, ir, method), strict=True)) if together else {}
     return [
         found[id(job)] if id(job) in found else beacon_fixes(job.names, job.readings, job.gains, ir, method, job.person)
@@ -141,14 +143,10 @@ def beacon_fixes_batch(jobs: list[SweepJob], ir: IrConfig, method: str = "lsq") 
 
 
 def _batchable(job: SweepJob) -> bool:
-    """Whether a sweep goes into the shared estimate: two beacons or more, well formed (see ``beacon_fixes_batch``)."""
+    """Whether a sweep may go into the shared estimate: two beacons or more, of the right shape, gains > 0
+    (``beacon_fixes_batch`` also checks that the readings are finite)."""
     readings = job.readings
-    return (
-        len(job.names) >= 2
-        and readings.shape == (len(job.names), RECEIVERS)
-        and all(g > 0 for g in job.gains)
-        and bool(np.isfinite(readings).all())
-    )
+    return len(job.names) >= 2 and readings.shape == (len(job.names), RECEIVERS) and all(g > 0 for g in job.gains)
 
 
 def _fixes_together(jobs: list[SweepJob], ir: IrConfig, method: str) -> list[tuple[list[str], np.ndarray]]:
@@ -379,6 +377,10 @@ def _explained(point: Point, centres: list[list[float]], reaches: list[float]) -
     x, y = point
     for (cx, cy), reach in zip(centres, reaches, strict=True):
         gx, gy = x - cx, y - cy
+        # a body further off along x or y than its reach is out, without the root: in floating point too,
+        # sqrt(gx*gx + gy*gy) >= |gx| (sqrt of a rounded square is exact, rounding and sqrt are monotonic)
+        if gx > reach or -gx > reach or gy > reach or -gy > reach:
+            continue
         if math.sqrt(gx * gx + gy * gy) <= reach:
             return True
     return False
