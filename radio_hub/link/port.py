@@ -41,12 +41,17 @@ class HubLink(Protocol):
     """How a node's messages reach the hub's environment and its answers come back.
 
     ``open`` starts the link: from then on ``on_down(data)`` is called on the node's event loop with every
-    message for the node, and ``on_hub(present)`` whenever the hub appears or goes away. ``put`` sends one
+    message for the node (its bytes; a link in memory may hand the message itself over, which the node checks
+    as it would decode it), and ``on_hub(present)`` whenever the hub appears or goes away. ``put`` sends one
     encoded message up (in order, never dropped by the transport); ``close`` ends the node's presence.
     """
 
     def open(
-        self, node_id: str, instance: str, on_down: Callable[[bytes], None], on_hub: Callable[[bool], None]
+        self,
+        node_id: str,
+        instance: str,
+        on_down: Callable[[bytes | wire.Message], None],
+        on_hub: Callable[[bool], None],
     ) -> None:
         """Start delivering to the node."""
 
@@ -568,10 +573,11 @@ class RadioClient:
             if fut.done() and not fut.cancelled():
                 fut.exception()  # a caller cancelled as the radio closed: its error is seen, never warned about
 
-    def _on_down(self, data: bytes) -> None:
-        """One message from the hub; never raises (anything unexpected is counted in ``faults``)."""
+    def _on_down(self, data: bytes | wire.Message) -> None:
+        """One message from the hub, encoded or handed over in memory; never raises (anything unexpected is
+        counted in ``faults``)."""
         try:
-            msg = wire.decode(data)
+            msg = wire.check(data) if isinstance(data, wire.Message) else wire.decode(data)
         except wire.WireError:
             self.malformed += 1
             return

@@ -424,6 +424,12 @@ def decode(data: bytes, max_bytes: int = MAX_MESSAGE_BYTES) -> Message:
         msg = cls(**body)
     except TypeError as err:
         raise WireError(f"bad {cls.TYPE} fields: {err}") from None
+    return check(msg)
+
+
+def check(msg: Message) -> Message:
+    """``msg`` if its fields pass the checks ``decode`` makes (types, ranges, finite floats, sequence number
+    and session key), else WireError: for a message handed over in memory without its bytes."""
     _check_types(msg)
     if not (0 <= msg.n <= SEQ_MAX and 0 <= msg.s <= SEQ_MAX):
         raise WireError(f"sequence number and session key are 0 to {SEQ_MAX}")
