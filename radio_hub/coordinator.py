@@ -49,7 +49,7 @@ class Coordinator:
         self.on_world: Callable[[dict[str, Any]], None] | None = None
         """Where world states for viewers go (10 Hz); None: nowhere."""
         self._downs: dict[str, list[bytes | wire.Message]] = {}
-        self._ups: list[tuple[str, int, bytes | None, str]] = []
+        self._ups: list[tuple[str, int, bytes | wire.Message | None, str]] = []
         self._order = itertools.count()
 
     # -- the environment's Downlink: held until the round ends ----------------------------------------------
@@ -73,8 +73,8 @@ class Coordinator:
 
     # -- inputs from the nodes: held until every node is idle --------------------------------------------
 
-    def up(self, node_id: str, data: bytes) -> None:
-        """A node's message, held for the end of the round."""
+    def up(self, node_id: str, data: bytes | wire.Message) -> None:
+        """A node's message (bytes, or in memory one handed over as it is), held for the end of the round."""
         self._ups.append((node_id, next(self._order), data, ""))
 
     def leave(self, node_id: str, instance: str) -> None:

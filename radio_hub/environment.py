@@ -261,14 +261,16 @@ class Environment:
         self._sweep_ir()
         self._deliver_ble()
 
-    def receive(self, node_id: str, data: bytes, now_us: int) -> None:
-        """A node's message (``wire``-encoded) arrived at ``now_us``. Never raises: anything unexpected is
-        counted in ``faults`` and the message dropped."""
+    def receive(self, node_id: str, data: bytes | wire.Message, now_us: int) -> None:
+        """A node's message (``wire``-encoded, or in memory handed over as it is, checked as its bytes would
+        be) arrived at ``now_us``. Never raises: anything unexpected is counted in ``faults`` and the message
+        dropped."""
         self._at(now_us)
         try:
             self._on_up(node_id, data)
         except Exception as err:
-            self.faults.record("receive", err, f"{len(data)} bytes from {node_id[:64]!r}")
+            what = f"{len(data)} bytes" if isinstance(data, bytes) else f"a {type(data).__name__}"
+            self.faults.record("receive", err, f"{what} from {node_id[:64]!r}")
 
     def node_gone(self, node_id: str, instance: str, now_us: int) -> None:
         """The node's liveliness ended; ignored when another instance has attached under that id since."""
@@ -382,11 +384,11 @@ class Environment:
                 self._send_down(delivery.dst, msg)
 
     # -- inputs ----------------------------------------------------------------------------------
-    def _on_up(self, node_id: str, data: bytes) -> None:
+    def _on_up(self, node_id: str, data: bytes | wire.Message) -> None:
         try:
             if node_id not in self._kinds:  # an attached id's name was checked when it attached
                 check_name("node", node_id)
-            msg = wire.decode(data, wire.MAX_UP_BYTES)
+            msg = wire.check(data) if isinstance(data, wire.Message) else wire.decode(data, wire.MAX_UP_BYTES)
         except ValueError as err:
             self.counters.malformed += 1
             if node_id in self._kinds or not _is_name(node_id):

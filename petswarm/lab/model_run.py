@@ -104,8 +104,8 @@ class MemoryAir:
         """A node's link is open: deliver to ``on_down`` from now on."""
         self._nodes[node_id] = on_down
 
-    def up(self, node_id: str, data: bytes) -> None:
-        """A node's message, held until every node is idle."""
+    def up(self, node_id: str, data: bytes | Message) -> None:
+        """A node's message (bytes, or one handed over as it is), held until every node is idle."""
         self.coordinator.up(node_id, data)
 
     def gone(self, node_id: str, instance: str) -> None:
@@ -166,6 +166,9 @@ class MemoryAir:
 class MemoryLink:
     """A node's ``HubLink`` to a ``MemoryAir``."""
 
+    takes_messages = True
+    """Motor commands and a user's pose go up as they are (``put_message``), without their bytes."""
+
     def __init__(self, air: MemoryAir) -> None:
         self.air = air
         self.node_id = ""
@@ -189,6 +192,11 @@ class MemoryLink:
         nothing more, whatever its leftover tasks try)."""
         if not self.closed:
             self.air.up(self.node_id, data)
+
+    def put_message(self, msg: Message) -> None:
+        """``put`` of a message as it is (the port's ``HANDED_UP`` ones)."""
+        if not self.closed:
+            self.air.up(self.node_id, msg)
 
     async def close(self) -> None:
         """The node goes."""
