@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from radio_hub.environment import Environment, EnvironmentConfig
+from radio_hub.link import wire
 from radio_hub.link.port import MODEL_EPOCH_S
 
 MODEL_EPOCH_US = round(MODEL_EPOCH_S * 1e6)
@@ -37,14 +38,18 @@ class Coordinator:
         wall_epoch_us: int,
         pcap_path: str | Path | None = None,
         world_log: str | Path | None = None,
+        in_memory: bool = False,
     ) -> None:
+        """``in_memory``: every node is in this process (model time), so the environment may hand the bulk of
+        its messages over as they are (``environment.MessageDownlink``); otherwise every message is bytes."""
+        self.takes_messages = in_memory
         self.env = Environment(
             config, seed, self, wall_epoch_us=wall_epoch_us, pcap_path=pcap_path, world_log=world_log
         )
         self.on_world: Callable[[dict[str, Any]], None] | None = None
         """Where world states for viewers go (10 Hz); None: nowhere."""
-        self._downs: dict[str, list[bytes]] = {}
-        self._ups: list[tuple[str, int, bytes | None, str]] = []
+        self._downs: dict[str, list[bytes | wire.Message]] = {}
+        self._ups: list[tuple[str, int, bytes | wire.Message | None, str]] = []
         self._order = itertools.count()
 
     # -- the environment's Downlink: held until the round ends ----------------------------------------------
@@ -52,6 +57,10 @@ class Coordinator:
     def send(self, node_id: str, data: bytes) -> None:
         """Hold a message for ``node_id``."""
         self._downs.setdefault(node_id, []).append(data)
+
+    def send_message(self, node_id: str, msg: wire.Message) -> None:
+        """Hold a message for ``node_id`` as it is (only when ``in_memory``)."""
+        self._downs.setdefault(node_id, []).append(msg)
 
     def forget(self, node_id: str) -> None:
         """Messages still held for a node that left go nowhere."""
@@ -64,8 +73,8 @@ class Coordinator:
 
     # -- inputs from the nodes: held until every node is idle --------------------------------------------
 
-    def up(self, node_id: str, data: bytes) -> None:
-        """A node's message, held for the end of the round."""
+    def up(self, node_id: str, data: bytes | wire.Message) -> None:
+        """A node's message (bytes, or in memory one handed over as it is), held for the end of the round."""
         self._ups.append((node_id, next(self._order), data, ""))
 
     def leave(self, node_id: str, instance: str) -> None:
@@ -74,8 +83,9 @@ class Coordinator:
 
     # -- the rounds ------------------------------------------------------------------------------------
 
-    def take_downs(self) -> dict[str, list[bytes]]:
-        """Every held message for nodes, per node in the order the environment made them."""
+    def take_downs(self) -> dict[str, list[bytes | wire.Message]]:
+        """Every held message for nodes, per node in the order the environment made them (bytes, or with
+        ``in_memory`` some as they are)."""
         downs, self._downs = self._downs, {}
         return downs
 

@@ -83,6 +83,20 @@ class Downlink(Protocol):
         """The world's state for viewers (10 Hz)."""
 
 
+class MessageDownlink(Downlink, Protocol):
+    """A downlink in memory, to nodes in this process: it may take the body-sensor and beacon messages (the
+    bulk of a run's traffic, 25 Hz per robot) as they are, without their bytes (``RadioClient`` checks a
+    message handed over as it would decode it)."""
+
+    def send_message(self, node_id: str, msg: wire.Message) -> None:
+        """Deliver one message to ``node_id`` as it is; the environment keeps no reference to it."""
+
+
+HANDED_OVER = (wire.Sensors, wire.IrBeacons)
+"""The messages a ``MessageDownlink`` takes as they are: every field a plain value (numbers, strings, bytes
+and lists of them), so the node sees the very values their bytes would decode to."""
+
+
 @dataclass
 class EnvironmentConfig:
     """Everything a hub emulates besides the 802.15.4 medium's own tables: the IR light, the world,
@@ -165,6 +179,9 @@ class Environment:
         self.config = config
         self.seed = seed
         self.downlink = downlink
+        self._hand_over: Callable[[str, wire.Message], None] | None = (
+            downlink.send_message if getattr(downlink, "takes_messages", False) else None  # type: ignore[attr-defined]
+        )
         self.wall_epoch_us = wall_epoch_us
         self.pcap_path = None if pcap_path is None else Path(pcap_path)
         self._pcap = None if self.pcap_path is None else PcapWriter(self.pcap_path)
@@ -244,14 +261,16 @@ class Environment:
         self._sweep_ir()
         self._deliver_ble()
 
-    def receive(self, node_id: str, data: bytes, now_us: int) -> None:
-        """A node's message (``wire``-encoded) arrived at ``now_us``. Never raises: anything unexpected is
-        counted in ``faults`` and the message dropped."""
+    def receive(self, node_id: str, data: bytes | wire.Message, now_us: int) -> None:
+        """A node's message (``wire``-encoded, or in memory handed over as it is, checked as its bytes would
+        be) arrived at ``now_us``. Never raises: anything unexpected is counted in ``faults`` and the message
+        dropped."""
         self._at(now_us)
         try:
             self._on_up(node_id, data)
         except Exception as err:
-            self.faults.record("receive", err, f"{len(data)} bytes from {node_id[:64]!r}")
+            what = f"{len(data)} bytes" if isinstance(data, bytes) else f"a {type(data).__name__}"
+            self.faults.record("receive", err, f"{what} from {node_id[:64]!r}")
 
     def node_gone(self, node_id: str, instance: str, now_us: int) -> None:
         """The node's liveliness ended; ignored when another instance has attached under that id since."""
@@ -365,11 +384,11 @@ class Environment:
                 self._send_down(delivery.dst, msg)
 
     # -- inputs ----------------------------------------------------------------------------------
-    def _on_up(self, node_id: str, data: bytes) -> None:
+    def _on_up(self, node_id: str, data: bytes | wire.Message) -> None:
         try:
             if node_id not in self._kinds:  # an attached id's name was checked when it attached
                 check_name("node", node_id)
-            msg = wire.decode(data, wire.MAX_UP_BYTES)
+            msg = wire.check(data) if isinstance(data, wire.Message) else wire.decode(data, wire.MAX_UP_BYTES)
         except ValueError as err:
             self.counters.malformed += 1
             if node_id in self._kinds or not _is_name(node_id):
@@ -691,7 +710,10 @@ class Environment:
 
     def _send_down(self, node_id: str, msg: wire.Message) -> None:
         msg.n = self._next_down_seq(node_id)
-        self.downlink.send(node_id, msg.encode())
+        if self._hand_over is not None and isinstance(msg, HANDED_OVER):
+            self._hand_over(node_id, msg)
+        else:
+            self.downlink.send(node_id, msg.encode())
 
     def _next_down_seq(self, node_id: str) -> int:
         """The number of the next message to ``node_id`` (its stream starts at 1 on every attach)."""

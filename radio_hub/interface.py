@@ -85,6 +85,7 @@ _LAB_ENTRY_POINTS = {
     "HUB_PROFILES": "radio_hub.profiles",
     "apply_profile": "radio_hub.profiles",
     "profile_tables": "radio_hub.profiles",
+    "Message": "radio_hub.link.wire",
     "Relayed": "radio_hub.link.wire",
     "check_name": "radio_hub.link.keys",
     "check_timed_fault": "radio_hub.air.chaos",

@@ -11,16 +11,18 @@ command); this shell wakes on each sample, hands the core the radio's latest sam
 from __future__ import annotations
 
 import asyncio
+import weakref
 from typing import Any
 
 from petswarm import clock
 from petswarm.controllers.driving import sleep_until
 from petswarm.controllers.driving_core import Drive, Log, Telemetry
 from petswarm.controllers.surround_core import TELEMETRY_EVERY, SetIrMode, SurroundAction, SurroundCore
-from petswarm.controllers.surround_pilot import SurroundDriverConfig
+from petswarm.controllers.surround_pilot import SurroundDriverConfig, SurroundPilot
+from petswarm.controllers.surround_sensing import SweepJob, beacon_fixes_batch
 from petswarm.managers.relative_location import IrModuleManager
 from petswarm.managers.sequence import EventLog
-from radio_hub.interface import HubUnavailable, RadioClient, RadioError
+from radio_hub.interface import BeaconSweep, HubUnavailable, RadioClient, RadioError
 
 __all__ = ["TELEMETRY_EVERY", "SurroundDriver"]
 
@@ -55,15 +57,22 @@ class SurroundDriver:
                 self.core.handle_timer(clock.now())
         fresh = asyncio.Event()
         self.radio.on_sensors.append(lambda _sensors: fresh.set())
-        while True:
-            await fresh.wait()
-            fresh.clear()
-            sensors = self.radio.sensors
-            if sensors is None:
-                continue
-            # read when the task runs, not when the sample came: a sweep of the same instant may be newer
-            self.core.sensors_sample(sensors, self.radio.beacons, clock.now())
-            await self._carry_out()
+        batch = SweepBatch.of_loop(asyncio.get_running_loop())
+        batch.join(self.pilot, self.radio)
+        try:
+            while True:
+                await fresh.wait()
+                fresh.clear()
+                sensors = self.radio.sensors
+                if sensors is None:
+                    continue
+                # read when the task runs, not when the sample came: a sweep of the same instant may be newer
+                sweep = self.radio.beacons
+                batch.prepare(self.pilot, sweep)
+                self.core.sensors_sample(sensors, sweep, clock.now())
+                await self._carry_out()
+        finally:
+            batch.leave(self.pilot)
 
     async def _carry_out(self) -> None:
         for action in self.core.actions():
@@ -88,3 +97,57 @@ class SurroundDriver:
             else:
                 self.core.ir_mode_set(clock.now())
             await self._carry_out()
+
+
+class SweepBatch:
+    """The surround robots running on one event loop, whose new beacon sweeps are estimated together.
+
+    In model time every robot of a run shares the loop, and their control steps fall at the same instants:
+    the first robot to step works out the fixes of every member's new sweep in one estimate
+    (``surround_sensing.beacon_fixes_batch``, equal bit for bit to each robot's own), and hands each pilot its
+    own (``SurroundPilot.give_fixes``), instead of twenty small estimates. In a robot process (wall or lockstep
+    time) the loop has one robot, and this is its own estimate.
+    """
+
+    _of_loop: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, SweepBatch] = weakref.WeakKeyDictionary()
+
+    def __init__(self) -> None:
+        self._members: dict[SurroundPilot, RadioClient] = {}
+
+    @classmethod
+    def of_loop(cls, loop: asyncio.AbstractEventLoop) -> SweepBatch:
+        """The batch of the robots on ``loop``."""
+        batch = cls._of_loop.get(loop)
+        if batch is None:
+            batch = cls._of_loop[loop] = cls()
+        return batch
+
+    def join(self, pilot: SurroundPilot, radio: RadioClient) -> None:
+        """``pilot`` steps on the sweeps that come to ``radio`` (its latest, ``radio.beacons``)."""
+        self._members[pilot] = radio
+
+    def leave(self, pilot: SurroundPilot) -> None:
+        """``pilot`` steps no more."""
+        self._members.pop(pilot, None)
+
+    def prepare(self, pilot: SurroundPilot, sweep: BeaconSweep) -> None:
+        """Before ``pilot`` steps on ``sweep``: if that sweep is new to it, estimate it together with every
+        member's latest sweep that is new to its pilot, and give each pilot its fixes."""
+        if pilot.sweep_job(sweep) is None:
+            return
+        groups: list[tuple[SurroundDriverConfig, list[tuple[SurroundPilot, BeaconSweep, SweepJob]]]] = []
+        for member, radio in self._members.items():
+            latest = sweep if member is pilot else radio.beacons
+            job = member.sweep_job(latest)
+            if job is None:
+                continue
+            config = member.config
+            group = next((g for c, g in groups if c.ir == config.ir and c.estimator == config.estimator), None)
+            if group is None:
+                group = []
+                groups.append((config, group))
+            group.append((member, latest, job))
+        for config, group in groups:
+            fixes = beacon_fixes_batch([job for _, _, job in group], config.ir, config.estimator)
+            for (member, latest, _), (seen, xy) in zip(group, fixes, strict=True):
+                member.give_fixes(latest, seen, xy)

@@ -38,7 +38,14 @@ from petswarm.controllers.motion import DriveLimits, MotorCommand
 from petswarm.controllers.pet_controller import PetControllerConfig, safety
 from petswarm.controllers.surround import SurroundConfig, SurroundController
 from petswarm.controllers.surround_improved import ImprovedSurroundController
-from petswarm.controllers.surround_sensing import BeaconTracker, SensingConfig, beacon_fixes, echo_list, sense_lists
+from petswarm.controllers.surround_sensing import (
+    BeaconTracker,
+    SensingConfig,
+    SweepJob,
+    beacon_fixes,
+    echo_list,
+    sense_lists,
+)
 from radio_hub.interface import BeaconSweep, IrConfig, OwnSensors, lazy_numpy
 
 if TYPE_CHECKING:
@@ -93,6 +100,21 @@ class SurroundPilot:
         self._sweep_at = -float("inf")
         self._ring_angles: np.ndarray | None = None
         self._ring_trig: tuple[list[float], list[float]] = ([], [])
+        self._given: tuple[BeaconSweep, list[str], np.ndarray] | None = None
+        """A sweep's fixes worked out for it ahead of its step (``give_fixes``)."""
+
+    def sweep_job(self, sweep: BeaconSweep) -> SweepJob | None:
+        """What the next step would estimate from ``sweep`` (None: nothing, the sweep is not new or its fixes
+        were given): so that a runtime can estimate many robots' sweeps at once (``beacon_fixes_batch``)."""
+        if sweep.t_us == self._sweep_t_us or (self._given is not None and self._given[0] is sweep):
+            return None
+        names, readings, gains = sweep.arrays()
+        return SweepJob(names, readings, gains, self.config.human_id)
+
+    def give_fixes(self, sweep: BeaconSweep, seen: list[str], xy: np.ndarray) -> None:
+        """The fixes of ``sweep``, worked out elsewhere exactly as ``step`` would (``beacon_fixes_batch`` of its
+        ``sweep_job``): the step that takes it in uses them."""
+        self._given = (sweep, seen, xy)
 
     def step(self, sensors: OwnSensors, sweep: BeaconSweep, now_s: float) -> tuple[float, float] | None:
         """The motor command (vx, vy) for this sample, or None to send nothing (no human seen yet, or a sample
@@ -110,9 +132,13 @@ class SurroundPilot:
         self.tracker.predict(own_velocity, dt)
         if sweep.t_us != self._sweep_t_us:
             self._sweep_t_us, self._sweep_at = sweep.t_us, now_s
-            config = self.config
-            names, readings, gains = sweep.arrays()
-            seen, xy = beacon_fixes(names, readings, gains, config.ir, config.estimator, config.human_id)
+            given, self._given = self._given, None
+            if given is not None and given[0] is sweep:
+                seen, xy = given[1], given[2]
+            else:
+                config = self.config
+                names, readings, gains = sweep.arrays()
+                seen, xy = beacon_fixes(names, readings, gains, config.ir, config.estimator, config.human_id)
             self.tracker.update_many(seen, xy, own_velocity)
         elif now_s - self._sweep_at > STALE_AFTER_S:
             self.tracker.clear()

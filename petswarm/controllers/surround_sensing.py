@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from petswarm.managers.ir_estimator import estimate_many
-from radio_hub.datasheet import PERSON_BEACON_POWER, IrConfig
+from radio_hub.datasheet import PERSON_BEACON_POWER, RECEIVERS, IrConfig
 from radio_hub.interface import lazy_numpy
 
 if TYPE_CHECKING:
@@ -109,6 +109,71 @@ def beacon_fixes(
     if np.count_nonzero(valid) == len(names):
         return list(names), xy
     return [n for n, v in zip(names, valid.tolist(), strict=True) if v], xy[valid]
+
+
+@dataclass(frozen=True)
+class SweepJob:
+    """One robot's sweep to turn into fixes (``beacon_fixes``'s arguments, less the calibration and method)."""
+
+    names: list[str]
+    readings: np.ndarray
+    gains: list[float]
+    person: str | None
+
+
+def beacon_fixes_batch(jobs: list[SweepJob], ir: IrConfig, method: str = "lsq") -> list[tuple[list[str], np.ndarray]]:
+    """``beacon_fixes`` of many robots' sweeps through one estimate: each result is, bit for bit, what
+    ``beacon_fixes`` gives for that sweep alone, so a model-time run that batches its robots' sweeps and a
+    lockstep run where each robot estimates its own give one digest.
+
+    Why that holds: the estimator works row by row (elementwise ufuncs, per-row reductions and choices), and
+    its small matrix products go through BLAS's gemm, whose rounding of a row does not depend on the rows
+    beside it, except that a product of one row goes through gemv, which rounds differently; so a sweep of
+    one beacon is estimated alone, as its robot would. Only sweeps the estimator takes without complaint
+    are batched (finite readings, gains > 0): the others go alone too, so a bad one fails as it would alone.
+    """
+    together = [job for job in jobs if _batchable(job)]
+    if together and not np.isfinite(np.concatenate([job.readings for job in together])).all():
+        together = [job for job in together if np.isfinite(job.readings).all()]
+    found = dict(zip(map(id, together), _fixes_together(together, ir, method), strict=True)) if together else {}
+    return [
+        found[id(job)] if id(job) in found else beacon_fixes(job.names, job.readings, job.gains, ir, method, job.person)
+        for job in jobs
+    ]
+
+
+def _batchable(job: SweepJob) -> bool:
+    """Whether a sweep may go into the shared estimate: two beacons or more, of the right shape, gains > 0
+    (``beacon_fixes_batch`` also checks that the readings are finite)."""
+    readings = job.readings
+    return len(job.names) >= 2 and readings.shape == (len(job.names), RECEIVERS) and all(g > 0 for g in job.gains)
+
+
+def _fixes_together(jobs: list[SweepJob], ir: IrConfig, method: str) -> list[tuple[list[str], np.ndarray]]:
+    """``beacon_fixes`` of every job, through one ``estimate_many`` of all their rows."""
+    readings = np.concatenate([job.readings for job in jobs])
+    brightness = [
+        (PERSON_BEACON_POWER if n == job.person else 1.0) * g
+        for job in jobs
+        for n, g in zip(job.names, job.gains, strict=True)
+    ]
+    found = estimate_many(readings, ir, method, brightness, [len(job.names) for job in jobs])
+    xy = np.empty((len(readings), 2))
+    np.multiply(np.cos(found.bearing_rad), found.distance_m, out=xy[:, 0])
+    np.multiply(np.sin(found.bearing_rad), found.distance_m, out=xy[:, 1])
+    valid = found.valid.tolist()
+    out = []
+    start = 0
+    for job in jobs:
+        end = start + len(job.names)
+        rows = valid[start:end]
+        if all(rows):
+            out.append((list(job.names), xy[start:end].copy()))
+        else:
+            keep = [start + i for i, v in enumerate(rows) if v]
+            out.append(([n for n, v in zip(job.names, rows, strict=True) if v], xy[keep]))
+        start = end
+    return out
 
 
 TRACK_ALPHA = 0.5
@@ -312,6 +377,10 @@ def _explained(point: Point, centres: list[list[float]], reaches: list[float]) -
     x, y = point
     for (cx, cy), reach in zip(centres, reaches, strict=True):
         gx, gy = x - cx, y - cy
+        # a body further off along x or y than its reach is out, without the root: in floating point too,
+        # sqrt(gx*gx + gy*gy) >= |gx| (sqrt of a rounded square is exact, rounding and sqrt are monotonic)
+        if gx > reach or -gx > reach or gy > reach or -gy > reach:
+            continue
         if math.sqrt(gx * gx + gy * gy) <= reach:
             return True
     return False

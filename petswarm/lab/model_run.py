@@ -21,7 +21,7 @@ import weakref
 from collections.abc import Callable, Coroutine
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from petswarm.clock import MODEL_EPOCH_S, ModelClockLoop
 from petswarm.control import RelayControl
@@ -57,6 +57,9 @@ from radio_hub.interface import (
     load_config,
 )
 
+if TYPE_CHECKING:
+    from radio_hub.interface import Message
+
 ENDPOINT = "memory"
 """What a model run records as its hub endpoint: there is no socket."""
 CONTROL_IDENTITY = RadioIdentity("run", 0, 0, 0, kind="control")
@@ -79,10 +82,10 @@ class MemoryAir:
         if not isinstance(self.loop, ModelClockLoop):
             raise TypeError("MemoryAir runs on a ModelClockLoop")
         self.coordinator = Coordinator(
-            config, seed, wall_epoch_us=MODEL_EPOCH_US, pcap_path=pcap_path, world_log=world_log
+            config, seed, wall_epoch_us=MODEL_EPOCH_US, pcap_path=pcap_path, world_log=world_log, in_memory=True
         )
         self.env = self.coordinator.env
-        self._nodes: dict[str, Callable[[bytes], None]] = {}
+        self._nodes: dict[str, Callable[[bytes | Message], None]] = {}
         self._settled: list[asyncio.Future[None]] = []
         self._wake: asyncio.TimerHandle | None = None
         self._wake_us = 0
@@ -97,12 +100,12 @@ class MemoryAir:
         """A new node's port to this environment."""
         return MemoryLink(self)
 
-    def opened(self, node_id: str, on_down: Callable[[bytes], None]) -> None:
+    def opened(self, node_id: str, on_down: Callable[[bytes | Message], None]) -> None:
         """A node's link is open: deliver to ``on_down`` from now on."""
         self._nodes[node_id] = on_down
 
-    def up(self, node_id: str, data: bytes) -> None:
-        """A node's message, held until every node is idle."""
+    def up(self, node_id: str, data: bytes | Message) -> None:
+        """A node's message (bytes, or one handed over as it is), held until every node is idle."""
         self.coordinator.up(node_id, data)
 
     def gone(self, node_id: str, instance: str) -> None:
@@ -163,6 +166,9 @@ class MemoryAir:
 class MemoryLink:
     """A node's ``HubLink`` to a ``MemoryAir``."""
 
+    takes_messages = True
+    """Motor commands and a user's pose go up as they are (``put_message``), without their bytes."""
+
     def __init__(self, air: MemoryAir) -> None:
         self.air = air
         self.node_id = ""
@@ -170,9 +176,14 @@ class MemoryLink:
         self.closed = False
 
     def open(
-        self, node_id: str, instance: str, on_down: Callable[[bytes], None], on_hub: Callable[[bool], None]
+        self,
+        node_id: str,
+        instance: str,
+        on_down: Callable[[bytes | Message], None],
+        on_hub: Callable[[bool], None],
     ) -> None:
-        """Register the node with the air (the hub is always present in memory)."""
+        """Register the node with the air (the hub is always present in memory); the body-sensor and beacon
+        messages reach it as they are, without their bytes (``Coordinator(in_memory=True)``)."""
         self.node_id, self.instance = node_id, instance
         self.air.opened(node_id, on_down)
 
@@ -181,6 +192,11 @@ class MemoryLink:
         nothing more, whatever its leftover tasks try)."""
         if not self.closed:
             self.air.up(self.node_id, data)
+
+    def put_message(self, msg: Message) -> None:
+        """``put`` of a message as it is (the port's ``HANDED_UP`` ones)."""
+        if not self.closed:
+            self.air.up(self.node_id, msg)
 
     async def close(self) -> None:
         """The node goes."""

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, NamedTuple
 
@@ -89,24 +90,30 @@ def estimate(readings: ArrayLike, config: IrConfig, method: str = "lsq") -> IrEs
 
 
 def estimate_many(
-    readings: ArrayLike, config: IrConfig, method: str = "lsq", brightness: ArrayLike | None = None
+    readings: ArrayLike,
+    config: IrConfig,
+    method: str = "lsq",
+    brightness: ArrayLike | None = None,
+    groups: Sequence[int] | None = None,
 ) -> IrEstimates:
     """``estimate`` for an array of sweeps, shape (N, 12), vectorised.
 
     ``brightness``: per sweep, how many times brighter than ``config``'s emitter its source is (default 1
     for all): sweep i is read with the calibration ``config.brighter(brightness[i])``, so sources of
-    different brightness go through one call."""
+    different brightness go through one call. ``groups``: the sizes of the blocks of consecutive rows that
+    are separate calls' worth (several robots' sweeps in one call); every row's estimate is then, bit for
+    bit, what the call of its block alone gives (see ``saturated_bearing``)."""
     if method not in METHODS:
         raise ValueError(f"unknown IR estimator {method!r}; known: {', '.join(METHODS)}")
     raw = np.asarray(readings, dtype=float).reshape(-1, RECEIVERS)
     strengths = raw - config.ambient_counts
     saturated = raw >= config.saturation_counts
     fit = paper_fit if method == "paper" else lsq_fit
-    strength, bearing, fallback = fit(strengths, saturated, config)
+    strength, bearing, fallback = fit(strengths, saturated, config, groups)
     # (ufuncs and count_nonzero rather than the array methods: these arrays are small, the calls many)
     if np.count_nonzero(fallback):
         strength = np.where(fallback, config.saturation_counts - config.ambient_counts, strength)
-        bearing = np.where(fallback, saturated_bearing(saturated), bearing)
+        bearing = np.where(fallback, _grouped_saturated_bearing(saturated, fallback, groups), bearing)
     return IrEstimates(
         bearing_rad=wrap_bearing(bearing),
         distance_m=distance_from_strength(strength, config, brightness),
@@ -152,7 +159,7 @@ def _brighter(config: IrConfig, brightness: ArrayLike) -> tuple[np.ndarray, np.n
 
 
 def paper_fit(
-    strengths: np.ndarray, saturated: np.ndarray, config: IrConfig
+    strengths: np.ndarray, saturated: np.ndarray, config: IrConfig, groups: Sequence[int] | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Equations (1)-(3) per sweep: (R, phi, fallback), fallback where the strongest reading saturated.
 
@@ -213,7 +220,7 @@ def _tables() -> _Tables:
 
 
 def lsq_fit(
-    strengths: np.ndarray, saturated: np.ndarray, config: IrConfig
+    strengths: np.ndarray, saturated: np.ndarray, config: IrConfig, groups: Sequence[int] | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Weighted least squares of the clipped cosine response: (R, phi, fallback) per sweep.
 
@@ -222,7 +229,7 @@ def lsq_fit(
     from the current estimate, leaves out saturated ones, weights each by the inverse variance of its
     reading (noise floor plus relative noise of its predicted strength) and solves the 2x2 normal
     equations. It starts from the paper's estimate; with fewer than LSQ_MIN_RECEIVERS usable receivers
-    it falls back (see ``saturated_bearing``).
+    it falls back (see ``saturated_bearing``). ``groups``: as ``estimate_many``'s.
 
     The estimate is carried as (a, b): receiver k's predicted strength R max(cos(axis_k - phi), 0) is
     max(a cos_k + b sin_k, 0), which faces the source exactly where it is positive.
@@ -231,7 +238,7 @@ def lsq_fit(
     bearing = n * SECTOR_RAD + theta
     any_saturated = np.count_nonzero(saturated) > 0
     if any_saturated and np.count_nonzero(paper_saturated):
-        bearing = np.where(paper_saturated, saturated_bearing(saturated), bearing)
+        bearing = np.where(paper_saturated, _grouped_saturated_bearing(saturated, paper_saturated, groups), bearing)
     noiseless = config.noiseless
     floor2, relative = config.noise_floor_counts**2, config.relative_noise
     # the first round goes from the start's bearing as a bearing: the saturated fallback's is an axis or
@@ -317,5 +324,25 @@ def _solve(weight: np.ndarray, strengths: np.ndarray) -> np.ndarray:
 
 def saturated_bearing(saturated: np.ndarray) -> np.ndarray:
     """Fallback bearing when full-scale readings hide the strength: the circular mean of the saturated
-    receivers' axes (they form an arc centred on the source, so this is within 15 degrees of it)."""
+    receivers' axes (they form an arc centred on the source, so this is within 15 degrees of it).
+
+    Its products of a matrix and a vector go through BLAS's gemv, whose rounding of a row depends on how
+    many rows the matrix has and where the row sits among them (the fits' matrix-matrix products, gemm, do
+    not, except for a single row); so rows from several calls' blocks are worked out block by block
+    (``_grouped_saturated_bearing``)."""
     return np.arctan2(saturated @ _tables().sin, saturated @ _tables().cos)
+
+
+def _grouped_saturated_bearing(saturated: np.ndarray, wanted: np.ndarray, groups: Sequence[int] | None) -> np.ndarray:
+    """``saturated_bearing`` of each block of ``groups`` alone (all rows as one block when None), for the
+    blocks holding a ``wanted`` row; the other blocks' rows are 0."""
+    if groups is None:
+        return saturated_bearing(saturated)
+    bearing = np.zeros(len(saturated))
+    start = 0
+    for size in groups:
+        end = start + size
+        if np.count_nonzero(wanted[start:end]):
+            bearing[start:end] = saturated_bearing(saturated[start:end])
+        start = end
+    return bearing

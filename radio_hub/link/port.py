@@ -41,12 +41,19 @@ class HubLink(Protocol):
     """How a node's messages reach the hub's environment and its answers come back.
 
     ``open`` starts the link: from then on ``on_down(data)`` is called on the node's event loop with every
-    message for the node, and ``on_hub(present)`` whenever the hub appears or goes away. ``put`` sends one
+    message for the node (its bytes; a link in memory may hand the message itself over, which the node checks
+    as it would decode it), and ``on_hub(present)`` whenever the hub appears or goes away. A link with
+    ``takes_messages`` true (in memory) also has ``put_message(msg)``, which takes the ``HANDED_UP``
+    messages as they are. ``put`` sends one
     encoded message up (in order, never dropped by the transport); ``close`` ends the node's presence.
     """
 
     def open(
-        self, node_id: str, instance: str, on_down: Callable[[bytes], None], on_hub: Callable[[bool], None]
+        self,
+        node_id: str,
+        instance: str,
+        on_down: Callable[[bytes | wire.Message], None],
+        on_hub: Callable[[bool], None],
     ) -> None:
         """Start delivering to the node."""
 
@@ -55,6 +62,12 @@ class HubLink(Protocol):
 
     async def close(self) -> None:
         """Leave: the hub sees the node go."""
+
+
+HANDED_UP = (wire.Drive, wire.Place)
+"""The node-to-hub messages a link in memory takes as they are: the bulk of the uplink (motor commands and a
+user's pose), every field a number the sender made a Python float, so the hub sees what the bytes would
+decode to (it checks them as it would decode them)."""
 
 
 class HubUnavailable(ConnectionError):
@@ -281,6 +294,7 @@ class RadioClient:
         self.faults = Faults(f"radio {identity.node_id}")
         """Unexpected exceptions while handling the hub's messages (each message is dropped, the node goes on)."""
         self.link = link
+        self._hands_over = bool(getattr(link, "takes_messages", False))
         self._loop = asyncio.get_running_loop()
         self._rx: asyncio.Queue[RxFrame] = asyncio.Queue(QUEUE_LIMIT)
         self._ir: asyncio.Queue[IrSweep] = asyncio.Queue(QUEUE_LIMIT)
@@ -527,7 +541,10 @@ class RadioClient:
 
     def _put(self, msg: wire.Message) -> None:
         msg.n, msg.s = next(self._up_seq), self.session_key
-        self.link.put(msg.encode())
+        if self._hands_over and isinstance(msg, HANDED_UP):
+            self.link.put_message(msg)  # type: ignore[attr-defined]
+        else:
+            self.link.put(msg.encode())
 
     @property
     def link_dropped(self) -> int:
@@ -568,10 +585,11 @@ class RadioClient:
             if fut.done() and not fut.cancelled():
                 fut.exception()  # a caller cancelled as the radio closed: its error is seen, never warned about
 
-    def _on_down(self, data: bytes) -> None:
-        """One message from the hub; never raises (anything unexpected is counted in ``faults``)."""
+    def _on_down(self, data: bytes | wire.Message) -> None:
+        """One message from the hub, encoded or handed over in memory; never raises (anything unexpected is
+        counted in ``faults``)."""
         try:
-            msg = wire.decode(data)
+            msg = wire.check(data) if isinstance(data, wire.Message) else wire.decode(data)
         except wire.WireError:
             self.malformed += 1
             return

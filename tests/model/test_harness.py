@@ -50,3 +50,31 @@ def test_a_killed_robot_leaves_no_task_behind_and_a_stopped_one_records_its_end(
         assert w.running[2].tasks == set()  # its leftover tasks (rosters, rounds) ended with it
 
     run_model_time(body, config=LOSSLESS)
+
+
+def test_sensor_and_motor_messages_are_handed_over_in_memory_and_checked_as_their_bytes_would_be() -> None:
+    import math
+
+    from radio_hub.link import wire
+
+    async def body(w: ModelWorld) -> None:
+        await w.robot(1, (0.0, 0.0))
+        await w.advance(0.2)
+        radio = w[1].rf.radio
+        assert w.air.coordinator.takes_messages and radio.sensors is not None  # samples came, without bytes
+        seen, malformed = radio.sensors, radio.malformed
+        bad = wire.Sensors(t_us=seen.t_us + 1, ranges=b"", yaw=math.nan, odometry=[0.0, 0.0, 0.0], n=10_000)
+        radio._on_down(bad)  # as the memory link hands a message over
+        assert radio.malformed == malformed + 1 and radio.sensors is seen  # dropped, as ...
+        with_bytes = wire.Sensors(t_us=seen.t_us + 1, ranges=b"", yaw=1e300 * 10, odometry=[0.0, 0.0, 0.0]).encode()
+        radio._on_down(with_bytes)
+        assert radio.malformed == malformed + 2 and radio.sensors is seen  # ... its bytes are
+        # and up: a motor command goes to the environment as it is, checked as its bytes would be
+        hub = w.air.env.counters
+        refused = hub.malformed
+        radio.drive(0.1, 0.0, 0.0)
+        radio.drive(math.nan, 0.0, 0.0)
+        await w.advance(0.04)
+        assert hub.malformed == refused + 1
+
+    run_model_time(body, config=LOSSLESS, seed=1)

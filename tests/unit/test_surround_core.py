@@ -82,3 +82,58 @@ def test_an_engaged_robot_drives_every_sample_records_engaging_once_and_tells_vi
     assert [a for a in actions if isinstance(a, Log)] == [Log("surround_engaged", {"beacons": 2})]
     assert [a for a in actions if isinstance(a, Telemetry)] == [Telemetry("surround", "", "", None, "surround")] * 2
     assert isinstance(actions[-1], Telemetry)  # after the 24th step's command
+
+
+class _Radio:
+    """The one thing a ``SweepBatch`` reads of a robot's radio: its latest beacon sweep."""
+
+    def __init__(self) -> None:
+        self.beacons = NO_BEACONS
+
+
+def _sweep_of(rng: np.random.Generator, t_us: int, names: list[str]) -> BeaconSweep:
+    from radio_hub.physics.light import IrConfig, receiver_gains, strength_at
+    from radio_hub.physics.light import sense as light_sense
+
+    config = IrConfig()
+    distances = rng.uniform(0.15, 1.5, size=len(names))
+    light = strength_at(distances, config)[:, None] * receiver_gains(rng.uniform(0, 2 * math.pi, size=len(names)))
+    return BeaconSweep.of_block(t_us, names, light_sense(light, config, rng), [1.0] * len(names))
+
+
+def test_a_sweep_batch_steps_every_robot_as_its_own_estimate_would() -> None:
+    from petswarm.controllers.surround_driver import SweepBatch
+    from petswarm.controllers.surround_pilot import SurroundPilot
+
+    rng = np.random.default_rng(4)
+    config = SurroundDriverConfig(human_id="user")
+    robots = ["robot-1", "robot-2", "robot-3"]
+    batched = [SurroundPilot(config) for _ in robots]
+    alone = [SurroundPilot(config) for _ in robots]
+    radios = [_Radio() for _ in robots]
+    batch = SweepBatch()
+    for pilot, radio in zip(batched, radios, strict=True):
+        batch.join(pilot, radio)
+    commands: list[tuple[Any, Any]] = []
+    for step in range(1, 30):
+        t_us = step * 40_000
+        for me, radio in zip(robots, radios, strict=True):  # a lone beacon now and then: estimated alone
+            others = [n for n in [*robots, "user"] if n != me][: 1 if step % 7 == 0 else None]
+            radio.beacons = _sweep_of(rng, t_us, others)
+        for pilot, own, radio in zip(batched, alone, radios, strict=True):
+            batch.prepare(pilot, radio.beacons)
+            assert pilot.sweep_job(radio.beacons) is None  # given: the step will not estimate it again
+            commands.append(
+                (
+                    pilot.step(sample(t_us / 1e6), radio.beacons, t_us / 1e6),
+                    own.step(sample(t_us / 1e6), radio.beacons, t_us / 1e6),
+                )
+            )
+            assert pilot.tracker.names == own.tracker.names
+            assert np.array_equal(pilot.tracker.positions, own.tracker.positions)
+    assert all(mine == theirs for mine, theirs in commands)
+    assert sum(mine is not None for mine, _ in commands) > 60  # the robots saw their human and drove
+    batch.leave(batched[0])
+    radios[0].beacons = _sweep_of(rng, 30 * 40_000, ["user", "robot-2"])
+    batch.prepare(batched[1], radios[1].beacons)
+    assert batched[0].sweep_job(radios[0].beacons) is not None  # a robot that left is not estimated for
