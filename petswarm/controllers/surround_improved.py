@@ -65,12 +65,52 @@ class ImprovedSurroundController(SurroundController):
         f_h = self._human_repulsion(human, human_velocity, velocity)
         f_o = (f_o[0] + f_h[0], f_o[1] + f_h[1])
         f_p = self._pull(self._aim(human, human_velocity))
+        f_l = self._lane(human, human_velocity)
+        f_p = (f_p[0] + f_l[0], f_p[1] + f_l[1])
         if c.surround_share > 0:
             f_g = self._surround(g, human, velocity)
             f_p = (f_p[0] + c.surround_share * f_g[0], f_p[1] + c.surround_share * f_g[1])
         self._forces = (f_r, f_o, f_p)
         force = (f_r[0] + f_o[0] + f_p[0], f_r[1] + f_o[1] + f_p[1])
-        return self._matched_command(force, velocity, human if human is None else human_velocity, dt)
+        command = self._matched_command(force, velocity, human if human is None else human_velocity, dt)
+        return self._stoppable(command, neighbours, moving, human, human_velocity)
+
+    def _stoppable(
+        self,
+        command: tuple[float, float],
+        neighbours: Sequence[Sequence[float]],
+        moving: Sequence[Sequence[float]],
+        human: Sequence[float] | None,
+        human_velocity: Sequence[float] | None,
+    ) -> tuple[float, float]:
+        """The command with its speed toward each tracked body cut to what still stops short of it.
+
+        Toward a neighbour (or the human) at centre distance d, moving away from it at w along the line, the
+        robot's speed u along the line is held to u^2 <= w^2 + 2 a g, g = d - d_stop (d_stop the bodies'
+        touching distance plus ``stop_margin_m``): if both brake at a now, this one stops behind. w is the
+        track's, less a t_lag (the track lags the body by about ``track_lag_s``, in which it may have braked).
+        A body coming at the robot (w < 0: the human walking into a robot in front of him) is taken to keep
+        coming: u <= w + sqrt(2 a g), so the robot gets out of its way. The forces (the pull, the velocity
+        match) push a robot at the tail of a file on into a slower one ahead whatever the repulsion; this
+        rule has the last word, before the ultrasonic safety stage, which sees only through eight cones."""
+        c = self.config
+        bodies = [(x, y, ux, uy, 2 * c.robot_radius_m) for (x, y), (ux, uy) in zip(neighbours, moving, strict=True)]
+        if human is not None:
+            hvx, hvy = human_velocity if human_velocity is not None else (0.0, 0.0)
+            bodies.append((human[0], human[1], hvx, hvy, c.human_clearance_m + c.robot_radius_m))
+        rules = []
+        for x, y, ux, uy, touching in bodies:
+            d = math.sqrt(x * x + y * y)
+            if not (0 < d <= touching + c.avoidance_m):
+                continue
+            nx, ny = x / d, y / d
+            gap = max(0.0, d - touching - c.stop_margin_m)
+            # its speed away from this robot, less what it may have lost since its track last saw it
+            away = ux * nx + uy * ny - c.brake_mps2 * c.track_lag_s
+            room = 2 * c.brake_mps2 * gap
+            rules.append((nx, ny, math.sqrt(away * away + room) if away > 0 else away + math.sqrt(room)))
+        vx, vy = _nearest_allowed(command, rules)
+        return _clip(vx, vy, c.max_speed_mps)
 
     def _braking_repulsion(
         self,
@@ -135,6 +175,26 @@ class ImprovedSurroundController(SurroundController):
         magnitude = c.repulsion / (reach * reach)
         return -magnitude * ux, -magnitude * uy
 
+    def _lane(self, human: Sequence[float] | None, human_velocity: Sequence[float] | None) -> tuple[float, float]:
+        """f_L: toward the line the human walks along, on a robot more than ``lane_half_width_m`` to the side of
+        it, growing with his speed up to ``lane_speed_mps``: a walking swarm narrows into a lane along his path
+        (the way he goes is the way clear of obstacles) and lengthens ahead and behind him."""
+        c = self.config
+        if human is None or human_velocity is None or c.lane_gain <= 0:
+            return 0.0, 0.0
+        speed = math.sqrt(human_velocity[0] ** 2 + human_velocity[1] ** 2)
+        if not speed > 0:
+            return 0.0, 0.0
+        hx, hy = human_velocity[0] / speed, human_velocity[1] / speed
+        # the robot's offset from him (-human), less its part along his heading: its offset from his line
+        along = -(human[0] * hx + human[1] * hy)
+        sx, sy = -human[0] - along * hx, -human[1] - along * hy
+        side = math.sqrt(sx * sx + sy * sy)
+        if side <= c.lane_half_width_m:
+            return 0.0, 0.0
+        strength = c.lane_gain * min(1.0, speed / c.lane_speed_mps) * (side - c.lane_half_width_m)
+        return -strength * sx / side, -strength * sy / side
+
     def _aim(self, human: Sequence[float] | None, human_velocity: Sequence[float] | None) -> Sequence[float] | None:
         """Where the pull aims: the human, led by ``lead_s`` of his velocity when it is known."""
         lead = self.config.lead_s
@@ -172,6 +232,32 @@ class ImprovedSurroundController(SurroundController):
             mx, my = c.velocity_match * (human_velocity[0] - vx), c.velocity_match * (human_velocity[1] - vy)
         ax, ay = _clip(force[0] + mx, force[1] + my, c.max_accel_mps2)
         return _clip(vx + ax * dt, vy + ay * dt, c.max_speed_mps)
+
+
+def _nearest_allowed(v: tuple[float, float], rules: list[tuple[float, float, float]]) -> tuple[float, float]:
+    """The velocity nearest ``v`` with ``nx vx + ny vy <= limit`` for every rule ``(nx, ny, limit)``, or, when no
+    velocity keeps them all (a robot held between a human coming at it and a slower robot ahead), the candidate
+    that breaks them least. A 2-D projection onto a few half-planes, solved by trying the candidates: ``v``, its
+    projection onto each boundary and each pair of boundaries' corner."""
+
+    def excess(c: tuple[float, float]) -> float:
+        return max((nx * c[0] + ny * c[1] - limit for nx, ny, limit in rules), default=0.0)
+
+    if excess(v) <= 0:  # the common case: nothing to stop for
+        return v
+    candidates = [
+        (v[0] - (nx * v[0] + ny * v[1] - limit) * nx, v[1] - (nx * v[0] + ny * v[1] - limit) * ny)
+        for nx, ny, limit in rules
+    ]
+    for k, (ax, ay, a) in enumerate(rules):
+        for bx, by, b in rules[k + 1 :]:
+            det = ax * by - ay * bx
+            if abs(det) > 1e-9:
+                candidates.append(((a * by - ay * b) / det, (ax * b - a * bx) / det))
+    allowed = [c for c in candidates if excess(c) <= 1e-9]
+    if allowed:
+        return min(allowed, key=lambda c: (c[0] - v[0]) ** 2 + (c[1] - v[1]) ** 2)
+    return min(candidates, key=excess)
 
 
 def _clip(x: float, y: float, limit: float) -> tuple[float, float]:
