@@ -99,7 +99,7 @@ class SurroundConfig:
     """Improved law: the pull grows linearly from 0 at ``pull_radius_m`` to ``pull_force`` this much further out."""
     centring: float = 2.0
     """Improved law: a spring (/s^2) toward the human on every robot, so the swarm's centre settles on him."""
-    lead_s: float = 0.4
+    lead_s: float = 0.8
     """Improved law: the pull aims at where the human will be this much later (his position plus his velocity
     times it), not where he is."""
     brake_mps2: float = 1.5
@@ -116,13 +116,6 @@ class SurroundConfig:
     stop_margin_m: float = 0.05
     """Improved law: the gap a robot keeps in hand when it brakes behind a tracked neighbour or the human's body
     (beyond touching): his IR estimate is a few cm off, and the command acts a control step late."""
-    lane_gain: float = 0.0
-    """Improved law: the spring (/s^2) toward the line the human walks along, on robots farther than
-    ``lane_half_width_m`` to its side, at full strength from ``lane_speed_mps`` (0: off)."""
-    lane_half_width_m: float = 0.4
-    """Improved law: how far to the side of the human's line a robot may keep without the lane's pull."""
-    lane_speed_mps: float = 0.8
-    """Improved law: the human's speed from which the lane pulls at full strength (less as he slows, none still)."""
     track_lag_s: float = 0.1
     """Improved law: how far a tracked body's IR velocity lags its own (a 20 Hz sweep, the track's filter): in that
     time a neighbour ahead may have braked, so the robot counts on its being that much slower."""
@@ -131,7 +124,7 @@ class SurroundConfig:
         if self.law not in LAWS:
             raise ValueError(f"law must be one of {LAWS}, not {self.law!r}")
         positive = ("sight_m", "avoidance_m", "max_speed_mps", "max_accel_mps2", "robot_radius_m", "dt_s")
-        positive += ("body_mass", "stiffness", "pull_ramp_m", "brake_mps2", "lane_speed_mps")
+        positive += ("body_mass", "stiffness", "pull_ramp_m", "brake_mps2")
         for name in dataclasses.fields(self):
             if name.name == "law":
                 continue

@@ -65,8 +65,6 @@ class ImprovedSurroundController(SurroundController):
         f_h = self._human_repulsion(human, human_velocity, velocity)
         f_o = (f_o[0] + f_h[0], f_o[1] + f_h[1])
         f_p = self._pull(self._aim(human, human_velocity))
-        f_l = self._lane(human, human_velocity)
-        f_p = (f_p[0] + f_l[0], f_p[1] + f_l[1])
         if c.surround_share > 0:
             f_g = self._surround(g, human, velocity)
             f_p = (f_p[0] + c.surround_share * f_g[0], f_p[1] + c.surround_share * f_g[1])
@@ -94,23 +92,36 @@ class ImprovedSurroundController(SurroundController):
         match) push a robot at the tail of a file on into a slower one ahead whatever the repulsion; this
         rule has the last word, before the ultrasonic safety stage, which sees only through eight cones."""
         c = self.config
-        bodies = [(x, y, ux, uy, 2 * c.robot_radius_m) for (x, y), (ux, uy) in zip(neighbours, moving, strict=True)]
+        touching = 2 * c.robot_radius_m
+        rules = [self._stop_rule(x, y, ux, uy, touching) for (x, y), (ux, uy) in zip(neighbours, moving, strict=True)]
+        his = None
         if human is not None:
             hvx, hvy = human_velocity if human_velocity is not None else (0.0, 0.0)
-            bodies.append((human[0], human[1], hvx, hvy, c.human_clearance_m + c.robot_radius_m))
-        rules = []
-        for x, y, ux, uy, touching in bodies:
-            d = math.sqrt(x * x + y * y)
-            if not (0 < d <= touching + c.avoidance_m):
-                continue
-            nx, ny = x / d, y / d
-            gap = max(0.0, d - touching - c.stop_margin_m)
-            # its speed away from this robot, less what it may have lost since its track last saw it
-            away = ux * nx + uy * ny - c.brake_mps2 * c.track_lag_s
-            room = 2 * c.brake_mps2 * gap
-            rules.append((nx, ny, math.sqrt(away * away + room) if away > 0 else away + math.sqrt(room)))
-        vx, vy = _nearest_allowed(command, rules)
+            his = self._stop_rule(human[0], human[1], hvx, hvy, c.human_clearance_m + c.robot_radius_m)
+        kept = [rule for rule in (*rules, his) if rule is not None]
+        vx, vy = _nearest_allowed(command, kept)
+        if his is not None and _excess((vx, vy), [his]) > 1e-9:
+            # no velocity keeps every rule (a robot held between the walking human and slower robots ahead):
+            # his rule comes first, and the robots ahead yield in turn to one coming at them
+            vx, vy = _nearest_allowed(command, [his])
         return _clip(vx, vy, c.max_speed_mps)
+
+    def _stop_rule(
+        self, x: float, y: float, ux: float, uy: float, touching: float
+    ) -> tuple[float, float, float] | None:
+        """``(nx, ny, limit)``: the robot's speed toward a body at (x, y) moving at (ux, uy), touching it at centre
+        distance ``touching``, is at most ``limit`` along the unit (nx, ny) (see ``_stoppable``); None when the
+        body is beyond the avoidance range (or on the robot's own centre)."""
+        c = self.config
+        d = math.sqrt(x * x + y * y)
+        if not (0 < d <= touching + c.avoidance_m):
+            return None
+        nx, ny = x / d, y / d
+        gap = max(0.0, d - touching - c.stop_margin_m)
+        # its speed away from this robot, less what it may have lost since its track last saw it
+        away = ux * nx + uy * ny - c.brake_mps2 * c.track_lag_s
+        room = 2 * c.brake_mps2 * gap
+        return nx, ny, math.sqrt(away * away + room) if away > 0 else away + math.sqrt(room)
 
     def _braking_repulsion(
         self,
@@ -175,26 +186,6 @@ class ImprovedSurroundController(SurroundController):
         magnitude = c.repulsion / (reach * reach)
         return -magnitude * ux, -magnitude * uy
 
-    def _lane(self, human: Sequence[float] | None, human_velocity: Sequence[float] | None) -> tuple[float, float]:
-        """f_L: toward the line the human walks along, on a robot more than ``lane_half_width_m`` to the side of
-        it, growing with his speed up to ``lane_speed_mps``: a walking swarm narrows into a lane along his path
-        (the way he goes is the way clear of obstacles) and lengthens ahead and behind him."""
-        c = self.config
-        if human is None or human_velocity is None or c.lane_gain <= 0:
-            return 0.0, 0.0
-        speed = math.sqrt(human_velocity[0] ** 2 + human_velocity[1] ** 2)
-        if not speed > 0:
-            return 0.0, 0.0
-        hx, hy = human_velocity[0] / speed, human_velocity[1] / speed
-        # the robot's offset from him (-human), less its part along his heading: its offset from his line
-        along = -(human[0] * hx + human[1] * hy)
-        sx, sy = -human[0] - along * hx, -human[1] - along * hy
-        side = math.sqrt(sx * sx + sy * sy)
-        if side <= c.lane_half_width_m:
-            return 0.0, 0.0
-        strength = c.lane_gain * min(1.0, speed / c.lane_speed_mps) * (side - c.lane_half_width_m)
-        return -strength * sx / side, -strength * sy / side
-
     def _aim(self, human: Sequence[float] | None, human_velocity: Sequence[float] | None) -> Sequence[float] | None:
         """Where the pull aims: the human, led by ``lead_s`` of his velocity when it is known."""
         lead = self.config.lead_s
@@ -241,7 +232,7 @@ def _nearest_allowed(v: tuple[float, float], rules: list[tuple[float, float, flo
     projection onto each boundary and each pair of boundaries' corner."""
 
     def excess(c: tuple[float, float]) -> float:
-        return max((nx * c[0] + ny * c[1] - limit for nx, ny, limit in rules), default=0.0)
+        return _excess(c, rules)
 
     if excess(v) <= 0:  # the common case: nothing to stop for
         return v
@@ -258,6 +249,11 @@ def _nearest_allowed(v: tuple[float, float], rules: list[tuple[float, float, flo
     if allowed:
         return min(allowed, key=lambda c: (c[0] - v[0]) ** 2 + (c[1] - v[1]) ** 2)
     return min(candidates, key=excess)
+
+
+def _excess(v: tuple[float, float], rules: list[tuple[float, float, float]]) -> float:
+    """How far the velocity ``v`` breaks the worst of ``rules`` (``nx vx + ny vy <= limit``); <= 0 if none."""
+    return max((nx * v[0] + ny * v[1] - limit for nx, ny, limit in rules), default=0.0)
 
 
 def _clip(x: float, y: float, limit: float) -> tuple[float, float]:

@@ -113,22 +113,14 @@ def test_a_robot_just_ahead_of_the_walking_human_keeps_out_of_his_way() -> None:
     assert v[0] >= 1.0 + c.brake_mps2 * c.track_lag_s - math.sqrt(2 * c.brake_mps2 * gap) - 1e-9
 
 
-def test_the_lane_pulls_a_robot_beside_a_walking_human_toward_his_line_and_none_when_he_stands() -> None:
-    lane = SurroundConfig(law="improved", lane_gain=4.0)
-    walking, standing, within = (ImprovedSurroundController(lane) for _ in range(3))
-    walking.step_plain([], [], (0.0, 0.9), (1.0, 0.0), DT, human_velocity=(1.0, 0.0))
-    standing.step_plain([], [], (0.0, 0.9), (0.0, 0.0), DT, human_velocity=(0.0, 0.0))
-    within.step_plain([], [], (0.0, 0.3), (1.0, 0.0), DT, human_velocity=(1.0, 0.0))
-    off = ImprovedSurroundController(IMPROVED)
-    off.step_plain([], [], (0.0, 0.9), (1.0, 0.0), DT, human_velocity=(1.0, 0.0))
-    # toward his line (+y) by lane_gain (0.9 - 0.4), beyond the pull and centring the law has without it
-    assert walking.last_forces[2][1] - off.last_forces[2][1] == pytest.approx(4.0 * (0.9 - lane.lane_half_width_m))
-    still = ImprovedSurroundController(SurroundConfig(law="improved"))
-    still.step_plain([], [], (0.0, 0.9), (0.0, 0.0), DT, human_velocity=(0.0, 0.0))
-    assert list(standing.last_forces[2]) == list(still.last_forces[2])
-    near = ImprovedSurroundController(IMPROVED)
-    near.step_plain([], [], (0.0, 0.3), (1.0, 0.0), DT, human_velocity=(1.0, 0.0))
-    assert list(within.last_forces[2]) == list(near.last_forces[2])
+def test_a_robot_between_the_walking_human_and_a_slower_robot_ahead_yields_to_him_first() -> None:
+    """No velocity keeps both stop rules: his comes first (the robot ahead yields in turn to one coming at it)."""
+    c = IMPROVED
+    rule = ImprovedSurroundController(IMPROVED)
+    ahead, slow = [(0.22, 0.0)], [(0.5, 0.0)]  # 2 cm of gap, at half his pace
+    v = rule.step_plain(ahead, [], (-0.44, 0.0), (0.8, 0.0), DT, human_velocity=(1.0, 0.0), neighbour_velocities=slow)
+    gap = 0.44 - c.human_clearance_m - c.robot_radius_m - c.stop_margin_m
+    assert v[0] >= 1.0 + c.brake_mps2 * c.track_lag_s - math.sqrt(2 * c.brake_mps2 * max(gap, 0.0)) - 1e-9
 
 
 def _state(t: float, bodies: list[dict[str, Any]], collisions: int, obstacles: list | None = None) -> dict:
