@@ -97,7 +97,9 @@ class ImprovedSurroundController(SurroundController):
         his = None
         if human is not None:
             hvx, hvy = human_velocity if human_velocity is not None else (0.0, 0.0)
-            his = self._stop_rule(human[0], human[1], hvx, hvy, c.human_clearance_m + c.robot_radius_m)
+            his = self._stop_rule(
+                human[0], human[1], hvx, hvy, c.human_clearance_m + c.robot_radius_m, c.human_margin_m
+            )
         kept = [rule for rule in (*rules, his) if rule is not None]
         vx, vy = _nearest_allowed(command, kept)
         if his is not None and _excess((vx, vy), [his]) > 1e-9:
@@ -107,21 +109,25 @@ class ImprovedSurroundController(SurroundController):
         return _clip(vx, vy, c.max_speed_mps)
 
     def _stop_rule(
-        self, x: float, y: float, ux: float, uy: float, touching: float
+        self, x: float, y: float, ux: float, uy: float, touching: float, margin: float | None = None
     ) -> tuple[float, float, float] | None:
         """``(nx, ny, limit)``: the robot's speed toward a body at (x, y) moving at (ux, uy), touching it at centre
-        distance ``touching``, is at most ``limit`` along the unit (nx, ny) (see ``_stoppable``); None when the
-        body is beyond the avoidance range (or on the robot's own centre)."""
+        distance ``touching`` (and ``margin`` more, ``stop_margin_m`` if None), is at most ``limit`` along the
+        unit (nx, ny) (see ``_stoppable``); None when the body is beyond the avoidance range (or on the robot's
+        own centre)."""
         c = self.config
         d = math.sqrt(x * x + y * y)
         if not (0 < d <= touching + c.avoidance_m):
             return None
         nx, ny = x / d, y / d
-        gap = max(0.0, d - touching - c.stop_margin_m)
+        gap = max(0.0, d - touching - (c.stop_margin_m if margin is None else margin))
         # its speed away from this robot, less what it may have lost since its track last saw it
         away = ux * nx + uy * ny - c.brake_mps2 * c.track_lag_s
-        room = 2 * c.brake_mps2 * gap
-        return nx, ny, math.sqrt(away * away + room) if away > 0 else away + math.sqrt(room)
+        if away > 0:
+            return nx, ny, math.sqrt(away * away + 2 * c.brake_mps2 * gap)
+        # it comes at the robot: the robot must be getting away by the time the gap is gone, from a start a
+        # control step late and at its motors' ramp, so it counts on less than its braking
+        return nx, ny, away + math.sqrt(2 * c.escape_mps2 * gap)
 
     def _braking_repulsion(
         self,

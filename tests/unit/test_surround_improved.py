@@ -109,8 +109,8 @@ def test_a_robot_just_ahead_of_the_walking_human_keeps_out_of_his_way() -> None:
     # he is 0.45 m behind it (0.05 m short of his clearance plus its radius and the margin) at 1 m/s
     v = rule.step_plain([], [], (-0.45, 0.0), (0.5, 0.0), DT, human_velocity=(1.0, 0.0))
     c = IMPROVED
-    gap = 0.45 - c.human_clearance_m - c.robot_radius_m - c.stop_margin_m
-    assert v[0] >= 1.0 + c.brake_mps2 * c.track_lag_s - math.sqrt(2 * c.brake_mps2 * gap) - 1e-9
+    gap = max(0.0, 0.45 - c.human_clearance_m - c.robot_radius_m - c.human_margin_m)
+    assert v[0] >= 1.0 + c.brake_mps2 * c.track_lag_s - math.sqrt(2 * c.escape_mps2 * gap) - 1e-9
 
 
 def test_a_robot_between_the_walking_human_and_a_slower_robot_ahead_yields_to_him_first() -> None:
@@ -119,8 +119,8 @@ def test_a_robot_between_the_walking_human_and_a_slower_robot_ahead_yields_to_hi
     rule = ImprovedSurroundController(IMPROVED)
     ahead, slow = [(0.22, 0.0)], [(0.5, 0.0)]  # 2 cm of gap, at half his pace
     v = rule.step_plain(ahead, [], (-0.44, 0.0), (0.8, 0.0), DT, human_velocity=(1.0, 0.0), neighbour_velocities=slow)
-    gap = 0.44 - c.human_clearance_m - c.robot_radius_m - c.stop_margin_m
-    assert v[0] >= 1.0 + c.brake_mps2 * c.track_lag_s - math.sqrt(2 * c.brake_mps2 * max(gap, 0.0)) - 1e-9
+    gap = max(0.0, 0.44 - c.human_clearance_m - c.robot_radius_m - c.human_margin_m)
+    assert v[0] >= 1.0 + c.brake_mps2 * c.track_lag_s - math.sqrt(2 * c.escape_mps2 * gap) - 1e-9
 
 
 def _state(t: float, bodies: list[dict[str, Any]], collisions: int, obstacles: list | None = None) -> dict:
