@@ -27,7 +27,12 @@ sensing (the tracked IR beacons of the human and the neighbours, the echoes, the
   a robot closing at 0.4 m/s on a slower neighbour or on the back of a human who stops touched it.
 
 Without the human's beacon (not seen yet, or lost) f_P is zero and f_M falls back to the paper's drag. The
-force becomes a velocity as in the paper's law (unit virtual mass, clipped acceleration and speed).
+force becomes a velocity as in the paper's law (unit virtual mass, clipped acceleration and speed), and then:
+
+- the stop rule: the velocity nearest that command whose speed toward each tracked body (neighbour, human)
+  still stops short of it if both brake now (``_stoppable``); a body coming at the robot is got out of the way
+  of. Forces only balance, so the pull and f_M pushed a robot at the tail of a file on into a slower one ahead;
+  a velocity bound does not. When no velocity keeps every rule, the human's comes first.
 """
 
 from __future__ import annotations
