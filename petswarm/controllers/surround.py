@@ -97,9 +97,9 @@ class SurroundConfig:
     """Improved law: within this distance of the human no pull acts (the local forces alone shape the swarm)."""
     pull_ramp_m: float = 0.4
     """Improved law: the pull grows linearly from 0 at ``pull_radius_m`` to ``pull_force`` this much further out."""
-    centring: float = 2.0
+    centring: float = 2.5
     """Improved law: a spring (/s^2) toward the human on every robot, so the swarm's centre settles on him."""
-    lead_s: float = 0.4
+    lead_s: float = 0.8
     """Improved law: the pull aims at where the human will be this much later (his position plus his velocity
     times it), not where he is."""
     brake_mps2: float = 1.5
@@ -113,12 +113,24 @@ class SurroundConfig:
     it)."""
     velocity_match: float = 6.0
     """Improved law: the gain (/s) pulling the robot's velocity to the human's (the paper's drag, relative to him)."""
+    stop_margin_m: float = 0.05
+    """Improved law: the gap a robot keeps in hand when it brakes behind a tracked neighbour or the human's body
+    (beyond touching): his IR estimate is a few cm off, and the command acts a control step late."""
+    human_margin_m: float = 0.1
+    """Improved law: ``stop_margin_m`` for the human's body: he walks into robots in front of him, which a
+    neighbour only does when it is pushed."""
+    escape_mps2: float = 0.75
+    """Improved law: the acceleration a robot counts on to get out of the way of a body coming at it (half of
+    ``brake_mps2``: it starts a control step late, at its motors' ramp)."""
+    track_lag_s: float = 0.1
+    """Improved law: how far a tracked body's IR velocity lags its own (a 20 Hz sweep, the track's filter): in that
+    time a neighbour ahead may have braked, so the robot counts on its being that much slower."""
 
     def __post_init__(self) -> None:
         if self.law not in LAWS:
             raise ValueError(f"law must be one of {LAWS}, not {self.law!r}")
         positive = ("sight_m", "avoidance_m", "max_speed_mps", "max_accel_mps2", "robot_radius_m", "dt_s")
-        positive += ("body_mass", "stiffness", "pull_ramp_m", "brake_mps2")
+        positive += ("body_mass", "stiffness", "pull_ramp_m", "brake_mps2", "escape_mps2")
         for name in dataclasses.fields(self):
             if name.name == "law":
                 continue

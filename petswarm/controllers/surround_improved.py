@@ -27,7 +27,12 @@ sensing (the tracked IR beacons of the human and the neighbours, the echoes, the
   a robot closing at 0.4 m/s on a slower neighbour or on the back of a human who stops touched it.
 
 Without the human's beacon (not seen yet, or lost) f_P is zero and f_M falls back to the paper's drag. The
-force becomes a velocity as in the paper's law (unit virtual mass, clipped acceleration and speed).
+force becomes a velocity as in the paper's law (unit virtual mass, clipped acceleration and speed), and then:
+
+- the stop rule: the velocity nearest that command whose speed toward each tracked body (neighbour, human)
+  still stops short of it if both brake now (``_stoppable``); a body coming at the robot is got out of the way
+  of. Forces only balance, so the pull and f_M pushed a robot at the tail of a file on into a slower one ahead;
+  a velocity bound does not. When no velocity keeps every rule, the human's comes first.
 """
 
 from __future__ import annotations
@@ -70,7 +75,64 @@ class ImprovedSurroundController(SurroundController):
             f_p = (f_p[0] + c.surround_share * f_g[0], f_p[1] + c.surround_share * f_g[1])
         self._forces = (f_r, f_o, f_p)
         force = (f_r[0] + f_o[0] + f_p[0], f_r[1] + f_o[1] + f_p[1])
-        return self._matched_command(force, velocity, human if human is None else human_velocity, dt)
+        command = self._matched_command(force, velocity, human if human is None else human_velocity, dt)
+        return self._stoppable(command, neighbours, moving, human, human_velocity)
+
+    def _stoppable(
+        self,
+        command: tuple[float, float],
+        neighbours: Sequence[Sequence[float]],
+        moving: Sequence[Sequence[float]],
+        human: Sequence[float] | None,
+        human_velocity: Sequence[float] | None,
+    ) -> tuple[float, float]:
+        """The command with its speed toward each tracked body cut to what still stops short of it.
+
+        Toward a neighbour (or the human) at centre distance d, moving away from it at w along the line, the
+        robot's speed u along the line is held to u^2 <= w^2 + 2 a g, g = d - d_stop (d_stop the bodies'
+        touching distance plus ``stop_margin_m``): if both brake at a now, this one stops behind. w is the
+        track's, less a t_lag (the track lags the body by about ``track_lag_s``, in which it may have braked).
+        A body coming at the robot (w < 0: the human walking into a robot in front of him) is taken to keep
+        coming: u <= w + sqrt(2 a g), so the robot gets out of its way. The forces (the pull, the velocity
+        match) push a robot at the tail of a file on into a slower one ahead whatever the repulsion; this
+        rule has the last word, before the ultrasonic safety stage, which sees only through eight cones."""
+        c = self.config
+        touching = 2 * c.robot_radius_m
+        rules = [self._stop_rule(x, y, ux, uy, touching) for (x, y), (ux, uy) in zip(neighbours, moving, strict=True)]
+        his = None
+        if human is not None:
+            hvx, hvy = human_velocity if human_velocity is not None else (0.0, 0.0)
+            his = self._stop_rule(
+                human[0], human[1], hvx, hvy, c.human_clearance_m + c.robot_radius_m, c.human_margin_m
+            )
+        kept = [rule for rule in (*rules, his) if rule is not None]
+        vx, vy = _nearest_allowed(command, kept)
+        if his is not None and _excess((vx, vy), [his]) > 1e-9:
+            # no velocity keeps every rule (a robot held between the walking human and slower robots ahead):
+            # his rule comes first, and the robots ahead yield in turn to one coming at them
+            vx, vy = _nearest_allowed(command, [his])
+        return _clip(vx, vy, c.max_speed_mps)
+
+    def _stop_rule(
+        self, x: float, y: float, ux: float, uy: float, touching: float, margin: float | None = None
+    ) -> tuple[float, float, float] | None:
+        """``(nx, ny, limit)``: the robot's speed toward a body at (x, y) moving at (ux, uy), touching it at centre
+        distance ``touching`` (and ``margin`` more, ``stop_margin_m`` if None), is at most ``limit`` along the
+        unit (nx, ny) (see ``_stoppable``); None when the body is beyond the avoidance range (or on the robot's
+        own centre)."""
+        c = self.config
+        d = math.sqrt(x * x + y * y)
+        if not (0 < d <= touching + c.avoidance_m):
+            return None
+        nx, ny = x / d, y / d
+        gap = max(0.0, d - touching - (c.stop_margin_m if margin is None else margin))
+        # its speed away from this robot, less what it may have lost since its track last saw it
+        away = ux * nx + uy * ny - c.brake_mps2 * c.track_lag_s
+        if away > 0:
+            return nx, ny, math.sqrt(away * away + 2 * c.brake_mps2 * gap)
+        # it comes at the robot: the robot must be getting away by the time the gap is gone, from a start a
+        # control step late and at its motors' ramp, so it counts on less than its braking
+        return nx, ny, away + math.sqrt(2 * c.escape_mps2 * gap)
 
     def _braking_repulsion(
         self,
@@ -172,6 +234,37 @@ class ImprovedSurroundController(SurroundController):
             mx, my = c.velocity_match * (human_velocity[0] - vx), c.velocity_match * (human_velocity[1] - vy)
         ax, ay = _clip(force[0] + mx, force[1] + my, c.max_accel_mps2)
         return _clip(vx + ax * dt, vy + ay * dt, c.max_speed_mps)
+
+
+def _nearest_allowed(v: tuple[float, float], rules: list[tuple[float, float, float]]) -> tuple[float, float]:
+    """The velocity nearest ``v`` with ``nx vx + ny vy <= limit`` for every rule ``(nx, ny, limit)``, or, when no
+    velocity keeps them all (a robot held between a human coming at it and a slower robot ahead), the candidate
+    that breaks them least. A 2-D projection onto a few half-planes, solved by trying the candidates: ``v``, its
+    projection onto each boundary and each pair of boundaries' corner."""
+
+    def excess(c: tuple[float, float]) -> float:
+        return _excess(c, rules)
+
+    if excess(v) <= 0:  # the common case: nothing to stop for
+        return v
+    candidates = [
+        (v[0] - (nx * v[0] + ny * v[1] - limit) * nx, v[1] - (nx * v[0] + ny * v[1] - limit) * ny)
+        for nx, ny, limit in rules
+    ]
+    for k, (ax, ay, a) in enumerate(rules):
+        for bx, by, b in rules[k + 1 :]:
+            det = ax * by - ay * bx
+            if abs(det) > 1e-9:
+                candidates.append(((a * by - ay * b) / det, (ax * b - a * bx) / det))
+    allowed = [c for c in candidates if excess(c) <= 1e-9]
+    if allowed:
+        return min(allowed, key=lambda c: (c[0] - v[0]) ** 2 + (c[1] - v[1]) ** 2)
+    return min(candidates, key=excess)
+
+
+def _excess(v: tuple[float, float], rules: list[tuple[float, float, float]]) -> float:
+    """How far the velocity ``v`` breaks the worst of ``rules`` (``nx vx + ny vy <= limit``); <= 0 if none."""
+    return max((nx * v[0] + ny * v[1] - limit for nx, ny, limit in rules), default=0.0)
 
 
 def _clip(x: float, y: float, limit: float) -> tuple[float, float]:

@@ -8,10 +8,10 @@ model-time figures and the 5-of-5 process runs):
 - the swarm's centre within 0.5 m of the walking human at the median;
 - r at the end within 10 % of r* (0.65 m).
 
-One seed keeps the run near a minute. Only the cylinder is asserted: in the corridor the law does not meet
-these bounds yet (its thin walls' ends are invisible to the ultrasonic ring until a robot on their line touches
-them), which `petswarm bench surround scenarios/surround-corridor.toml --law improved` shows in model time
-(docs/RESULTS.md) without a minute of 20 processes spent on a known failure in every test run.
+One seed keeps the run near a minute. Only the cylinder is asserted: in the corridor the law meets every bound
+but "no contact" (1-3 robots touch a thin wall's end in every seed: docs/RESULTS.md), which
+`petswarm bench surround scenarios/surround-corridor-improved.toml --law improved` shows in model time without
+a minute of 20 processes spent on a known failure in every test run.
 """
 
 from __future__ import annotations

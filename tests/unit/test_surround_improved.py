@@ -84,6 +84,45 @@ def test_a_neighbour_closing_from_behind_is_repelled_by_its_tracked_speed() -> N
     assert v_fast[0] > v_slow[0]
 
 
+def test_a_robot_closing_on_a_slower_neighbour_ahead_is_held_to_what_still_stops_behind_it() -> None:
+    """The stopping rule: the forces alone (velocity match toward 1 m/s, the pull) drive it on into him."""
+    rule = ImprovedSurroundController(IMPROVED)
+    ahead = [(0.3, 0.0)]  # 0.1 m of gap, the neighbour going at 0.3 m/s
+    v = rule.step_plain(
+        ahead, [], (1.5, 0.0), (1.0, 0.0), DT, human_velocity=(1.0, 0.0), neighbour_velocities=[(0.3, 0.0)]
+    )
+    c = IMPROVED
+    away = 0.3 - c.brake_mps2 * c.track_lag_s
+    gap = 0.3 - 2 * c.robot_radius_m - c.stop_margin_m
+    assert v[0] == pytest.approx(math.sqrt(away**2 + 2 * c.brake_mps2 * gap))
+    assert v[0] < 0.6
+    # the same neighbour off to the side (not on the way) does not hold it back
+    free = ImprovedSurroundController(IMPROVED)
+    side = free.step_plain(
+        [(0.0, 0.6)], [], (1.5, 0.0), (1.0, 0.0), DT, human_velocity=(1.0, 0.0), neighbour_velocities=[(0.3, 0.0)]
+    )
+    assert side[0] > 0.9
+
+
+def test_a_robot_just_ahead_of_the_walking_human_keeps_out_of_his_way() -> None:
+    rule = ImprovedSurroundController(IMPROVED)
+    # he is 0.45 m behind it (0.05 m short of his clearance plus its radius and the margin) at 1 m/s
+    v = rule.step_plain([], [], (-0.45, 0.0), (0.5, 0.0), DT, human_velocity=(1.0, 0.0))
+    c = IMPROVED
+    gap = max(0.0, 0.45 - c.human_clearance_m - c.robot_radius_m - c.human_margin_m)
+    assert v[0] >= 1.0 + c.brake_mps2 * c.track_lag_s - math.sqrt(2 * c.escape_mps2 * gap) - 1e-9
+
+
+def test_a_robot_between_the_walking_human_and_a_slower_robot_ahead_yields_to_him_first() -> None:
+    """No velocity keeps both stop rules: his comes first (the robot ahead yields in turn to one coming at it)."""
+    c = IMPROVED
+    rule = ImprovedSurroundController(IMPROVED)
+    ahead, slow = [(0.22, 0.0)], [(0.5, 0.0)]  # 2 cm of gap, at half his pace
+    v = rule.step_plain(ahead, [], (-0.44, 0.0), (0.8, 0.0), DT, human_velocity=(1.0, 0.0), neighbour_velocities=slow)
+    gap = max(0.0, 0.44 - c.human_clearance_m - c.robot_radius_m - c.human_margin_m)
+    assert v[0] >= 1.0 + c.brake_mps2 * c.track_lag_s - math.sqrt(2 * c.escape_mps2 * gap) - 1e-9
+
+
 def _state(t: float, bodies: list[dict[str, Any]], collisions: int, obstacles: list | None = None) -> dict:
     return {"t_us": round(t * 1e6), "bodies": bodies, "collisions": collisions, "obstacles": obstacles or []}
 
