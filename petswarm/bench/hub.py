@@ -346,6 +346,7 @@ def load_summary(
     fps = (after.delivered - before.delivered) / window
     target = min(FPS_TARGET, capacity)
     channels = after.stats["channels"]
+    delivered = max(after.delivered - before.delivered, 1)
     return {
         "label": label,
         "config_file": str(config_file) if config_file else None,
@@ -370,6 +371,9 @@ def load_summary(
         "hub_cpu_pct": 100 * (after.hub_cpu_s - before.hub_cpu_s) / window,
         "hub_job_thread_cpu_pct": 100 * (after.hub_job_cpu_s - before.hub_job_cpu_s) / window,
         "load_gen_cpu_pct": 100 * (after.gens_cpu_s - before.gens_cpu_s) / window,
+        "hub_cpu_us_per_frame": 1e6 * (after.hub_cpu_s - before.hub_cpu_s) / delivered,
+        "hub_job_thread_us_per_frame": 1e6 * (after.hub_job_cpu_s - before.hub_job_cpu_s) / delivered,
+        "load_gen_cpu_us_per_frame": 1e6 * (after.gens_cpu_s - before.gens_cpu_s) / delivered,
         "machine_cpu_busy_pct": 100 * (after.machine[0] - before.machine[0]) / (after.machine[1] - before.machine[1]),
         "series": [{"t_s": t, "fps": f} for t, f in series],
     }

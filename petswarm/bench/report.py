@@ -149,6 +149,11 @@ def _load_lines(results: dict[str, Any]) -> list[str]:
             f"  {_load(load['load_average'])}"
         )
         lines.append(
+            f"{'':<12}CPU per delivered frame: hub {load['hub_cpu_us_per_frame']:.0f} us "
+            f"(job thread {load['hub_job_thread_us_per_frame']:.0f} us), "
+            f"load generators {load['load_gen_cpu_us_per_frame']:.0f} us (load-robust, unlike frames/s)"
+        )
+        lines.append(
             f"{'':<12}{load['delivered']} delivered / {load['sent']} sent in {load['window_s']:.2f} s of hub clock; "
             f"collided {load['collided']}, lost {load['lost']} since the hub started"
         )

@@ -312,6 +312,10 @@ class RadioClient:
         self._ultrasonic_rad: np.ndarray | None = None
         self._pending: dict[int, asyncio.Future[Any]] = {}
         self._pending_types: dict[int, str] = {}
+        self._on_tx_done: dict[int, Callable[[TxResult], None]] = {}
+        """Frames handed over with ``transmit``: the callback of each, by token."""
+        self.on_frame: Callable[[RxFrame], None] | None = None
+        """Where received frames go instead of the queue ``receive`` reads (a high-rate node's lean path)."""
 
         self._tokens = itertools.count(1)
         self._up_seq = itertools.count(1)
@@ -408,9 +412,18 @@ class RadioClient:
                 if str(err) != wire.NOT_ATTACHED or attempt:
                     raise
                 await self._reattached()  # a restarted hub: attach again, then send once more
-        return TxResult(
-            TxStatus(done.status), done.retries, done.backoffs, done.submitted_us, done.done_us, done.reason
-        )
+        return _tx_result(done)
+
+    def transmit(self, frame: Frame, on_done: Callable[[TxResult], None]) -> int:
+        """Hand a frame to the MAC without waiting; returns its token. ``on_done`` gets the result on the loop,
+        as ``send`` returns it (a refusal by the hub comes as REFUSED with its reason). The lean path of a
+        high-rate node: no future, task or timer per frame. Nor a timeout: a frame the hub never answers (it
+        died) never calls back, and one sent before a hub restart is settled as REFUSED on the re-attach.
+        FrameError if the frame cannot be encoded."""
+        token = next(self._tokens)
+        self._put(wire.Transmit(token=token, psdu=frame.encode()))
+        self._on_tx_done[token] = on_done
+        return token
 
     async def receive(self) -> RxFrame:
         """The next received frame."""
@@ -629,10 +642,15 @@ class RadioClient:
             self.on_relayed(msg)
         elif isinstance(msg, wire.IrBeacons):
             self._on_beacons(msg)
+        elif isinstance(msg, wire.TxDone) and msg.token in self._on_tx_done:
+            self._on_tx_done.pop(msg.token)(_tx_result(msg))
         elif isinstance(msg, (wire.TxDone, wire.Attached)):
             self._resolve(msg.token, msg)
         elif isinstance(msg, wire.Error):
             self.errors.append(msg.reason)
+            on_done = self._on_tx_done.pop(msg.token, None)
+            if on_done is not None:
+                on_done(TxResult(TxStatus.REFUSED, 0, 0, 0, 0, msg.reason))
             fut = self._pending.get(msg.token)
             if fut is not None and not fut.done():
                 fut.set_exception(RadioError(msg.reason))
@@ -647,7 +665,11 @@ class RadioClient:
         except FrameError:
             self.malformed += 1
             return
-        self._enqueue("rx", self._rx, RxFrame(frame, msg.rssi_dbm, msg.lqi, msg.start_us, msg.end_us, msg.submitted_us))
+        rx = RxFrame(frame, msg.rssi_dbm, msg.lqi, msg.start_us, msg.end_us, msg.submitted_us)
+        if self.on_frame is not None:
+            self.on_frame(rx)
+        else:
+            self._enqueue("rx", self._rx, rx)
 
     def _on_ir(self, msg: wire.IrSample) -> None:
         if len(msg.readings) != 4 * IR_RECEIVERS:
@@ -730,11 +752,14 @@ class RadioClient:
 
     async def _reattach(self) -> None:
         orphans = [token for token in self._pending if token]  # sent before this attach: to the dead hub
+        orphaned_frames, self._on_tx_done = self._on_tx_done, {}
         attached = await self._request(0, self._attach_message(), resend_s=RESEND_S)
 
         self._adopt(attached)
         self.reattaches += 1
         self._settle_orphans(orphans, attached)
+        for on_done in orphaned_frames.values():
+            on_done(TxResult(TxStatus.REFUSED, 0, 0, 0, 0, "the hub restarted before it answered"))
         for callback in self.on_reattach:
             callback()
 
@@ -756,3 +781,7 @@ class RadioClient:
         fut = self._pending.get(token)
         if fut is not None and not fut.done():
             fut.set_result(msg)
+
+
+def _tx_result(done: wire.TxDone) -> TxResult:
+    return TxResult(TxStatus(done.status), done.retries, done.backoffs, done.submitted_us, done.done_us, done.reason)
