@@ -113,7 +113,7 @@ def experiment_command(args: argparse.Namespace) -> int:
     try:
         spec = load(Path(args.file))
     except (OSError, ValueError, tomllib.TOMLDecodeError) as err:
-        print(f"petswarm experiment: {args.file}: {err}", file=sys.stderr)
+        print(f"petswarm experiment: {err}", file=sys.stderr)  # every error names the file already
         return 2
     if getattr(args, "clock", None):
         spec["run"] = {**spec.get("run", {}), "clock": args.clock}

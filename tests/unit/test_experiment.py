@@ -81,3 +81,13 @@ def test_the_lost_fraction_of_a_30_percent_loss_fault_reads_about_0_3() -> None:
     radio = ("sent", "delivered", "collided", "lost", "filtered", "mac_retries")  # the counters a row sums
     row = {"ok": True, "organize_ms": None, "retries": None, **{k: sum(c[k] for c in counters) for k in radio}}
     assert 0.27 <= _aggregate([row])["lost_fraction"] <= 0.33
+
+
+def test_a_bad_experiment_file_is_refused_with_exit_2_naming_it_once(tmp_path: Path, capsys) -> None:
+    from cli.main import main
+
+    path = tmp_path / "bad.toml"
+    path.write_text('repetitions = 1\n[run]\nclock = "sundial"\n')
+    assert main(["experiment", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count(str(path)) == 1 and "clock is one of wall, model, lockstep" in err, err
