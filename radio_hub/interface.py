@@ -96,6 +96,7 @@ _LAB_ENTRY_POINTS = {
     "parse_obstacle": "radio_hub.physics.world",
     "receiver_axes_rad": "radio_hub.physics.light",
     "receiver_readings": "radio_hub.physics.light",
+    "put_up": "radio_hub.link.zenoh_link",
     "reliable_publisher": "radio_hub.link.zenoh_link",
 }
 """What the lab (model-time and lockstep runs, benches) takes from the hub's side, loaded on first use so

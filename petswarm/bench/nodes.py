@@ -23,13 +23,13 @@ import zenoh
 from radio_hub.interface import (
     Frame,
     FrameType,
-    HubUnavailable,
     Keys,
     RadioClient,
     RadioIdentity,
     RxFrame,
     TxResult,
     open_session,
+    put_up,
     reliable_publisher,
 )
 
@@ -170,12 +170,7 @@ class SharedLink:
 
     def put(self, data: bytes) -> None:
         """One message to the hub."""
-        if self._pub is None:
-            raise HubUnavailable("the link is not open")
-        try:
-            self._pub.put(data)
-        except zenoh.ZError as err:
-            raise HubUnavailable(f"cannot reach the hub: {err}") from None
+        put_up(self._pub, data)
 
     async def close(self) -> None:
         """Leave: undeclare the token and the publisher."""

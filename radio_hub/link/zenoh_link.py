@@ -78,6 +78,17 @@ def reliable_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
     )
 
 
+def put_up(pub: zenoh.Publisher | None, data: bytes) -> None:
+    """One message of a node to the hub on its up publisher; HubUnavailable when it is not open or the session
+    is gone (every node link puts this way)."""
+    if pub is None:
+        raise HubUnavailable("the link is not open")
+    try:
+        pub.put(data)
+    except zenoh.ZError as err:
+        raise HubUnavailable(f"cannot reach the hub: {err}") from None
+
+
 def open_session(mode: str, endpoint: str) -> zenoh.Session:
     """Open a zenoh session, turning zenoh's error into HubUnavailable with the endpoint in it."""
     if not _ENDPOINT.match(endpoint):
@@ -291,12 +302,7 @@ class ZenohLink:
 
     def put(self, data: bytes) -> None:
         """One message to the hub; HubUnavailable when the session is gone."""
-        if self._pub is None:
-            raise HubUnavailable("the link is not open")
-        try:
-            self._pub.put(data)
-        except zenoh.ZError as err:
-            raise HubUnavailable(f"cannot reach the hub: {err}") from None
+        put_up(self._pub, data)
 
     async def close(self) -> None:
         """Undeclare everything; close the session if the link opened it."""
