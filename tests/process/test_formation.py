@@ -33,6 +33,22 @@ def _states(air, rids) -> dict[int, dict]:
     return {rid: air.cmd(rid, "status") for rid in rids}
 
 
+ROSTER_WAIT_S = 3.0
+"""A slave learns the swarm's members from the master's roster, an unacknowledged broadcast every 0.25 s that a
+collision can take: twelve rosters' time for one to arrive, instead of a fixed wait that raced the first."""
+
+
+def _states_once_rostered(air, rids, slaves) -> dict[int, dict]:
+    """``_states`` once every one of ``slaves`` has heard a roster (knows its swarm's members)."""
+    deadline = time.monotonic() + ROSTER_WAIT_S
+    while True:
+        states = _states(air, rids)
+        heard = all((states[rid].get("swarm") or {}).get("members") for rid in slaves)
+        if heard or time.monotonic() > deadline:
+            return states
+        time.sleep(0.05)
+
+
 def test_the_closest_join_the_others_wait_and_disperse_restores_everyone(make_air):
     air = make_air()
     _master(air)
@@ -43,8 +59,7 @@ def test_the_closest_join_the_others_wait_and_disperse_restores_everyone(make_ai
     assert organized["available"] == [2, 3, 4, 5, 6]
     pan = organized["pan_id"]
     assert pan != WAITING_PAN
-    time.sleep(0.3)
-    states = _states(air, range(1, 7))
+    states = _states_once_rostered(air, range(1, 7), [3, 5, 6])
     assert states[1]["state"] == "master-driving" and states[1]["radio"]["pan_id"] == pan
     for number, rid in enumerate([3, 5, 6], start=1):
         s = states[rid]
