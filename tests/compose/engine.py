@@ -18,13 +18,14 @@ from typing import Any
 
 import pytest
 
+from . import base_image
+from .base_image import run
+
 ROOT = Path(__file__).resolve().parents[2]
 ENGINE = ROOT / ".ci/engine"
 ENGINE_DIR = os.environ.get("PETSWARM_ENGINE_DIR") or os.path.join(os.environ.get("TMPDIR", "/tmp"), "petswarm-engine")
 ENGINE_PIDFILE = Path(ENGINE_DIR) / "dockerd.pid"  # .ci/engine's mark: the engine it started
-BASE_IMAGE = "python:3.11-slim"  # the Dockerfile's FROM
-STAND_IN_LABEL = "org.petswarm.stand-in"
-STAND_IN_SUITE = "bookworm"  # Debian 12: its python3 is 3.11, as in the real image
+BASE_IMAGE = base_image.BASE_IMAGE
 
 
 def expected() -> bool:
@@ -39,21 +40,6 @@ def unavailable(reason: str) -> None:
     if expected():
         pytest.fail(f"the compose test must run here but cannot: {reason}", pytrace=False)
     pytest.skip(reason)
-
-
-def run(argv: Sequence[str], timeout: float, check: bool = False, **kw: Any) -> subprocess.CompletedProcess[str]:
-    """Run a command; a timeout is a failure that says which command hung."""
-    try:
-        done = subprocess.run(list(argv), capture_output=True, text=True, timeout=timeout, **kw)
-    except subprocess.TimeoutExpired as err:
-        raise AssertionError(
-            f"{' '.join(argv)} did not finish within {timeout} s:\n{err.stdout}\n{err.stderr}"
-        ) from None
-    if check and done.returncode != 0:
-        raise AssertionError(
-            f"{' '.join(argv)} exited {done.returncode}:\n{done.stdout[-3000:]}\n{done.stderr[-3000:]}"
-        )
-    return done
 
 
 def docker(*args: str, timeout: float = 60, check: bool = True) -> subprocess.CompletedProcess[str]:
@@ -96,65 +82,14 @@ def stop_engine() -> None:
     run([str(ENGINE), "stop"], 90, check=True)
 
 
-def image_exists(ref: str) -> bool:
-    return docker("image", "inspect", ref, check=False).returncode == 0
-
-
 def ensure_base_image(workdir: Path) -> str | None:
-    """The Dockerfile's base image: already here (None), pulled ("pulled"), or, where no image registry can be
-    reached, a stand-in made from Debian's packages ("stand-in"): Debian 12 with python3 and pip, bootstrapped
-    by mmdebstrap (a minute or two; debootstrap takes twice the CPU) and imported under the same name. Returns
-    what it added, to be removed after the test."""
-    if image_exists(BASE_IMAGE):
-        return None
-    pulled = run(["docker", "pull", BASE_IMAGE], 300)
-    if pulled.returncode == 0:
-        return "pulled"
-    if shutil.which("mmdebstrap") is None or os.geteuid() != 0:
-        unavailable(f"{BASE_IMAGE} cannot be pulled ({pulled.stderr.strip()}) nor made here (needs mmdebstrap, root)")
-    tarball = workdir / "stand-in.tar"
-    slim = [f"--dpkgopt=path-exclude=/usr/share/{d}/*" for d in ("doc", "man", "locale", "info")]  # as slim images
-    hooks = [
-        'rm -f "$1"/usr/lib/python3*/EXTERNALLY-MANAGED',  # its pip installs into the system Python, as in the image
-        'ln -sf python3 "$1"/usr/bin/python',
-        'ln -sf pip3 "$1"/usr/bin/pip',
-    ]
-    if Path("/etc/ssl/certs/ca-certificates.crt").exists():  # the host's trust, for the build's pip
-        hooks.append("copy-in /etc/ssl/certs/ca-certificates.crt /etc/ssl/certs")
-    argv = [
-        "mmdebstrap",
-        "--variant=minbase",
-        "--include=python3,python3-venv,python3-pip,ca-certificates",
-        *slim,
-        *(f"--customize-hook={hook}" for hook in hooks),
-        STAND_IN_SUITE,
-        str(tarball),
-        debian_mirror(),
-    ]
+    """The Dockerfile's base image (``base_image.ensure_base_image``); skips, or fails where the engine is
+    expected, when it can be neither pulled nor made here."""
     try:
-        made = run(argv, 900)
-        assert made.returncode == 0, f"mmdebstrap of the stand-in base image failed:\n{made.stderr[-3000:]}"
-        changes = ["ENV LANG=C.UTF-8", 'CMD ["python3"]', f"LABEL {STAND_IN_LABEL}=mmdebstrap-{STAND_IN_SUITE}"]
-        docker("import", *(a for c in changes for a in ("--change", c)), str(tarball), BASE_IMAGE, timeout=300)
-    finally:
-        tarball.unlink(missing_ok=True)
-    return "stand-in"
-
-
-def debian_mirror() -> str:
-    """The Debian archive apt is configured with here (read from apt, never written down in the repository)."""
-    listed = run(["apt-get", "indextargets", "--format", "$(REPO_URI) $(RELEASE) $(IDENTIFIER)"], 30, check=True)
-    rows = [line.split() for line in listed.stdout.splitlines() if len(line.split()) == 3]
-    codename = ""
-    if Path("/etc/os-release").exists():
-        found = re.search(r"^VERSION_CODENAME=(\S+)", Path("/etc/os-release").read_text(), re.M)
-        codename = found.group(1) if found else ""
-    for release in (STAND_IN_SUITE, codename):  # an archive that lists the host's release has bookworm as well
-        for uri, rel, ident in rows:
-            if rel == release and ident == "Packages":
-                return uri
-    unavailable(f"no Debian archive in apt's sources to make the stand-in {BASE_IMAGE} from")
-    raise AssertionError  # unreachable: unavailable() skips or fails
+        return base_image.ensure_base_image(workdir)
+    except base_image.BaseImageUnavailable as err:
+        unavailable(str(err))
+        raise AssertionError from err  # unreachable: unavailable() skips or fails
 
 
 def copy_build_context(src: Path, dst: Path) -> None:
