@@ -202,6 +202,8 @@ class LockstepHub:
         self.nodes: dict[str, _Node] = {}
         self.dead: list[dict[str, Any]] = []
         self.rounds = 0
+        self.stale_idles = 0
+        """Idles of nodes already taken as gone (counted and dropped)."""
         self.now_s = 0.0
         self._started = False
         self._inbox: queue.SimpleQueue[tuple[Any, ...]] = queue.SimpleQueue()
@@ -264,6 +266,7 @@ class LockstepHub:
             "model_time_s": self.now_s,
             "rounds": self.rounds,
             "nodes": len(self.nodes),
+            "stale_idles": self.stale_idles,
             "dead": self.dead,
         }
         from radio_hub.environment import process_usage
@@ -303,6 +306,11 @@ class LockstepHub:
             return
         node = self.nodes.get(node_id)
         if node is None:
+            if isinstance(msg, wire.Idle) and msg.seen:
+                # a node taken as gone that was only slow: it was granted before, so brought back it would
+                # wait for a grant the hub never sends it, and the hub for its idle: the world would stall
+                self.stale_idles += 1
+                return
             if not isinstance(msg, (wire.Attach, wire.Idle)):  # the last words of a node that has left
                 self.coordinator.up(node_id, data)
                 return

@@ -1,0 +1,55 @@
+"""The lockstep hub's rounds, fed node messages directly (no zenoh session: its downlink sends nothing).
+
+The process tests (tests/process/test_lockstep.py) run it over zenoh; these pin down what one late or stale
+node can do to the rounds of everyone else."""
+
+from __future__ import annotations
+
+import time
+
+from radio_hub.environment import EnvironmentConfig
+from radio_hub.link import wire
+from radio_hub.shell.lockstep import LockstepHub
+
+
+def _hub(expect: int = 2) -> LockstepHub:
+    return LockstepHub("tcp/127.0.0.1:1", "unit", EnvironmentConfig(), seed=1, expect=expect, dead_after_s=0.05)
+
+
+def _up(hub: LockstepHub, node_id: str, msg: wire.Message) -> None:
+    hub._handle(("up", hub.keys.up(node_id), msg.encode()))
+    hub._bury_the_silent()
+    hub._run_rounds()
+
+
+def _attach(hub: LockstepHub, node_id: str, key: int) -> None:
+    _up(hub, node_id, wire.Attach(ext_addr=key, short_addr=key, instance=f"i{key}", n=1, s=key))
+    _up(hub, node_id, wire.Idle(seen=0, next_s=0.5, n=2, s=key))
+
+
+def test_rounds_go_on_once_every_node_is_idle_and_stop_at_a_busy_one() -> None:
+    hub = _hub()
+    _attach(hub, "robot-1", 11)
+    assert hub.rounds == 0  # one of the two expected nodes: model time has not started
+    _attach(hub, "robot-2", 12)
+    assert hub.rounds > 0 and hub.nodes["robot-1"].granted and not hub.nodes["robot-1"].idle
+    before = hub.now_s
+    _up(hub, "robot-1", wire.Idle(seen=hub.nodes["robot-1"].granted, next_s=0.5, n=3, s=11))
+    assert hub.now_s == before  # robot-2 has not answered its grant: nobody moves on
+
+
+def test_a_node_taken_as_gone_that_answers_late_does_not_stall_the_others() -> None:
+    """A node silent past dead_after_s is taken as gone; its late idle (it was only slow) must not bring it
+    back as a node that is never granted again and so never idle: that stalled every run for good."""
+    hub = _hub()
+    _attach(hub, "robot-1", 11)
+    _attach(hub, "robot-2", 12)
+    late = hub.nodes["robot-2"].granted
+    time.sleep(0.1)
+    _up(hub, "robot-1", wire.Idle(seen=hub.nodes["robot-1"].granted, next_s=0.5, n=3, s=11))
+    assert [d["node"] for d in hub.dead] == ["robot-2"] and "robot-2" not in hub.nodes
+    at = hub.now_s
+    _up(hub, "robot-2", wire.Idle(seen=late, next_s=0.5, n=3, s=12))  # it was only slow
+    assert "robot-2" not in hub.nodes and hub.stats()["lockstep"]["stale_idles"] == 1
+    _up(hub, "robot-1", wire.Idle(seen=hub.nodes["robot-1"].granted, next_s=0.5, n=4, s=11))
+    assert hub.now_s > at  # robot-1 goes on alone
