@@ -42,6 +42,13 @@ from collections.abc import Sequence
 
 from petswarm.controllers.surround import MIN_RANGE_M, SurroundConfig, SurroundController
 
+import os
+WALL_MARGIN_M = float(os.environ.get("WALL_MARGIN", "0.05"))
+WALL_LATE_S = float(os.environ.get("WALL_LATE", "0.0"))
+WALL_BRAKE_MPS2 = float(os.environ.get("WALL_BRAKE", "1.5"))
+WALL_SECTORS = 16
+"""Sectors (22.5 degrees) round the robot in each of which only the nearest wall point makes a stop rule."""
+
 
 class ImprovedSurroundController(SurroundController):
     """One robot's improved surround law, in its own frame, in plain floats (see the module's docstring)."""
@@ -59,10 +66,13 @@ class ImprovedSurroundController(SurroundController):
         dt: float,
         human_velocity: Sequence[float] | None = None,
         neighbour_velocities: Sequence[Sequence[float]] | None = None,
+        walls: Sequence[Sequence[float]] = (),
     ) -> tuple[float, float]:
         """The velocity command; as the paper's ``step_plain``, with the human's own velocity ``human_velocity``
-        (his tracked beacon's, in this robot's frame; None when unknown) and the neighbours' own velocities
-        ``neighbour_velocities`` (their tracks', in the order of ``neighbours``; None: taken to be still)."""
+        (his tracked beacon's, in this robot's frame; None when unknown), the neighbours' own velocities
+        ``neighbour_velocities`` (their tracks', in the order of ``neighbours``; None: taken to be still) and the
+        obstacle points the robot must stop short of, ``walls`` (``surround_memory.EchoMemory``'s: heard now,
+        or remembered in a blind gap or behind a neighbour)."""
         distances, near, g, f_r = self._centring(neighbours, dt)
         c = self.config
         moving = neighbour_velocities if neighbour_velocities is not None else [(0.0, 0.0)] * len(neighbours)
@@ -76,7 +86,7 @@ class ImprovedSurroundController(SurroundController):
         self._forces = (f_r, f_o, f_p)
         force = (f_r[0] + f_o[0] + f_p[0], f_r[1] + f_o[1] + f_p[1])
         command = self._matched_command(force, velocity, human if human is None else human_velocity, dt)
-        return self._stoppable(command, neighbours, moving, human, human_velocity)
+        return self._stoppable(command, neighbours, moving, human, human_velocity, walls)
 
     def _stoppable(
         self,
@@ -85,8 +95,9 @@ class ImprovedSurroundController(SurroundController):
         moving: Sequence[Sequence[float]],
         human: Sequence[float] | None,
         human_velocity: Sequence[float] | None,
+        walls: Sequence[Sequence[float]] = (),
     ) -> tuple[float, float]:
-        """The command with its speed toward each tracked body cut to what still stops short of it.
+        """The command with its speed toward each tracked body and wall point cut to what still stops short of it.
 
         Toward a neighbour (or the human) at centre distance d, moving away from it at w along the line, the
         robot's speed u along the line is held to u^2 <= w^2 + 2 a g, g = d - d_stop (d_stop the bodies'
@@ -105,13 +116,39 @@ class ImprovedSurroundController(SurroundController):
             his = self._stop_rule(
                 human[0], human[1], hvx, hvy, c.human_clearance_m + c.robot_radius_m, c.human_margin_m
             )
-        kept = [rule for rule in (*rules, his) if rule is not None]
+        fixed = self._wall_rules(walls)
+        kept = [rule for rule in (*rules, *fixed, his) if rule is not None]
         vx, vy = _nearest_allowed(command, kept)
         if his is not None and _excess((vx, vy), [his]) > 1e-9:
             # no velocity keeps every rule (a robot held between the walking human and slower robots ahead):
             # his rule comes first, and the robots ahead yield in turn to one coming at them
-            vx, vy = _nearest_allowed(command, [his])
+            vx, vy = _nearest_allowed(command, [his, *fixed])
+            if _excess((vx, vy), [his]) > 1e-9:
+                vx, vy = _nearest_allowed(command, [his])
         return _clip(vx, vy, c.max_speed_mps)
+
+    def _wall_rules(self, walls: Sequence[Sequence[float]]) -> list[tuple[float, float, float]]:
+        """``(nx, ny, limit)`` per wall point within reach: the speed toward it that still stops ``stop_margin_m``
+        short of it at ``brake_mps2`` (a wall stays put). Of the points in each of ``WALL_SECTORS`` sectors round
+        the robot only the nearest counts (a remembered echo is an arc of points: they differ by a few degrees),
+        which keeps the exact nearest-velocity search small."""
+        c = self.config
+        reach = c.robot_radius_m + c.avoidance_m
+        nearest: dict[int, tuple[float, float, float]] = {}
+        for x, y in walls:
+            d = math.sqrt(x * x + y * y)
+            if not (0 < d <= reach):
+                continue
+            sector = int((math.atan2(y, x) + math.pi) / (2 * math.pi) * WALL_SECTORS) % WALL_SECTORS
+            if sector not in nearest or d < nearest[sector][2]:
+                nearest[sector] = (x, y, d)
+        rules = []
+        for x, y, d in nearest.values():
+            gap = max(0.0, d - c.robot_radius_m - WALL_MARGIN_M)
+            # the command acts about a control step and a world tick late: brake from where it will be then
+            limit = max(0.0, math.sqrt(WALL_BRAKE_MPS2 * WALL_BRAKE_MPS2 * WALL_LATE_S**2 + 2 * WALL_BRAKE_MPS2 * gap) - WALL_BRAKE_MPS2 * WALL_LATE_S)
+            rules.append((x / d, y / d, limit))
+        return rules
 
     def _stop_rule(
         self, x: float, y: float, ux: float, uy: float, touching: float, margin: float | None = None

@@ -1,0 +1,126 @@
+"""The improved surround law's obstacle memory: what the ultrasonic ring has heard, kept in the odometry frame.
+
+Beyond the paper (docs/SURROUND.md, "The improved law", item 7). A ring of eight 30 degree cones, 45 degrees
+apart, hears only each cone's nearest echo, and nothing in the 15 degree gaps between cones. A thin wall's end
+a robot slides past crosses such a gap, or a neighbour steps into its cone and hides it: in the corridor every
+robot-obstacle contact of the improved law was a robot's flank meeting a wall's end it had heard a moment
+before. So the robot remembers.
+
+An echo at distance R (from the robot's centre) on the cone with axis a says: some obstacle point lies at R,
+somewhere within a +-15 degrees. The memory keeps that arc as ``ARC_POINTS`` points, in the robot's frame (its
+heading never turns, so that frame is the odometry frame moved along), each carried back by the robot's own
+odometry every step. A remembered point stays until:
+
+- a cone whose beam holds it hears nothing, or hears its nearest echo farther off than the point: the point is
+  not there (free space carved by the beam), whatever the ring hears from a neighbour nearer than it;
+- the same cone hears a new echo at the point's distance (the new arc replaces it);
+- ``MEMORY_S`` has passed, or it has fallen behind by more than ``REACH_M``.
+
+Echoes a tracked beacon explains (a neighbour's body, the human's) carve the beam up to them but are not kept:
+bodies move, and the law has their tracks. The law then holds the robot's speed toward every remembered point
+to what still stops short of it (``ImprovedSurroundController``'s wall rule): a point in a blind gap, or behind
+a neighbour, is still one it will not drive into.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+ARC_POINTS = 5
+"""Points per remembered echo, spread evenly over its cone's 30 degrees (7.5 degrees apart: at 0.4 m, 5 cm)."""
+HALF_BEAM_RAD = math.radians(15.0)
+"""Half a transducer's cone (the hub's HC-SR04-like 30 degrees; the robot's datasheet knowledge)."""
+CARVE_HALF_BEAM_RAD = math.radians(13.0)
+"""A point this close to a cone's axis is in its beam for carving (2 degrees inside the edge: the AHRS and the
+odometry drift a little, and an arc's end point sits on the edge itself)."""
+MEMORY_S = float(os.environ.get("MEM_S", "2.0"))
+"""How long a remembered point lasts without a beam crossing it (a robot at 0.3 m/s passes a wall's end in it)."""
+REACH_M = float(os.environ.get("REACH", "0.7"))
+"""Echoes and points farther than this from the robot's centre are not kept (braking from 1.5 m/s at 1.5 m/s^2
+takes 0.75 m; at the swarm's pace, 1 m/s, 0.33 m plus the body and a margin)."""
+SLACK_M = 0.04
+"""A cone's echo counts as farther than a point (carving it) only beyond this: ranging noise (1 cm), the
+odometry's 3 % over a step or two, the arc's chord."""
+
+
+ONLY_GAPS = int(os.environ.get("ONLY_GAPS", "1"))
+
+
+class EchoMemory:
+    """Remembered obstacle points (see the module's docstring), in plain floats: a pilot steps it every sample."""
+
+    def __init__(self) -> None:
+        self.points: list[tuple[float, float, float]] = []
+        """(x, y, age in s) in the robot's frame."""
+
+    def step(
+        self,
+        ranges: list[float],
+        cos: list[float],
+        sin: list[float],
+        explained: list[bool],
+        velocity: tuple[float, float],
+        dt: float,
+        robot_radius_m: float,
+    ) -> list[tuple[float, float]]:
+        """Take in one ring reading (``ranges`` from the skin, nan for none; the cones' axes as ``cos``/``sin``;
+        ``explained``: the echo came off a tracked beacon) after the robot moved at ``velocity`` for ``dt``;
+        return the remembered points (x, y) now."""
+        shift_x, shift_y = velocity[0] * dt, velocity[1] * dt
+        reach2 = REACH_M * REACH_M
+        moved = []
+        for x, y, age in self.points:
+            x, y, age = x - shift_x, y - shift_y, age + dt
+            if age <= MEMORY_S and x * x + y * y <= reach2:
+                moved.append((x, y, age))
+        heard = [robot_radius_m + r if math.isfinite(r) else math.inf for r in ranges]
+        cos_carve = math.cos(CARVE_HALF_BEAM_RAD)
+        kept = []
+        for x, y, age in moved:
+            d = math.sqrt(x * x + y * y)
+            if not _carved(x, y, d, heard, cos, sin, explained, cos_carve):
+                kept.append((x, y, age))
+        # what the law keeps off: every point remembered from an earlier step (in a blind gap, or behind a
+        # neighbour); what the cones hear now the safety stage and the repulsion already see
+        out = [(x, y) for x, y, _ in kept]
+        for k, distance in enumerate(heard):
+            if explained[k] or distance > REACH_M:
+                continue
+            if ONLY_GAPS < 0:
+                out.append((cos[k] * distance, sin[k] * distance))
+            kept.extend(_arc(cos[k], sin[k], distance))
+        self.points = kept
+        return out
+
+
+def _carved(
+    x: float,
+    y: float,
+    d: float,
+    heard: list[float],
+    cos: list[float],
+    sin: list[float],
+    explained: list[bool],
+    cos_carve: float,
+) -> bool:
+    """Whether a cone's beam holding the point (x, y) at distance d shows it is not there: nothing heard, or the
+    nearest echo beyond it; or the point lies where that cone hears a wall now (its fresh arc replaces it)."""
+    for distance, c, s, body in zip(heard, cos, sin, explained, strict=True):
+        if x * c + y * s < cos_carve * d:
+            continue
+        if distance > d + SLACK_M:
+            return True
+        if not body and distance >= d - SLACK_M:
+            return True
+    return False
+
+
+def _arc(c: float, s: float, distance: float) -> list[tuple[float, float, float]]:
+    """The arc of an echo at ``distance`` on the cone with axis (c, s): ``ARC_POINTS`` points across its beam."""
+    points = []
+    for k in range(ARC_POINTS):
+        offset = HALF_BEAM_RAD * (2 * k / (ARC_POINTS - 1) - 1)
+        co, so = math.cos(offset), math.sin(offset)
+        points.append(((c * co - s * so) * distance, (s * co + c * so) * distance, 0.0))
+    return points
