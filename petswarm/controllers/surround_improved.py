@@ -42,10 +42,16 @@ from collections.abc import Sequence
 
 from petswarm.controllers.surround import MIN_RANGE_M, SurroundConfig, SurroundController
 
-import os
-WALL_MARGIN_M = float(os.environ.get("WALL_MARGIN", "0.05"))
-WALL_LATE_S = float(os.environ.get("WALL_LATE", "0.0"))
-WALL_BRAKE_MPS2 = float(os.environ.get("WALL_BRAKE", "1.5"))
+WALL_MARGIN_M = 0.07
+"""The wall rule's gap kept in hand beyond touching: a remembered point is an arc's, up to its chord off the
+wall's end (7.5 degrees apart at 0.45 m, 6 cm; 2 cm at the 0.15 m where it binds), and the odometry drifts."""
+WALL_LATE_S = 0.06
+"""The wall rule's lateness: a command acts a control step (40 ms) and up to a world tick (20 ms) after the
+echoes it was made from, in which the robot still closes at its old speed."""
+WALL_BRAKE_MPS2 = 1.2
+"""The deceleration the wall rule counts on: below the bodies' ``brake_mps2`` (1.5), as the robot's own stop
+rules and the neighbours' escapes pull the command other ways too. With 5 cm, no lateness and 1.5 m/s^2, the
+corridor's seeds 1 and 2 had 2 robot-obstacle contacts each; with these values 1 (of any kind) each."""
 WALL_SECTORS = 16
 """Sectors (22.5 degrees) round the robot in each of which only the nearest wall point makes a stop rule."""
 
@@ -146,8 +152,7 @@ class ImprovedSurroundController(SurroundController):
         for x, y, d in nearest.values():
             gap = max(0.0, d - c.robot_radius_m - WALL_MARGIN_M)
             # the command acts about a control step and a world tick late: brake from where it will be then
-            limit = max(0.0, math.sqrt(WALL_BRAKE_MPS2 * WALL_BRAKE_MPS2 * WALL_LATE_S**2 + 2 * WALL_BRAKE_MPS2 * gap) - WALL_BRAKE_MPS2 * WALL_LATE_S)
-            rules.append((x / d, y / d, limit))
+            rules.append((x / d, y / d, _late_stop(gap)))
         return rules
 
     def _stop_rule(
@@ -271,6 +276,13 @@ class ImprovedSurroundController(SurroundController):
             mx, my = c.velocity_match * (human_velocity[0] - vx), c.velocity_match * (human_velocity[1] - vy)
         ax, ay = _clip(force[0] + mx, force[1] + my, c.max_accel_mps2)
         return _clip(vx + ax * dt, vy + ay * dt, c.max_speed_mps)
+
+
+def _late_stop(gap: float) -> float:
+    """The fastest speed u toward a wall point ``gap`` beyond the margin that still stops short of it when the
+    robot closes at u for ``WALL_LATE_S`` before braking at ``WALL_BRAKE_MPS2``: u T + u^2 / (2 a) = gap."""
+    a, late = WALL_BRAKE_MPS2, WALL_LATE_S
+    return max(0.0, math.sqrt(a * a * late * late + 2 * a * gap) - a * late)
 
 
 def _nearest_allowed(v: tuple[float, float], rules: list[tuple[float, float, float]]) -> tuple[float, float]:

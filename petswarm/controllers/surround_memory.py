@@ -25,26 +25,30 @@ a neighbour, is still one it will not drive into.
 from __future__ import annotations
 
 import math
-import os
 
 ARC_POINTS = 5
 """Points per remembered echo, spread evenly over its cone's 30 degrees (7.5 degrees apart: at 0.4 m, 5 cm)."""
 HALF_BEAM_RAD = math.radians(15.0)
 """Half a transducer's cone (the hub's HC-SR04-like 30 degrees; the robot's datasheet knowledge)."""
 CARVE_HALF_BEAM_RAD = math.radians(13.0)
-"""A point this close to a cone's axis is in its beam for carving (2 degrees inside the edge: the AHRS and the
-odometry drift a little, and an arc's end point sits on the edge itself)."""
-MEMORY_S = float(os.environ.get("MEM_S", "2.0"))
-"""How long a remembered point lasts without a beam crossing it (a robot at 0.3 m/s passes a wall's end in it)."""
-REACH_M = float(os.environ.get("REACH", "0.7"))
-"""Echoes and points farther than this from the robot's centre are not kept (braking from 1.5 m/s at 1.5 m/s^2
-takes 0.75 m; at the swarm's pace, 1 m/s, 0.33 m plus the body and a margin)."""
+"""A point this close to a cone's axis is in its beam for carving by a farther echo (2 degrees inside the edge:
+the AHRS and the odometry drift a little)."""
+REPLACE_HALF_BEAM_RAD = math.radians(15.5)
+"""A point this close to a cone's axis, at or beyond the distance that cone hears a wall now, is replaced by the
+fresh arc: the arcs' own edge points sit on the edge. Replaced only inside 13 degrees, an arc's edge point off a
+wall beside the robot stayed where no beam carved it, 8 cm nearer than the wall, and held a robot moving along
+the wall to under 0.4 m/s."""
+MEMORY_S = 0.6
+"""How long a remembered point lasts without a beam crossing it: long enough for a wall's end to cross a blind
+gap beside a robot passing it (at 0.5 m/s, 0.3 m); 2 s held the corridor's swarm back at the mouth (its centre
+0.54-0.72 m from the human at the median on seeds 1 and 2, one run torn), on arcs long gone by."""
+REACH_M = 0.45
+"""Echoes and points farther than this from the robot's centre are not kept. The robots that met a wall's end
+came at it at 0.3-0.7 m/s (braking at 1.2 m/s^2 takes 0.04-0.2 m, plus the body and the margin); an arc farther
+off is 23 cm wide or more, and held robots back (0.7 m: seeds 1 and 2 as for ``MEMORY_S``)."""
 SLACK_M = 0.04
 """A cone's echo counts as farther than a point (carving it) only beyond this: ranging noise (1 cm), the
 odometry's 3 % over a step or two, the arc's chord."""
-
-
-ONLY_GAPS = int(os.environ.get("ONLY_GAPS", "1"))
 
 
 class EchoMemory:
@@ -75,20 +79,20 @@ class EchoMemory:
             if age <= MEMORY_S and x * x + y * y <= reach2:
                 moved.append((x, y, age))
         heard = [robot_radius_m + r if math.isfinite(r) else math.inf for r in ranges]
-        cos_carve = math.cos(CARVE_HALF_BEAM_RAD)
+        cos_carve, cos_replace = math.cos(CARVE_HALF_BEAM_RAD), math.cos(REPLACE_HALF_BEAM_RAD)
         kept = []
         for x, y, age in moved:
             d = math.sqrt(x * x + y * y)
-            if not _carved(x, y, d, heard, cos, sin, explained, cos_carve):
+            if not _carved(x, y, d, heard, cos, sin, explained, cos_carve, cos_replace):
                 kept.append((x, y, age))
-        # what the law keeps off: every point remembered from an earlier step (in a blind gap, or behind a
-        # neighbour); what the cones hear now the safety stage and the repulsion already see
+        # what the law keeps off: every point remembered from an earlier step that no beam has crossed since (in a
+        # blind gap, or behind a neighbour); what the cones hear now, the safety stage and the repulsion see.
+        # (A stop rule on the echoes heard now too, on their axes, held the swarm back at the corridor's mouth:
+        # seed 1, centre 0.53 m from the human at the median, 5 contacts.)
         out = [(x, y) for x, y, _ in kept]
         for k, distance in enumerate(heard):
             if explained[k] or distance > REACH_M:
                 continue
-            if ONLY_GAPS < 0:
-                out.append((cos[k] * distance, sin[k] * distance))
             kept.extend(_arc(cos[k], sin[k], distance))
         self.points = kept
         return out
@@ -103,15 +107,17 @@ def _carved(
     sin: list[float],
     explained: list[bool],
     cos_carve: float,
+    cos_replace: float,
 ) -> bool:
     """Whether a cone's beam holding the point (x, y) at distance d shows it is not there: nothing heard, or the
     nearest echo beyond it; or the point lies where that cone hears a wall now (its fresh arc replaces it)."""
     for distance, c, s, body in zip(heard, cos, sin, explained, strict=True):
-        if x * c + y * s < cos_carve * d:
+        along = x * c + y * s
+        if along < cos_replace * d:
             continue
-        if distance > d + SLACK_M:
+        if not body and d - SLACK_M <= distance <= REACH_M:
             return True
-        if not body and distance >= d - SLACK_M:
+        if along >= cos_carve * d and distance > d + SLACK_M:
             return True
     return False
 
