@@ -372,34 +372,16 @@ def sense_lists(
     return neighbours, obstacles, human, dropped
 
 
-ECHO_NEARER_M = 0.03
-"""An echo this much nearer than a tracked body's nearest surface may still be that body's: its IR track is a
-centimetre or two off at the distances where it matters (0.2-0.4 m), and lags it by a sweep."""
-
-
 def explained_echoes(
     points: list[Point], names: list[str], xy: np.ndarray, human_id: str, config: SensingConfig
 ) -> list[bool]:
-    """Per echo point (nan for a cone without echo: False), whether a tracked beacon's body explains it: it lies
-    within the body and its slack, as ``sense_lists`` decides when it drops echoes, and it is not nearer the
-    robot than that body's nearest surface (less ``ECHO_NEARER_M``), where no echo off it can come from.
-
-    Why the second test (the improved law's echo memory): a neighbour pressed against a wall's end had the
-    end's echo, 4-5 cm in front of its own surface, put down to it, and the robot behind drove into the end."""
+    """Per echo point (nan for a cone without echo: False), whether a tracked beacon's body explains it, as
+    ``sense_lists`` decides when it drops echoes (the improved law's echo memory keeps only the others)."""
     rows = xy.tolist()
-    slack = config.echo_match_m
-    bodies = [config.person_radius_m if name == human_id else config.robot_radius_m for name in names]
-    out = []
-    for x, y in points:
-        explained = False
-        if math.isfinite(x):
-            reach = math.sqrt(x * x + y * y)
-            for (cx, cy), body in zip(rows, bodies, strict=True):
-                if math.dist((x, y), (cx, cy)) <= body + slack and reach >= math.hypot(cx, cy) - body - ECHO_NEARER_M:
-                    explained = True
-                    break
-        out.append(explained)
-    return out
+    radius = config.robot_radius_m + config.echo_match_m
+    person = config.person_radius_m + config.echo_match_m
+    reaches = [person if name == human_id else radius for name in names]
+    return [bool(rows) and math.isfinite(p[0]) and _explained(p, rows, reaches) for p in points]
 
 
 def _explained(point: Point, centres: list[list[float]], reaches: list[float]) -> bool:

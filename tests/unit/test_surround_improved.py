@@ -315,15 +315,3 @@ def test_a_wall_beside_a_robot_leaves_no_remembered_point_nearer_than_itself() -
     assert points and all(y <= -0.2 + 0.01 for _, y in points)  # none off the wall, toward the robot's path
     law = ImprovedSurroundController(IMPROVED)
     assert law.step_plain([], [], None, (1.0, 0.0), DT, walls=points)[0] > 0.95
-
-
-def test_an_echo_nearer_than_a_neighbours_surface_is_not_put_down_to_it() -> None:
-    """A wall's end 5 cm in front of a neighbour pressed against it, within the neighbour's body and slack, was
-    taken to come off the neighbour and forgotten; no echo off a body comes from nearer than its nearest surface."""
-    import numpy as np
-
-    from petswarm.controllers.surround_sensing import SensingConfig, explained_echoes
-
-    neighbour = np.array([[0.3, 0.0]])  # its surface 0.2 m from the robot's centre
-    points = [(0.2, 0.0), (0.15, 0.0), (0.35, 0.05), (math.nan, math.nan)]
-    assert explained_echoes(points, ["robot-2"], neighbour, "user", SensingConfig()) == [True, False, True, False]
