@@ -32,7 +32,10 @@ force becomes a velocity as in the paper's law (unit virtual mass, clipped accel
 - the stop rule: the velocity nearest that command whose speed toward each tracked body (neighbour, human)
   still stops short of it if both brake now (``_stoppable``); a body coming at the robot is got out of the way
   of. Forces only balance, so the pull and f_M pushed a robot at the tail of a file on into a slower one ahead;
-  a velocity bound does not. When no velocity keeps every rule, the human's comes first.
+  a velocity bound does not. When no velocity keeps every rule, the human's comes first;
+- the wall rule, within the stop rule: every wall point the robot's echo memory holds (``surround_memory``: heard
+  earlier, now in a blind gap between two cones or behind a neighbour) is passed by at the robot's radius and
+  ``WALL_MARGIN_M``, or stopped short of (``_wall_rules``).
 """
 
 from __future__ import annotations

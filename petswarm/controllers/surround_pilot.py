@@ -13,8 +13,9 @@ instant, and steps on without one when a sample comes alone):
 2. the tracked beacons and the ultrasonic echoes become neighbours, obstacles and the human
    (``surround_sensing.sense``);
 3. the surround law (``surround.SurroundController``, or ``surround_improved.ImprovedSurroundController`` when
-   the config's ``law`` is ``improved``, which also takes the human's tracked velocity) turns them into a
-   velocity, with the fresh odometry as the law's own velocity;
+   the config's ``law`` is ``improved``, which also takes the human's tracked velocity and the wall points of
+   its echo memory, ``surround_memory.EchoMemory``) turns them into a velocity, with the fresh odometry as the
+   law's own velocity;
 4. the Pet-Bot's safety stage on the ultrasonic ring (``SAFETY``) has the last word.
 
 Why every sensor sample: stepping only per sweep (50 ms) made the swarm bounce (the repulsion Q / d^2 is
