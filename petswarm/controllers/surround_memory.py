@@ -2,9 +2,9 @@
 
 Beyond the paper (docs/SURROUND.md, "The improved law", item 7). A ring of eight 30 degree cones, 45 degrees
 apart, hears only each cone's nearest echo, and nothing in the 15 degree gaps between cones. A thin wall's end
-a robot slides past crosses such a gap, or a neighbour steps into its cone and hides it: in the corridor every
-robot-obstacle contact of the improved law was a robot's flank meeting a wall's end it had heard a moment
-before. So the robot remembers.
+a robot slides past crosses such a gap, or a neighbour steps into its cone and hides it: 4 of the 5
+robot-obstacle contacts of the improved law on corridor seeds 1 and 2 were a robot meeting a wall's end it had
+heard with 8 cm or more to go (a replay of its ring from the world's truth). So the robot remembers.
 
 An echo at distance R (from the robot's centre) on the cone with axis a says: some obstacle point lies at R,
 somewhere within a +-15 degrees. The memory keeps that arc as ``ARC_POINTS`` points, in the robot's frame (its
@@ -17,9 +17,9 @@ odometry every step. A remembered point stays until:
 - ``MEMORY_S`` has passed, or it has fallen behind by more than ``REACH_M``.
 
 Echoes a tracked beacon explains (a neighbour's body, the human's) carve the beam up to them but are not kept:
-bodies move, and the law has their tracks. The law then holds the robot's speed toward every remembered point
-to what still stops short of it (``ImprovedSurroundController``'s wall rule): a point in a blind gap, or behind
-a neighbour, is still one it will not drive into.
+bodies move, and the law has their tracks. The law then makes the robot pass every remembered point or stop
+short of it (``ImprovedSurroundController``'s wall rule): a point in a blind gap, or behind a neighbour, is
+still one it will not drive into.
 """
 
 from __future__ import annotations
@@ -36,16 +36,16 @@ the AHRS and the odometry drift a little)."""
 REPLACE_HALF_BEAM_RAD = math.radians(15.5)
 """A point this close to a cone's axis, at or beyond the distance that cone hears a wall now, is replaced by the
 fresh arc: the arcs' own edge points sit on the edge. Replaced only inside 13 degrees, an arc's edge point off a
-wall beside the robot stayed where no beam carved it, 8 cm nearer than the wall, and held a robot moving along
-the wall to under 0.4 m/s."""
+wall beside the robot stays where no beam carves it, up to 8 cm nearer than the wall (worked out for a wall
+0.1 m off: it would hold a robot moving along it to under 0.4 m/s)."""
 MEMORY_S = 0.6
 """How long a remembered point lasts without a beam crossing it: long enough for a wall's end to cross a blind
-gap beside a robot passing it (at 0.5 m/s, 0.3 m); 2 s held the corridor's swarm back at the mouth (its centre
-0.54-0.72 m from the human at the median on seeds 1 and 2, one run torn), on arcs long gone by."""
+gap beside a robot passing it (at 0.5 m/s, 0.3 m); 2 s with ``REACH_M`` 0.7 m held the corridor's swarm back at
+the mouth (its centre 0.54-0.72 m from the human at the median on seeds 1 and 2, one run torn)."""
 REACH_M = 0.45
 """Echoes and points farther than this from the robot's centre are not kept. The robots that met a wall's end
 came at it at 0.3-0.7 m/s (braking at 1.2 m/s^2 takes 0.04-0.2 m, plus the body and the margin); an arc farther
-off is 23 cm wide or more, and held robots back (0.7 m: seeds 1 and 2 as for ``MEMORY_S``)."""
+off is 23 cm wide or more (0.7 m held robots back: see ``MEMORY_S``)."""
 SLACK_M = 0.04
 """A cone's echo counts as farther than a point (carving it) only beyond this: ranging noise (1 cm), the
 odometry's 3 % over a step or two, the arc's chord."""
