@@ -13,8 +13,9 @@ instant, and steps on without one when a sample comes alone):
 2. the tracked beacons and the ultrasonic echoes become neighbours, obstacles and the human
    (``surround_sensing.sense``);
 3. the surround law (``surround.SurroundController``, or ``surround_improved.ImprovedSurroundController`` when
-   the config's ``law`` is ``improved``, which also takes the human's tracked velocity) turns them into a
-   velocity, with the fresh odometry as the law's own velocity;
+   the config's ``law`` is ``improved``, which also takes the human's tracked velocity and the wall points of
+   its echo memory, ``surround_memory.EchoMemory``) turns them into a velocity, with the fresh odometry as the
+   law's own velocity;
 4. the Pet-Bot's safety stage on the ultrasonic ring (``SAFETY``) has the last word.
 
 Why every sensor sample: stepping only per sweep (50 ms) made the swarm bounce (the repulsion Q / d^2 is
@@ -38,12 +39,14 @@ from petswarm.controllers.motion import DriveLimits, MotorCommand
 from petswarm.controllers.pet_controller import PetControllerConfig, safety
 from petswarm.controllers.surround import SurroundConfig, SurroundController
 from petswarm.controllers.surround_improved import ImprovedSurroundController
+from petswarm.controllers.surround_memory import EchoMemory
 from petswarm.controllers.surround_sensing import (
     BeaconTracker,
     SensingConfig,
     SweepJob,
     beacon_fixes,
     echo_list,
+    explained_echoes,
     sense_lists,
 )
 from radio_hub.interface import BeaconSweep, IrConfig, OwnSensors, lazy_numpy
@@ -102,6 +105,7 @@ class SurroundPilot:
         """True once the human's beacon was seen: the robot drives from then on."""
         self.counters = {"steps": 0, "stale_steps": 0, "human_seen": 0, "echoes_dropped": 0, "beacons": 0}
         self._echoes = EchoRanges()
+        self._memory = EchoMemory()
         self._safety = SAFETY_IMPROVED if improved else SAFETY
         self._sensing = config.sensing
         self._last_us: int | None = None
@@ -172,7 +176,8 @@ class SurroundPilot:
             # the improved law keeps off the human's body itself (his centre and velocity): his surface point,
             # which sensing put last among the obstacles, is left out
             echoes = obstacles if human is None else obstacles[:-1]
-            vx, vy = controller.step_plain(neighbours, echoes, human, velocity, dt, own, others)
+            walls = self._remember(sensors, tracker.names, tracker.positions, velocity, dt)
+            vx, vy = controller.step_plain(neighbours, echoes, human, velocity, dt, own, others, walls)
         else:
             vx, vy = controller.step_plain(neighbours, obstacles, human, velocity, dt)
         # the law's repulsion acts on IR estimates up to a sweep old; the ultrasonic ring is the last word
@@ -183,6 +188,17 @@ class SurroundPilot:
         self.counters["echoes_dropped"] += dropped
         self.counters["beacons"] = len(tracker.names)
         return safe.vx, safe.vy
+
+    def _remember(
+        self, sensors: OwnSensors, names: list[str], positions: np.ndarray, velocity: tuple[float, float], dt: float
+    ) -> list[tuple[float, float]]:
+        """The echo memory's step (``surround_memory``): the wall points the law must stop short of."""
+        ranges = sensors.ranges_m.tolist()
+        cos, sin = self._ring(sensors.angles_rad)
+        radius = self.config.law.robot_radius_m
+        points = [(c * (radius + r), s * (radius + r)) for r, c, s in zip(ranges, cos, sin, strict=True)]
+        explained = explained_echoes(points, names, positions, self.config.human_id, self._sensing)
+        return self._memory.step(ranges, cos, sin, explained, velocity, dt, radius)
 
     def _ring(self, angles_rad: np.ndarray) -> tuple[list[float], list[float]]:
         """The cosines and sines of the ultrasonic sensors' angles, worked out again only when the ring changes."""

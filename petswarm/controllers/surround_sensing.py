@@ -372,6 +372,18 @@ def sense_lists(
     return neighbours, obstacles, human, dropped
 
 
+def explained_echoes(
+    points: list[Point], names: list[str], xy: np.ndarray, human_id: str, config: SensingConfig
+) -> list[bool]:
+    """Per echo point (nan for a cone without echo: False), whether a tracked beacon's body explains it, as
+    ``sense_lists`` decides when it drops echoes (the improved law's echo memory keeps only the others)."""
+    rows = xy.tolist()
+    radius = config.robot_radius_m + config.echo_match_m
+    person = config.person_radius_m + config.echo_match_m
+    reaches = [person if name == human_id else radius for name in names]
+    return [bool(rows) and math.isfinite(p[0]) and _explained(p, rows, reaches) for p in points]
+
+
 def _explained(point: Point, centres: list[list[float]], reaches: list[float]) -> bool:
     """Whether ``point`` lies within one of the bodies (centre and reach)."""
     x, y = point

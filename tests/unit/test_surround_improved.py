@@ -209,3 +209,109 @@ def test_snapshots_show_the_gathered_swarm_the_walk_and_the_end() -> None:
     assert times == sorted(times) and all(not math.isnan(t) for t in times)
     assert is_surround_run(world)
     assert not is_surround_run([_state(0.02, [{**_robot("robot-1", 0, 0), "ir": "idle"}, _user(0, 0)], 0)])
+
+
+def _ring_along(world_xy: list[tuple[float, float]]) -> list[tuple[list[float], tuple[float, float]]]:
+    """The ring's noise-free ranges of a robot (heading 0, radius 0.1) at each of ``world_xy`` beside the corridor's
+    wall (x 4..7, y -0.6), with the velocity that takes it from each position to the next in one step."""
+    from radio_hub.physics.world import World, WorldConfig, parse_obstacle
+
+    world = World(
+        WorldConfig(robot_radius_m=0.1), [parse_obstacle({"kind": "wall", "x0": 4, "y0": -0.6, "x1": 7, "y1": -0.6})]
+    )
+    world.add("r", "robot", *world_xy[0], 0.0)
+    out = []
+    for (x, y), (nx, ny) in zip(world_xy, [*world_xy[1:], world_xy[-1]], strict=True):
+        world.place("r", x, y, 0.0)
+        out.append((world.ultrasonic("r").tolist(), ((nx - x) / DT, (ny - y) / DT)))
+    return out
+
+
+def _cones() -> tuple[list[float], list[float]]:
+    angles = [math.radians(a) for a in (0.0, 45.0, 90.0, 135.0, 180.0, -135.0, -90.0, -45.0)]
+    return [math.cos(a) for a in angles], [math.sin(a) for a in angles]
+
+
+def test_a_wall_end_that_slid_into_a_blind_gap_is_remembered_where_it_was_heard() -> None:
+    """The echo memory (beyond the paper): a robot sliding past a wall's end at 0.5 m/s hears it on its front cone,
+    then the end crosses the 15 degree gap to the next cone, where the ring hears nothing of it; the memory still
+    has a point within a few cm of it, and the law's wall rule holds the robot's speed toward it."""
+    from petswarm.controllers.surround_memory import EchoMemory
+
+    memory, cos, sin = EchoMemory(), *_cones()
+    path = [(3.5 + 0.02 * k, -0.54) for k in range(20)]  # 0.5 m/s along y = -0.54, its flank over the wall's line
+    end = (4.0, -0.6)
+    in_gap = 0
+    for (x, y), (ranges, velocity) in zip(path, _ring_along(path), strict=True):
+        points = memory.step(ranges, cos, sin, [False] * 8, velocity, DT, 0.1)
+        bearing = math.degrees(math.atan2(end[1] - y, end[0] - x))
+        if -30 < bearing < -16:  # the end in the blind gap between the cones at 0 and -45 degrees
+            in_gap += 1
+            # the ring does not hear the end: at most the wall beyond it, where the front cone's edge meets it
+            assert all(not r < math.dist((x, y), end) - 0.1 + 0.01 for r in ranges)
+            assert min(math.dist(p, (end[0] - x, end[1] - y)) for p in points) < 0.035
+            law = ImprovedSurroundController(IMPROVED)
+            held = law.step_plain([], [], None, (0.6, 0.0), DT, walls=points)
+            free = ImprovedSurroundController(IMPROVED).step_plain([], [], None, (0.6, 0.0), DT)
+            toward = (end[0] - x, end[1] - y)
+            unit = (toward[0] / math.hypot(*toward), toward[1] / math.hypot(*toward))
+            assert held[0] * unit[0] + held[1] * unit[1] < free[0] * unit[0] + free[1] * unit[1] - 0.05
+    assert in_gap >= 3
+
+
+def test_the_memory_forgets_a_point_a_beam_sees_past_or_that_a_beacon_explains_or_too_old() -> None:
+    from petswarm.controllers.surround_memory import MEMORY_S, EchoMemory
+
+    cos, sin = _cones()
+    nothing = [math.nan] * 8
+    ahead = [0.2, *[math.nan] * 7]  # a wall 0.3 m ahead of the centre, on the front cone
+    memory = EchoMemory()
+    memory.step(ahead, cos, sin, [False] * 8, (0.0, 0.0), DT, 0.1)
+    assert len(memory.points) == 5  # its arc, across the cone
+    # the front cone now hears nothing: the arc's points inside its beam are not there; its edge points may be
+    left = memory.step(nothing, cos, sin, [False] * 8, (0.0, 0.0), DT, 0.1)
+    assert 0 < len(left) <= 2 and all(abs(math.degrees(math.atan2(y, x))) > 13 for x, y in left)
+    # heard past by a neighbour's echo farther off: carved too; nearer (hiding it): kept
+    hidden = EchoMemory()
+    hidden.step(ahead, cos, sin, [False] * 8, (0.0, 0.0), DT, 0.1)
+    assert len(hidden.step([0.1, *[math.nan] * 7], cos, sin, [True, *[False] * 7], (0.0, 0.0), DT, 0.1)) == 5
+    # an echo a beacon explains is not remembered
+    body = EchoMemory()
+    body.step(ahead, cos, sin, [True, *[False] * 7], (0.0, 0.0), DT, 0.1)
+    assert body.points == []
+    # too old: gone, even unseen (behind a neighbour all along)
+    old = EchoMemory()
+    old.step(ahead, cos, sin, [False] * 8, (0.0, 0.0), DT, 0.1)
+    steps = round(MEMORY_S / DT) + 1
+    for _ in range(steps):
+        kept = old.step([0.1, *[math.nan] * 7], cos, sin, [True, *[False] * 7], (0.0, 0.0), DT, 0.1)
+    assert kept == []
+
+
+def test_the_wall_rule_lets_a_robot_slide_past_a_wall_point_but_not_drive_into_it() -> None:
+    from petswarm.controllers.surround_improved import WALL_BRAKE_MPS2, WALL_LATE_S, WALL_MARGIN_M
+
+    c = IMPROVED
+    point = [(0.25, 0.0)]  # 0.15 m from its skin, straight ahead
+    into = ImprovedSurroundController(IMPROVED).step_plain([], [], None, (1.0, 0.0), DT, walls=point)
+    gap = 0.25 - c.robot_radius_m - WALL_MARGIN_M
+    a, late = WALL_BRAKE_MPS2, WALL_LATE_S
+    limit = math.sqrt(a * a * late * late + 2 * a * gap) - a * late
+    assert into[0] == pytest.approx(limit) and limit * late + limit**2 / (2 * a) == pytest.approx(gap)
+    past = ImprovedSurroundController(IMPROVED).step_plain([], [], None, (0.0, 1.0), DT, walls=point)
+    assert past[1] > 0.9
+
+
+def test_a_wall_beside_a_robot_leaves_no_remembered_point_nearer_than_itself() -> None:
+    """The arcs' edge points: a cone hearing a wall beside the robot puts its arc's edges off the wall, nearer
+    than it; each fresh arc replaces them, so a robot standing or driving along a wall is not held back."""
+    from petswarm.controllers.surround_memory import EchoMemory
+
+    cos, sin = _cones()
+    path = [(5.0 + 0.004 * k, -0.4) for k in range(8)]  # 0.1 m/s along the wall, 0.1 m off it
+    memory = EchoMemory()
+    for ranges, velocity in _ring_along(path):
+        points = memory.step(ranges, cos, sin, [False] * 8, velocity, DT, 0.1)
+    assert points and all(y <= -0.2 + 0.01 for _, y in points)  # none off the wall, toward the robot's path
+    law = ImprovedSurroundController(IMPROVED)
+    assert law.step_plain([], [], None, (1.0, 0.0), DT, walls=points)[0] > 0.95
