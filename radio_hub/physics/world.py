@@ -190,6 +190,7 @@ class World:
         half = math.radians(self.config.ultrasonic_half_beam_deg)
         self._ultrasonic_spread = np.array((-half, 0.0, half) if half > 0 else (0.0,))
         self._cos_half_beam = math.cos(half)
+        self._not_self_of: tuple[tuple[Any, ...], np.ndarray] = ((), np.zeros((0, 0), dtype=bool))
 
     def set_obstacles(self, obstacles: list[Obstacle]) -> None:
         """Replace the obstacles (a scenario loaded at run time)."""
@@ -416,13 +417,9 @@ class World:
         axis_angle = poses[:, 2, None] + self._ultrasonic_rad  # (n, S)
         axis = np.stack([np.cos(axis_angle), np.sin(axis_angle)], axis=-1)  # (n, S, 2)
         cone = np.full(axis_angle.shape, np.inf)  # (n, S): shapes' nearest points inside the cone
-        bodies_xyr = np.array([(*b.pose[:2], b.radius) for b in everyone], dtype=float).reshape(-1, 3)
-        circles = np.vstack([self._circles, bodies_xyr])
+        circles = np.vstack([self._circles, self._bodies_xyr(everyone)])
         if len(circles):
-            # a body does not echo off itself
-            not_self = np.ones((n, len(circles)), dtype=bool)
-            index = {b.body_id: len(self._circles) + k for k, b in enumerate(everyone)}
-            not_self[np.arange(n), [index[b] for b in body_ids]] = False
+            not_self = self._not_self(body_ids, everyone, len(circles))
             rel = circles[None, :, :2] - origin[:, None, :]  # (n, M, 2)
             # one matrix-vector product per ray (as rel @ d for a single ray)
             along = np.matmul(rel[:, None, None], unit[..., None])[..., 0]  # (n, S, K, M)
@@ -458,6 +455,28 @@ class World:
             cone = np.minimum(cone, self._inside_cone(closest, distance, distance, axis))
         reach = np.minimum(best.min(axis=-1), cone) - skin[:, None]
         return np.where(reach <= cfg.ultrasonic_range_m, reach, np.nan)
+
+    @staticmethod
+    def _bodies_xyr(everyone: list[Body]) -> np.ndarray:
+        """(bodies, 3): every body's x, y and radius, as circles."""
+        if not everyone:
+            return np.zeros((0, 3))
+        xyr = np.empty((len(everyone), 3))
+        xyr[:, :2] = np.array([b.pose for b in everyone], dtype=float)[:, :2]
+        xyr[:, 2] = [b.radius for b in everyone]
+        return xyr
+
+    def _not_self(self, body_ids: list[str], everyone: list[Body], count: int) -> np.ndarray:
+        """(sensing bodies, circles): False where the circle is the sensing body itself (no echo off oneself);
+        the same bodies sense at every tick, so the last answer is kept."""
+        key = (tuple(body_ids), tuple(b.body_id for b in everyone), len(self._circles), count)
+        if self._not_self_of[0] != key:
+            not_self = np.ones((len(body_ids), count), dtype=bool)
+            index = {b.body_id: len(self._circles) + k for k, b in enumerate(everyone)}
+            not_self[np.arange(len(body_ids)), [index[b] for b in body_ids]] = False
+            not_self.flags.writeable = False
+            self._not_self_of = (key, not_self)
+        return self._not_self_of[1]
 
     def _inside_cone(self, point: np.ndarray, distance: np.ndarray, echo: np.ndarray, axis: np.ndarray) -> np.ndarray:
         """(n, S): the least ``echo`` (n, M) over the shapes whose nearest ``point`` (n, M, 2), at ``distance``
