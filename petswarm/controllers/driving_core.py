@@ -915,10 +915,11 @@ class EchoRanges:
         if len(oldest) != len(ranges):
             return ()
         vx, vy, _ = sensors.odometry
-        return tuple(
-            0.0 if math.isnan(rate) else rate + (vx * c + vy * s)
-            for rate, c, s in zip([(r - o) / dt for r, o in zip(ranges, oldest, strict=True)], cos, sin, strict=True)
-        )
+        receding = []
+        for r, o, c, s in zip(ranges, oldest, cos, sin, strict=True):
+            rate = (r - o) / dt
+            receding.append(0.0 if math.isnan(rate) else rate + (vx * c + vy * s))
+        return tuple(receding)
 
 
 def _ranges_of(sample: list[Any]) -> list[float]:

@@ -221,24 +221,37 @@ def _nearest_allowed(v: tuple[float, float], constraints: list[tuple[float, floa
     projection onto each boundary, and each pair of boundaries' corner. Standing still is always allowed.
     """
 
-    def allowed(c: tuple[float, float]) -> bool:
-        cx, cy = c
-        return all(ux * cx + uy * cy <= limit + 1e-12 for ux, uy, limit in constraints)
+    # (plain loops with early exits: the safety stage runs on every control step of every robot)
+    bounds = [(ux, uy, limit + 1e-12) for ux, uy, limit in constraints]
 
-    if allowed(v):  # nearest of all (the common case: nothing in the way)
+    def allowed(cx: float, cy: float) -> bool:
+        for ux, uy, bound in bounds:  # noqa: SIM110 (a loop: all() of a generator costs twice as much here)
+            if not ux * cx + uy * cy <= bound:
+                return False
+        return True
+
+    vx, vy = v
+    if allowed(vx, vy):  # nearest of all (the common case: nothing in the way)
         return v
     candidates = [v, (0.0, 0.0)]
     for ux, uy, limit in constraints:
-        excess = ux * v[0] + uy * v[1] - limit
-        candidates.append((v[0] - excess * ux, v[1] - excess * uy))
-    for i, (ax, ay, a_lim) in enumerate(constraints):
-        for bx, by, b_lim in constraints[i + 1 :]:
+        excess = ux * vx + uy * vy - limit
+        candidates.append((vx - excess * ux, vy - excess * uy))
+    count = len(constraints)
+    for i in range(count):
+        ax, ay, a_lim = constraints[i]
+        for j in range(i + 1, count):
+            bx, by, b_lim = constraints[j]
             det = ax * by - ay * bx
-            if abs(det) > 1e-9:
+            if det > 1e-9 or det < -1e-9:
                 candidates.append(((a_lim * by - ay * b_lim) / det, (ax * b_lim - a_lim * bx) / det))
     # the nearest allowed one (the first in candidate order among equally near ones): try them nearest first
-    nearest_first = sorted(candidates, key=lambda c: (c[0] - v[0]) ** 2 + (c[1] - v[1]) ** 2)
-    return next(c for c in nearest_first if allowed(c))
+    distances = [(cx - vx) ** 2 + (cy - vy) ** 2 for cx, cy in candidates]
+    for k in sorted(range(len(candidates)), key=distances.__getitem__):
+        cx, cy = candidates[k]
+        if allowed(cx, cy):
+            return candidates[k]
+    raise AssertionError("standing still is always allowed")  # every limit is >= 0
 
 
 def obstacle_ahead(ranges: Ranges, cfg: PetControllerConfig) -> bool:

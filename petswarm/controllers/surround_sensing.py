@@ -111,6 +111,10 @@ def beacon_fixes(
     return [n for n, v in zip(names, valid.tolist(), strict=True) if v], xy[valid]
 
 
+_IN_ORDER = slice(None)
+"""``BeaconTracker._same_beacons``: the fixes are in the tracks' order already (every row, as it is)."""
+
+
 @dataclass(frozen=True)
 class SweepJob:
     """One robot's sweep to turn into fixes (``beacon_fixes``'s arguments, less the calibration and method)."""
@@ -209,6 +213,9 @@ class BeaconTracker:
         self._velocity = np.zeros((0, 2))
         """Each beacon's own velocity (not relative to us), in our frame."""
         self._since_fix = 0.0
+        self._reorder: tuple[list[str], list[str], np.ndarray | None] = ([], [], None)
+        """The last ``_same_beacons`` answer that needed a reordering: the sweep's names, the tracks'
+        names (that very list) and the order."""
 
     @property
     def points(self) -> dict[str, np.ndarray]:
@@ -259,11 +266,14 @@ class BeaconTracker:
         own = np.asarray(own_velocity, dtype=float)
         period = self._since_fix
         self._since_fix = 0.0
-        if period > 0 and names and names == self._names:  # the same beacons as last sweep: every track goes on
-            innovation = np.asarray(xy, dtype=float).reshape(-1, 2) - self._position
-            self._position = self._position + self.alpha * innovation
-            self._velocity = self._velocity + self.beta * innovation / period
-            return
+        if period > 0 and names:
+            order = self._same_beacons(names)
+            if order is not None:  # the same beacons as last sweep: every track goes on, in its row
+                fixed = np.asarray(xy, dtype=float).reshape(-1, 2)
+                innovation = fixed[order] - self._position
+                self._position = self._position + self.alpha * innovation
+                self._velocity = self._velocity + self.beta * innovation / period
+                return
         fix_row = {n: i for i, n in enumerate(names)}
         old = self._rows
         kept = [n for n in self._names if n in fix_row]  # tracks go on in their order, new ones after
@@ -287,6 +297,22 @@ class BeaconTracker:
                 velocity = np.concatenate([velocity, np.tile(own, (len(new), 1))])
         self._names, self._rows = order, {n: i for i, n in enumerate(order)}
         self._position, self._velocity = position.reshape(-1, 2), velocity.reshape(-1, 2)
+
+    def _same_beacons(self, names: list[str]) -> np.ndarray | slice | None:
+        """When ``names`` are the tracked beacons, perhaps in another order: the row of ``names`` for each track
+        (``_IN_ORDER`` when the orders agree), else None. A sweep lists its beacons in its own order, most often
+        the same from sweep to sweep, so the last answer is kept."""
+        if names == self._names:
+            return _IN_ORDER
+        key, tracks, order = self._reorder
+        if names == key and tracks is self._names:
+            return order
+        if len(names) != len(self._names) or set(names) != self._rows.keys():
+            return None
+        row = {n: i for i, n in enumerate(names)}
+        order = np.array([row[n] for n in self._names], dtype=np.intp)
+        self._reorder = (list(names), self._names, order)
+        return order
 
     def clear(self) -> None:
         """Forget every beacon (the sweeps stopped)."""

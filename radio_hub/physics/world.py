@@ -190,6 +190,7 @@ class World:
         half = math.radians(self.config.ultrasonic_half_beam_deg)
         self._ultrasonic_spread = np.array((-half, 0.0, half) if half > 0 else (0.0,))
         self._cos_half_beam = math.cos(half)
+        self._not_self_of: tuple[tuple[Any, ...], np.ndarray] = ((), np.zeros((0, 0), dtype=bool))
 
     def set_obstacles(self, obstacles: list[Obstacle]) -> None:
         """Replace the obstacles (a scenario loaded at run time)."""
@@ -416,13 +417,9 @@ class World:
         axis_angle = poses[:, 2, None] + self._ultrasonic_rad  # (n, S)
         axis = np.stack([np.cos(axis_angle), np.sin(axis_angle)], axis=-1)  # (n, S, 2)
         cone = np.full(axis_angle.shape, np.inf)  # (n, S): shapes' nearest points inside the cone
-        bodies_xyr = np.array([(*b.pose[:2], b.radius) for b in everyone], dtype=float).reshape(-1, 3)
-        circles = np.vstack([self._circles, bodies_xyr])
+        circles = np.vstack([self._circles, self._bodies_xyr(everyone)])
         if len(circles):
-            # a body does not echo off itself
-            not_self = np.ones((n, len(circles)), dtype=bool)
-            index = {b.body_id: len(self._circles) + k for k, b in enumerate(everyone)}
-            not_self[np.arange(n), [index[b] for b in body_ids]] = False
+            not_self = self._not_self(body_ids, everyone, len(circles))
             rel = circles[None, :, :2] - origin[:, None, :]  # (n, M, 2)
             # one matrix-vector product per ray (as rel @ d for a single ray)
             along = np.matmul(rel[:, None, None], unit[..., None])[..., 0]  # (n, S, K, M)
@@ -459,6 +456,28 @@ class World:
         reach = np.minimum(best.min(axis=-1), cone) - skin[:, None]
         return np.where(reach <= cfg.ultrasonic_range_m, reach, np.nan)
 
+    @staticmethod
+    def _bodies_xyr(everyone: list[Body]) -> np.ndarray:
+        """(bodies, 3): every body's x, y and radius, as circles."""
+        if not everyone:
+            return np.zeros((0, 3))
+        xyr = np.empty((len(everyone), 3))
+        xyr[:, :2] = np.array([b.pose for b in everyone], dtype=float)[:, :2]
+        xyr[:, 2] = [b.radius for b in everyone]
+        return xyr
+
+    def _not_self(self, body_ids: list[str], everyone: list[Body], count: int) -> np.ndarray:
+        """(sensing bodies, circles): False where the circle is the sensing body itself (no echo off oneself);
+        the same bodies sense at every tick, so the last answer is kept."""
+        key = (tuple(body_ids), tuple(b.body_id for b in everyone), len(self._circles), count)
+        if self._not_self_of[0] != key:
+            not_self = np.ones((len(body_ids), count), dtype=bool)
+            index = {b.body_id: len(self._circles) + k for k, b in enumerate(everyone)}
+            not_self[np.arange(len(body_ids)), [index[b] for b in body_ids]] = False
+            not_self.flags.writeable = False
+            self._not_self_of = (key, not_self)
+        return self._not_self_of[1]
+
     def _inside_cone(self, point: np.ndarray, distance: np.ndarray, echo: np.ndarray, axis: np.ndarray) -> np.ndarray:
         """(n, S): the least ``echo`` (n, M) over the shapes whose nearest ``point`` (n, M, 2), at ``distance``
         (n, M) from the sensor, lies within the half beam of each sensor's ``axis`` (n, S, 2); inf if none."""
@@ -470,27 +489,58 @@ class World:
         """Every body's pose (x, y, yaw) as plain floats, by id (for the IR light and the radio ranges)."""
         return {n: (float(b.pose[0]), float(b.pose[1]), float(b.pose[2])) for n, b in self.bodies.items()}
 
-    def snapshot(self) -> list[dict[str, Any]]:
-        """Every body's truth as plain values (for the world publication and records)."""
+    def truth_rows(self) -> list[list[float]]:
+        """Every body's pose and velocity (x, y, yaw, vx, vy, omega), each ``round(value, 4)`` as records and
+        viewers take them, in the order of ``bodies``."""
         bodies = list(self.bodies.values())
         if not bodies:
             return []
-        # every pose and velocity as Python floats in one conversion, then rounded as before
-        values = np.array([(*b.pose, *b.velocity) for b in bodies], dtype=float).tolist()
+        return round_places(
+            np.hstack(
+                [np.array([b.pose for b in bodies], dtype=float), np.array([b.velocity for b in bodies], dtype=float)]
+            ),
+            4,
+        )
+
+    def snapshot(self) -> list[dict[str, Any]]:
+        """Every body's truth as plain values (for the world publication and records)."""
+        bodies = list(self.bodies.values())
         return [
             {
                 "id": b.body_id,
                 "kind": b.kind,
-                "x": round(x, 4),
-                "y": round(y, 4),
-                "yaw": round(yaw, 4),
-                "vx": round(vx, 4),
-                "vy": round(vy, 4),
-                "omega": round(omega, 4),
+                "x": x,
+                "y": y,
+                "yaw": yaw,
+                "vx": vx,
+                "vy": vy,
+                "omega": omega,
                 "radius": b.radius,
             }
-            for b, (x, y, yaw, vx, vy, omega) in zip(bodies, values, strict=True)
+            for b, (x, y, yaw, vx, vy, omega) in zip(bodies, self.truth_rows(), strict=True)
         ]
+
+
+def round_places(values: np.ndarray, places: int) -> list[list[float]]:
+    """``round(v, places)`` of every value of a 2-D array, bit for bit, as nested lists of Python floats.
+
+    Python's ``round`` converts through a decimal string, about a microsecond a value (the world log rounds
+    126 every tick). Here: k, the integer nearest ``v * 10**places``, then ``k / 10**places``, which IEEE
+    division rounds to the double nearest the decimal k * 10**-places, which is what ``round`` returns. The
+    product is off the exact one by half an ulp, so k is sure unless it lies within a few ulps of a half (or
+    is too large for the units to count); those few, and nan and inf, take ``round`` itself."""
+    scale = 10.0**places
+    scaled = values * scale
+    k = np.rint(scaled)
+    size = np.abs(scaled)
+    with np.errstate(invalid="ignore"):  # inf - inf: not sure
+        sure = (np.abs(np.abs(scaled - k) - 0.5) > size * 2.0**-48) & (size < 2.0**50)
+    rows = (k / scale).tolist()
+    if not sure.all():
+        exact = values.tolist()
+        for i, j in zip(*np.nonzero(~sure), strict=True):
+            rows[i][j] = round(exact[i][j], places)
+    return rows
 
 
 def _segment_array(obstacles: list[Obstacle]) -> np.ndarray:

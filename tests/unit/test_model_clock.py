@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import asyncio
+import itertools
 import json
+import math
 from pathlib import Path
 
 import pytest
@@ -117,3 +119,17 @@ def test_a_run_into_a_folder_that_holds_an_earlier_run_gives_the_same_digest(
     again = _model_run(tmp_path, "same", 7, capsys)
     assert again["digest"] == first["digest"] == record_digest(tmp_path / "same")
     assert not (tmp_path / "same" / "events" / "robot-9.jsonl").exists()
+
+
+def test_timers_order_by_deadline_then_by_when_they_were_scheduled_as_tuples_of_both_do() -> None:
+    loop = ModelClockLoop()
+    try:
+        nan = math.nan
+        whens = [0.0, 0.02, 0.02, 1e-9, 0.04, math.inf, nan, nan, 0.02, float("nan"), 0.0]
+        timers = [loop.call_at(when, lambda: None) for when in whens]
+        for a, b in itertools.product(timers, timers):
+            assert (a < b) == ((a._when, a._order) < (b._when, b._order))  # type: ignore[attr-defined]
+        assert timers[1] < timers[2] and not timers[2] < timers[1]  # equal deadlines: first scheduled first
+        assert timers[6] < timers[7]  # one nan object: as a tuple compares it, the same
+    finally:
+        loop.close()

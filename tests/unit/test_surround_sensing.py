@@ -218,3 +218,29 @@ def test_a_batch_of_sweeps_gives_each_robot_its_own_estimate_bit_for_bit(method:
             assert xy.shape == alone_xy.shape and np.array_equal(xy, alone_xy, equal_nan=True)
             saturated += bool(np.any(job.readings >= config.saturation_counts))
     assert saturated > 100  # the fits' saturated fallbacks were exercised, not only the plain path
+
+
+def test_the_tracker_takes_a_sweep_in_any_order_of_its_beacons_row_by_row() -> None:
+    """The same beacons listed in another order than the tracks (a sweep's own order) correct each track by
+    its own fix: bit for bit what fixes given in the tracks' order do, sweep after sweep, and a beacon that
+    comes or goes still starts or ends its own track."""
+    rng = np.random.default_rng(12)
+    names = [f"robot-{k}" for k in range(7)]
+    shuffled, in_order = BeaconTracker(), BeaconTracker()
+    own = np.array([0.3, -0.1])
+    for sweep in range(30):
+        present = names if sweep % 10 else names[: 4 + sweep % 3]
+        xy = rng.normal(0.0, 1.0, (len(present), 2))
+        order = [int(i) for i in rng.permutation(len(present))] if sweep % 4 else list(range(len(present)))
+        for tracker in (shuffled, in_order):
+            tracker.predict(own, 0.04)
+        swept = [present[i] for i in order]
+        shuffled.update_many(swept, xy[order], own)
+        # the tracks' order, new beacons after them in the sweep's order (where a new track goes)
+        rows = [present.index(n) for n in in_order.names if n in present]
+        rows += [present.index(n) for n in swept if n not in in_order.names]
+        in_order.update_many([present[i] for i in rows], xy[rows], own)
+        assert shuffled.names == in_order.names
+        assert shuffled.positions.tobytes() == in_order.positions.tobytes()
+        assert shuffled.velocities.tobytes() == in_order.velocities.tobytes()
+    assert shuffled.velocity_of("robot-6") is not None

@@ -1,0 +1,79 @@
+"""The world log's line is ``world_state`` encoded by ``json.dumps``, character for character."""
+
+from __future__ import annotations
+
+import json
+import math
+from typing import Any
+
+import numpy as np
+
+from radio_hub.environment import Environment, EnvironmentConfig
+from radio_hub.link import wire
+from radio_hub.physics.world import Obstacle, round_places
+
+
+class Quiet:
+    """A downlink that drops everything."""
+
+    def send(self, node_id: str, data: bytes) -> None:
+        pass
+
+    def forget(self, node_id: str) -> None:
+        pass
+
+    def publish_world(self, state: dict[str, Any]) -> None:
+        pass
+
+
+def _as_json(env: Environment) -> str:
+    return json.dumps(env.world_state(), separators=(",", ":"))
+
+
+def test_the_world_line_is_the_world_state_as_json_through_motion_telemetry_and_odd_values() -> None:
+    rng = np.random.default_rng(3)
+    env = Environment(EnvironmentConfig(), 1, Quiet())
+    assert env.world_line() == _as_json(env)  # nobody yet
+    for k in range(6):
+        kind = "user" if k == 5 else "robot"
+        env.receive(f"n-{k}", wire.Attach(ext_addr=k + 1, position=[0.4 * k, 0.1], kind=kind, n=1), 0)
+    env.world.set_obstacles([Obstacle("circle", x=5.0, y=1.6, r=1.0), Obstacle("wall", x0=0, y0=-3, x1=4, y1=-3)])
+    now, referenced = 0, 0
+    for step in range(60):
+        now += 20_000
+        for k in range(5):
+            vx, vy = rng.normal(0.0, 0.7, 2).tolist()
+            env.receive(f"n-{k}", wire.Drive(vx=vx, vy=vy, omega=float(rng.normal()), n=step + 2), now)
+        if step % 7 == 3:  # a slave with a slot under master n-0, then one whose master is gone, then none
+            slave = wire.Telemetry(state="slave_driving", role="slave", master="n-0", slot=[-0.6, 0.4])
+            env.receive("n-2", slave, now)
+            odd = wire.Telemetry(state='odd "quoted" \u00e9', role="", master="nobody", slot=[1.0, 0.0])
+            env.receive("n-3", odd, now)
+        if step == 40:
+            env.receive("n-2", wire.Telemetry(state="", role="", master="", slot=None), now)
+            env.world.set_obstacles([])
+        env.advance(now)
+        line = env.world_line(now)
+        assert line == _as_json(env)
+        referenced += '"reference":[' in line
+    assert 0 < referenced < 60
+    body = env.world.bodies["n-1"]
+    body.pose[0], body.velocity[1] = -0.0, 1e-300  # a signed zero and a value that rounds to zero
+    assert env.world_line() == _as_json(env)
+    body.velocity[0] = math.inf  # JSON's Infinity: the encoder's own path
+    assert "Infinity" in env.world_line() and env.world_line() == _as_json(env)
+
+
+def test_round_places_is_round_bit_for_bit_near_halves_signed_zeros_and_beyond() -> None:
+    rng = np.random.default_rng(8)
+    values = []
+    for exponent in range(-9, 13):
+        values += (rng.normal(size=400) * 10.0**exponent).tolist()
+    halves = np.round(rng.normal(size=400) * 1e4) / 1e4 + 0.00005  # within an ulp or two of a decimal half
+    values += halves.tolist() + np.nextafter(halves, 0.0).tolist() + np.nextafter(halves, 1.0).tolist()
+    values += [0.0, -0.0, -1e-5, 0.03125, 2.5e-4, -2.5e-4, 1e-300, 5e-324, 1e12 + 0.5, 1e300, math.inf, -math.inf]
+    table = np.array(values + [math.nan] * (-len(values) % 6)).reshape(-1, 6)
+    got = round_places(table, 4)
+    want = [[round(v, 4) for v in row] for row in table.tolist()]
+    assert [[repr(v) for v in row] for row in got] == [[repr(v) for v in row] for row in want]
+    assert [repr(v) for v in round_places(np.array([[0.123456, -0.5]]), 2)[0]] == ["0.12", "-0.5"]
