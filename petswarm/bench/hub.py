@@ -397,9 +397,16 @@ def load_summary(
         "hub_job_thread_us_per_frame": 1e6 * (after.hub_job_cpu_s - before.hub_job_cpu_s) / delivered,
         "hub_world_thread_us_per_frame": 1e6 * (after.hub_world_cpu_s - before.hub_world_cpu_s) / delivered,
         "load_gen_cpu_us_per_frame": 1e6 * (after.gens_cpu_s - before.gens_cpu_s) / delivered,
+        "hub_down_messages_per_frame": _hub_count(after, before, "down_messages") / delivered,
+        "hub_down_puts_per_frame": _hub_count(after, before, "down_puts") / delivered,
         "machine_cpu_busy_pct": 100 * (after.machine[0] - before.machine[0]) / (after.machine[1] - before.machine[1]),
         "series": [{"t_s": t, "fps": f} for t, f in series],
     }
+
+
+def _hub_count(after: Snapshot, before: Snapshot, name: str) -> float:
+    """How much one of the hub's counters grew over the window (NaN for a hub without it)."""
+    return after.stats["hub"].get(name, math.nan) - before.stats["hub"].get(name, math.nan)
 
 
 def air_limited(load: dict[str, Any]) -> bool:

@@ -116,7 +116,7 @@ class RadioHub:
         self.endpoint = endpoint
         self.keys = Keys(world)
         self.seed = seed
-        self._downlink = HubDownlink(self.keys, is_member=lambda node_id: node_id in self.env.kinds)
+        self._downlink = HubDownlink(self.keys, is_member=lambda node_id: node_id in self.env.kinds, batching=True)
         self._t0_ns = time.perf_counter_ns()
         self.env = Environment(
             tables,
@@ -239,6 +239,7 @@ class RadioHub:
             # what the items scheduled may be due already; with nothing due, advancing would only cost time
             if now_us() >= self._next_due_us():
                 self._advance_safely()
+            self._flush_safely()  # one put per node per pass
 
     def _next_due_us(self) -> int:
         due = self.env.medium.next_event_us()
@@ -260,6 +261,7 @@ class RadioHub:
                 env.advance_world(now_us())
             except Exception as err:
                 self.env.faults.record("advance world", err)
+            self._flush_safely()
             while self._held and not self._stop.is_set():
                 # the job thread's turn: a world that falls behind (ticks back to back) must not starve it
                 time.sleep(_HELD_POLL_US / 1e6)
@@ -357,6 +359,12 @@ class RadioHub:
             self.env.advance_medium(now)
         except Exception as err:
             self.env.faults.record("advance", err)
+
+    def _flush_safely(self) -> None:
+        try:
+            self._downlink.flush()
+        except Exception as err:
+            self.env.faults.record("flush", err)
 
     def _expire_when_free(self, now: int) -> None:
         lock = self.env.world_lock
@@ -491,6 +499,8 @@ class RadioHub:
             "timeout_s": ATTACH_TOKEN_TIMEOUT_S,
         }
         stats["hub"]["stranger_answers_dropped"] = self._downlink.stranger_answers_dropped
+        stats["hub"]["down_messages"] = self._downlink.messages
+        stats["hub"]["down_puts"] = self._downlink.puts
         return stats
 
 

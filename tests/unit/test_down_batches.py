@@ -11,6 +11,7 @@ import pytest
 from radio_hub.air.mac import Frame, FrameType, TxStatus
 from radio_hub.link import wire
 from radio_hub.link.port import RadioClient, RadioIdentity, RxFrame, TxResult
+from radio_hub.link.zenoh_link import DOWN_BATCH_BYTES, _batches
 from tests.unit.test_port_transmit import RecordingLink
 
 
@@ -71,3 +72,11 @@ def test_a_node_takes_a_batch_in_order_and_counts_a_malformed_one_once():
         assert radio.malformed == 2 and radio.transport_gaps == 0 and radio.faults.total == 0
 
     asyncio.run(scenario())
+
+
+def test_a_long_run_of_messages_is_cut_into_batches_within_bounds():
+    parts = [bytes(100)] * (wire.BATCH_MAX_PARTS + 10)
+    assert [len(b) for b in _batches(parts)] == [wire.BATCH_MAX_PARTS, 10]
+    big = [bytes(DOWN_BATCH_BYTES // 2 + 1)] * 3
+    assert [len(b) for b in _batches(big)] == [1, 1, 1]
+    assert [part for batch in _batches(parts) for part in batch] == parts
