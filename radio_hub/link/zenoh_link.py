@@ -137,8 +137,10 @@ class HubDownlink:
         self._window_answers = 0
         self._pending: dict[str, list[bytes]] = {}
         self._lock = threading.Lock()
-        """Over the buffer and each flush's puts: two threads send, and a node's messages leave in the order
-        they were numbered."""
+        """Over the buffer and the strangers' answer budget (two threads send)."""
+        self._flushing = threading.Lock()
+        """Held by the one thread putting the buffer's contents: a node's messages leave in the order they were
+        numbered, and a thread that finds it held leaves its messages to the holder instead of waiting."""
 
     def send(self, node_id: str, data: bytes) -> None:
         if self.session is None:
@@ -151,28 +153,41 @@ class HubDownlink:
                 else:
                     pending.append(data)
             return
-        with self._lock:
-            self._put(node_id, data, 1)
+        self._put(node_id, data, 1)
 
     def flush(self) -> None:
         """Put every buffered message, one put per node (``wire.BATCH_MAX_PARTS`` messages and
-        ``DOWN_BATCH_BYTES`` at most each)."""
-        if not self._pending:
-            return
-        with self._lock:
-            pending, self._pending = self._pending, {}
-            for node_id, parts in pending.items():
-                if len(parts) == 1:
-                    self._put(node_id, parts[0], 1)
-                    continue
-                for batch in _batches(parts):
-                    self._put(node_id, batch[0] if len(batch) == 1 else wire.encode_batch(batch), len(batch))
+        ``DOWN_BATCH_BYTES`` at most each). Never waits for the other thread's flush: that one takes these
+        messages too before it stops (it looks again after letting go)."""
+        while self._pending:
+            if not self._flushing.acquire(blocking=False):
+                return
+            try:
+                while True:
+                    with self._lock:
+                        pending, self._pending = self._pending, {}
+                    if not pending:
+                        break
+                    self._put_all(pending)
+            finally:
+                self._flushing.release()
+
+    def _put_all(self, pending: dict[str, list[bytes]]) -> None:
+        for node_id, parts in pending.items():
+            if len(parts) == 1:
+                self._put(node_id, parts[0], 1)
+                continue
+            for batch in _batches(parts):
+                self._put(node_id, batch[0] if len(batch) == 1 else wire.encode_batch(batch), len(batch))
 
     def _put(self, node_id: str, data: bytes, count: int) -> None:
+        if self.session is None:
+            return
         try:
             pub = self._pubs.get(node_id)
             if pub is None and self.is_member is not None and not self.is_member(node_id):
-                self._answer_stranger(node_id, data)
+                with self._lock:
+                    self._answer_stranger(node_id, data)
                 return
             if pub is None:
                 pub = self._pubs[node_id] = reliable_publisher(self.session, self.keys.down(node_id))
@@ -194,11 +209,16 @@ class HubDownlink:
         self.session.put(self.keys.down(node_id), data)
 
     def forget(self, node_id: str) -> None:
-        self.flush()  # what was sent before it left still goes
-        pub = self._pubs.pop(node_id, None)
-        if pub is not None:
-            with contextlib.suppress(zenoh.ZError):
-                pub.undeclare()
+        # waits for a flush under way: a put on the publisher while it is undeclared raises (zenoh's objects
+        # are borrowed across threads); what was sent before the node left still goes
+        with self._flushing:
+            with self._lock:
+                pending, self._pending = self._pending, {}
+            self._put_all(pending)
+            pub = self._pubs.pop(node_id, None)
+            if pub is not None:
+                with contextlib.suppress(zenoh.ZError):
+                    pub.undeclare()
 
     def publish_world(self, state: dict[str, Any]) -> None:
         if self.world_pub is not None:
