@@ -18,6 +18,7 @@ import json
 import math
 import resource
 import sys
+import threading
 import tomllib
 from collections import deque
 from collections.abc import Callable
@@ -222,6 +223,13 @@ class Environment:
         self._obstacles_text_of: tuple[tuple[Obstacle, ...], str] = ((), "[]")
         self._down_seq: dict[str, int] = {}
         self._now = 0
+        self.world_lock = threading.RLock()
+        """Held by whatever touches the world, the IR light, BLE, LF or the set of nodes (everything but a
+        robot's frame and the medium's outcomes). In one thread (model time, lockstep) nobody waits on it; the
+        hub runs ``advance_world`` on a thread of its own, and its job thread then only needs it for the rare
+        message that is not a frame."""
+        self._down_lock = threading.RLock()
+        """A message's number and its sending go together, so a node's stream stays in order from two threads."""
 
     def now_us(self) -> int:
         """The model time of the latest input or advance."""
@@ -251,30 +259,49 @@ class Environment:
 
     def next_event_us(self) -> int:
         """When the next scheduled thing is due: a medium outcome, an IR sweep, a BLE delivery or a world tick."""
+        due = self.next_world_event_us()
+        medium = self.medium.next_event_us()
+        return due if medium is None or medium >= due else medium
+
+    def next_world_event_us(self) -> int:
+        """When the next world tick, IR sweep or BLE delivery is due."""
         due = self._next_tick_us
-        for t in (self.medium.next_event_us(), self.ir.next_event_us(), self.ble.next_event_us()):
+        for t in (self.ir.next_event_us(), self.ble.next_event_us()):
             if t is not None and t < due:
                 due = t
         return due
 
     def advance(self, now_us: int) -> None:
         """Carry out everything due by ``now_us``, in one fixed order: medium, world tick, IR, BLE."""
+        self.advance_medium(now_us)
+        self.advance_world(self._now)
+
+    def advance_medium(self, now_us: int) -> None:
+        """Carry out the medium's outcomes due by ``now_us`` (and move the model clock to it)."""
         self._at(now_us)
         self._dispatch(self.medium.advance(self._now))
-        self._tick_world()
-        self._sweep_ir()
-        self._deliver_ble()
 
-    def receive(self, node_id: str, data: bytes | wire.Message, now_us: int) -> None:
+    def advance_world(self, now_us: int) -> None:
+        """Carry out the world tick, IR sweeps and BLE deliveries due by ``now_us``, in that order, under
+        ``world_lock``. It does not move the model clock, so a shell may call it from another thread than the
+        one that feeds the medium (the hub does)."""
+        with self.world_lock:
+            self._tick_world(now_us)
+            self._sweep_ir(now_us)
+            self._deliver_ble(now_us)
+
+    def receive(self, node_id: str, data: bytes | wire.Message, now_us: int, *, wait: bool = True) -> bool:
         """A node's message (``wire``-encoded, or in memory handed over as it is, checked as its bytes would
         be) arrived at ``now_us``. Never raises: anything unexpected is counted in ``faults`` and the message
-        dropped."""
+        dropped. With ``wait=False`` a message that needs ``world_lock`` (all but an attached robot's frame)
+        while another thread holds it is left untouched and False returned: the caller offers it again."""
         self._at(now_us)
         try:
-            self._on_up(node_id, data)
+            return self._on_up(node_id, data, wait)
         except Exception as err:
             what = f"{len(data)} bytes" if isinstance(data, bytes) else f"a {type(data).__name__}"
             self.faults.record("receive", err, f"{what} from {node_id[:64]!r}")
+        return True
 
     def node_gone(self, node_id: str, instance: str, now_us: int) -> None:
         """The node's liveliness ended; ignored when another instance has attached under that id since."""
@@ -293,8 +320,7 @@ class Environment:
         """Every transmission the medium keeps in its air log."""
         return {"transmissions": [tx.to_dict() for tx in self.medium.air_log]}
 
-    def _sweep_ir(self) -> None:
-        now = self.now_us()
+    def _sweep_ir(self, now: int) -> None:
         if not self.ir.take_due(now):
             return
         poses = self.world.poses()
@@ -307,8 +333,7 @@ class Environment:
             readings = block.astype("<f4", copy=False).tobytes()
             self._send_down(node_id, wire.IrBeacons(sources=sources, readings=readings, t_us=now, gains=gains))
 
-    def _tick_world(self) -> None:
-        now = self.now_us()
+    def _tick_world(self, now: int) -> None:
         if now < self._next_tick_us:
             return
         tick_us = round(self.world.config.tick_s * 1e6)
@@ -441,7 +466,7 @@ class Environment:
             body["state"], body["role"] = tele.get("state") or None, tele.get("role") or None
             body["reference"] = _reference(poses.get(tele.get("master", "")), tele.get("slot"))
         totals = {"delivered": 0, "collided": 0, "lost": 0}
-        for counters in self.medium.node_counters.values():
+        for counters in list(self.medium.node_counters.values()):  # a snapshot: the medium's thread may add one
             for name in totals:
                 totals[name] += getattr(counters, name, 0)
         return {
@@ -454,14 +479,14 @@ class Environment:
             "radio": totals,
         }
 
-    def _deliver_ble(self) -> None:
-        for delivery in self.ble.due(self.now_us()):
+    def _deliver_ble(self, now: int) -> None:
+        for delivery in self.ble.due(now):
             if delivery.dst in self._kinds:
                 msg = wire.BleReceived(src=delivery.src, payload=delivery.payload, t_us=delivery.due_us)
                 self._send_down(delivery.dst, msg)
 
     # -- inputs ----------------------------------------------------------------------------------
-    def _on_up(self, node_id: str, data: bytes | wire.Message) -> None:
+    def _on_up(self, node_id: str, data: bytes | wire.Message, wait: bool) -> bool:
         try:
             if node_id not in self._kinds:  # an attached id's name was checked when it attached
                 check_name("node", node_id)
@@ -470,9 +495,21 @@ class Environment:
             self.counters.malformed += 1
             if node_id in self._kinds or not _is_name(node_id):
                 # an attached id hears nothing it did not send (it may be someone else speaking for it)
-                return
+                return True
             self._send_down(node_id, wire.Error(reason=f"malformed message: {err}"))
-            return
+            return True
+        if type(msg) is wire.Transmit and self._kinds.get(node_id) == "robot":
+            self._take_up(node_id, msg)  # the medium's alone: no world lock
+            return True
+        if not self.world_lock.acquire(blocking=wait):
+            return False
+        try:
+            self._take_up(node_id, msg)
+        finally:
+            self.world_lock.release()
+        return True
+
+    def _take_up(self, node_id: str, msg: wire.Message) -> None:
         if isinstance(msg, wire.Attach) and msg.exclusive and node_id in self._kinds:
             # a refused claim must not touch the live node's sequence numbering (its holder ignores the answer)
             self._send_down(node_id, wire.Error(reason=f"node id {node_id} is taken", instance=msg.instance))
@@ -753,6 +790,12 @@ class Environment:
         now = self.now_us()
         lag = self.counters.lag_us
         send = self.downlink.send
+        with self._down_lock:
+            self._send_outputs(outputs, now, lag, send)
+
+    def _send_outputs(
+        self, outputs: list[Output], now: int, lag: deque[int], send: Callable[[str, bytes], None]
+    ) -> None:
         for out in outputs:
             node_id = out.node_id
             if type(out) is Reception:
@@ -786,11 +829,12 @@ class Environment:
         self._send_down(node_id, msg)
 
     def _send_down(self, node_id: str, msg: wire.Message) -> None:
-        msg.n = self._next_down_seq(node_id)
-        if self._hand_over is not None and isinstance(msg, HANDED_OVER):
-            self._hand_over(node_id, msg)
-        else:
-            self.downlink.send(node_id, msg.encode())
+        with self._down_lock:
+            msg.n = self._next_down_seq(node_id)
+            if self._hand_over is not None and isinstance(msg, HANDED_OVER):
+                self._hand_over(node_id, msg)
+            else:
+                self.downlink.send(node_id, msg.encode())
 
     def _next_down_seq(self, node_id: str) -> int:
         """The number of the next message to ``node_id`` (its stream starts at 1 on every attach)."""

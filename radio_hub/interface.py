@@ -19,7 +19,7 @@ from typing import Any
 
 from radio_hub.air.mac import BROADCAST, MAX_PSDU, Frame, FrameError, FrameType, TxStatus, max_payload
 from radio_hub.config import MediumConfig, airtime_us
-from radio_hub.link.keys import DEFAULT_ENDPOINT, DEFAULT_WORLD, Keys
+from radio_hub.link.keys import DEFAULT_ENDPOINT, DEFAULT_WORLD, WORLD_THREAD, Keys
 from radio_hub.link.port import (
     MODEL_EPOCH_S,
     REQUEST_TIMEOUT_S,
@@ -48,6 +48,7 @@ __all__ = [
     "MODEL_EPOCH_S",
     "REQUEST_TIMEOUT_S",
     "RESEND_S",
+    "WORLD_THREAD",
     "BeaconSweep",
     "BleMessage",
     "Frame",

@@ -49,7 +49,15 @@ from petswarm.bench.nodes import (
 )
 from petswarm.bench.report import report, write_results
 from petswarm.lab.processes import Supervisor, free_tcp_port, run_supervised
-from radio_hub.interface import HubUnavailable, Keys, RadioError, airtime_us, open_session, query_hub
+from radio_hub.interface import (
+    WORLD_THREAD,
+    HubUnavailable,
+    Keys,
+    RadioError,
+    airtime_us,
+    open_session,
+    query_hub,
+)
 
 MODULE = "petswarm.bench.hub"
 WARMUP_ROUNDS = 20
@@ -260,6 +268,7 @@ class Snapshot:
     stats: dict[str, Any]
     hub_cpu_s: float
     hub_job_cpu_s: float
+    hub_world_cpu_s: float
     gens_cpu_s: float
     machine: tuple[float, float]
 
@@ -282,7 +291,20 @@ class Snapshot:
 def snapshot(sup: Supervisor, hub: HubRun, gens: list[str]) -> Snapshot:
     """Take the hub's counters and the CPU clocks of the hub, its job thread and the generators."""
     gens_cpu = sum(cpu_seconds(sup.children[g].pid) for g in gens)
-    return Snapshot(hub.stats(), cpu_seconds(hub.pid), cpu_seconds(hub.pid, hub.pid), gens_cpu, machine_cpu())
+    world = world_thread(hub.pid)
+    world_cpu = math.nan if world is None else cpu_seconds(hub.pid, world)
+    job_cpu = cpu_seconds(hub.pid, hub.pid)
+    return Snapshot(hub.stats(), cpu_seconds(hub.pid), job_cpu, world_cpu, gens_cpu, machine_cpu())
+
+
+def world_thread(pid: int) -> int | None:
+    """The thread id of the hub's world thread (``radio_hub.shell.hub.WORLD_THREAD``), None if not found."""
+    with contextlib.suppress(OSError):
+        for task in Path(f"/proc/{pid}/task").iterdir():
+            with contextlib.suppress(OSError):
+                if (task / "comm").read_text().strip() == WORLD_THREAD:
+                    return int(task.name)
+    return None
 
 
 def load_phase(
@@ -373,10 +395,18 @@ def load_summary(
         "load_gen_cpu_pct": 100 * (after.gens_cpu_s - before.gens_cpu_s) / window,
         "hub_cpu_us_per_frame": 1e6 * (after.hub_cpu_s - before.hub_cpu_s) / delivered,
         "hub_job_thread_us_per_frame": 1e6 * (after.hub_job_cpu_s - before.hub_job_cpu_s) / delivered,
+        "hub_world_thread_us_per_frame": 1e6 * (after.hub_world_cpu_s - before.hub_world_cpu_s) / delivered,
         "load_gen_cpu_us_per_frame": 1e6 * (after.gens_cpu_s - before.gens_cpu_s) / delivered,
+        "hub_down_messages_per_frame": _hub_count(after, before, "down_messages") / delivered,
+        "hub_down_puts_per_frame": _hub_count(after, before, "down_puts") / delivered,
         "machine_cpu_busy_pct": 100 * (after.machine[0] - before.machine[0]) / (after.machine[1] - before.machine[1]),
         "series": [{"t_s": t, "fps": f} for t, f in series],
     }
+
+
+def _hub_count(after: Snapshot, before: Snapshot, name: str) -> float:
+    """How much one of the hub's counters grew over the window (NaN for a hub without it)."""
+    return after.stats["hub"].get(name, math.nan) - before.stats["hub"].get(name, math.nan)
 
 
 def air_limited(load: dict[str, Any]) -> bool:

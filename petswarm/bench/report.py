@@ -150,8 +150,11 @@ def _load_lines(results: dict[str, Any]) -> list[str]:
         )
         lines.append(
             f"{'':<12}CPU per delivered frame: hub {load['hub_cpu_us_per_frame']:.0f} us "
-            f"(job thread {load['hub_job_thread_us_per_frame']:.0f} us), "
-            f"load generators {load['load_gen_cpu_us_per_frame']:.0f} us (load-robust, unlike frames/s)"
+            f"(job thread {load['hub_job_thread_us_per_frame']:.0f} us, "
+            f"world thread {load.get('hub_world_thread_us_per_frame', float('nan')):.0f} us), "
+            f"load generators {load['load_gen_cpu_us_per_frame']:.0f} us (load-robust, unlike frames/s); "
+            f"hub messages to nodes {load.get('hub_down_messages_per_frame', float('nan')):.2f} per frame in "
+            f"{load.get('hub_down_puts_per_frame', float('nan')):.2f} puts"
         )
         lines.append(
             f"{'':<12}{load['delivered']} delivered / {load['sent']} sent in {load['window_s']:.2f} s of hub clock; "

@@ -10,6 +10,8 @@ import re
 ROOT = "petswarm"
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 DEFAULT_WORLD = "default"
+WORLD_THREAD = "hub-world"
+"""The name of the hub's world thread, as the OS sees it too (``/proc/<pid>/task/*/comm``): a bench reads its CPU."""
 _WORLD_RE = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
 
 

@@ -599,8 +599,21 @@ class RadioClient:
                 fut.exception()  # a caller cancelled as the radio closed: its error is seen, never warned about
 
     def _on_down(self, data: bytes | wire.Message) -> None:
-        """One message from the hub, encoded or handed over in memory; never raises (anything unexpected is
-        counted in ``faults``)."""
+        """One message from the hub, or a batch of them (``wire.encode_batch``), encoded or handed over in
+        memory; never raises (anything unexpected is counted in ``faults``, a malformed batch in ``malformed``
+        and dropped whole)."""
+        if isinstance(data, bytes) and wire.is_batch(data):
+            try:
+                parts = wire.split_batch(data)
+            except wire.WireError:
+                self.malformed += 1
+                return
+            for part in parts:
+                self._on_one(part)  # a part is one message: a batch inside a batch is malformed
+        else:
+            self._on_one(data)
+
+    def _on_one(self, data: bytes | wire.Message) -> None:
         try:
             msg = wire.check(data) if isinstance(data, wire.Message) else wire.decode(data)
         except wire.WireError:

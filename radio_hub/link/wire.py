@@ -403,6 +403,45 @@ def encode_tx_done(
     return msgpack.packb(body, use_bin_type=True)
 
 
+BATCH_MAX_PARTS = 256
+"""Messages one batch carries at most (a sender splits a longer run)."""
+_ARRAY_HEADS = frozenset((*range(0x90, 0xA0), 0xDC, 0xDD))
+"""First bytes of a msgpack array: a batch (a message is a map)."""
+
+
+def encode_batch(parts: list[bytes]) -> bytes:
+    """Several encoded messages to one receiver in one transport message: a msgpack array of their bytes, in
+    order. Each part stays a whole message with its own sequence number."""
+    return msgpack.packb(parts, use_bin_type=True)
+
+
+def is_batch(data: bytes) -> bool:
+    """Whether ``data`` is a batch (``encode_batch``) rather than one message."""
+    return bool(data) and data[0] in _ARRAY_HEADS
+
+
+def split_batch(data: bytes, max_bytes: int = MAX_MESSAGE_BYTES) -> list[bytes]:
+    """The encoded messages of a batch, in order; raises WireError unless ``data`` is an array of 1 to
+    ``BATCH_MAX_PARTS`` byte strings, at most ``max_bytes`` long in all (each part is then decoded on its own)."""
+    if len(data) > max_bytes:
+        raise WireError(f"batch of {len(data)} bytes exceeds {max_bytes}")
+    try:
+        parts = msgpack.unpackb(data, raw=False)
+    except Exception as err:  # msgpack raises several unrelated types on garbage
+        raise WireError(f"not msgpack ({type(err).__name__})") from None
+    if not isinstance(parts, list) or not 0 < len(parts) <= BATCH_MAX_PARTS:
+        raise WireError(f"a batch is a list of 1 to {BATCH_MAX_PARTS} messages")
+    if not all(type(part) is bytes for part in parts):
+        raise WireError("a batch holds encoded messages (bytes)")
+    return parts
+
+
+def decode_all(data: bytes) -> list[Message]:
+    """The messages of one transport message, a batch's parts or the one message; raises WireError as
+    ``split_batch`` and ``decode`` do (one bad part spoils the lot: for tools and tests, not a node)."""
+    return [decode(part) for part in split_batch(data)] if is_batch(data) else [decode(data)]
+
+
 def decode(data: bytes, max_bytes: int = MAX_MESSAGE_BYTES) -> Message:
     """Parse one message; raises WireError on anything but a well-formed, known, current message of at most
     ``max_bytes`` bytes."""

@@ -186,7 +186,7 @@ def test_a_rogue_client_cannot_take_the_hub_or_its_robots_down(make_air: Any) ->
         alive = rogue.liveliness().declare_token(keys.alive("rogue-1", "r1"))
         answers: list[wire.Message] = []
         sub = rogue.declare_subscriber(
-            keys.down("rogue-1"), lambda s: answers.append(wire.decode(s.payload.to_bytes()))
+            keys.down("rogue-1"), lambda s: answers.extend(wire.decode_all(s.payload.to_bytes()))
         )
         time.sleep(0.3)
         rogue.put(keys.up("rogue-1"), wire.Attach(short_addr=77, pan_id=0x1000, instance="r1", n=1, s=9).encode())

@@ -97,7 +97,9 @@ def test_malformed_and_oversize_input_from_a_raw_client_is_counted_and_dropped(m
     air.robot(2, (1.0, 0.0))
     session, keys = air.session, air.keys
     replies: list[wire.Message] = []
-    sub = session.declare_subscriber(keys.down("raw-1"), lambda s: replies.append(wire.decode(s.payload.to_bytes())))
+    sub = session.declare_subscriber(
+        keys.down("raw-1"), lambda s: replies.extend(wire.decode_all(s.payload.to_bytes()))
+    )
     for junk in (b"", b"\xc1\xc1", msgpack.packb({"v": 9, "t": "transmit"}), msgpack.packb([1, 2, 3])):
         session.put(keys.up("raw-1"), junk)
     session.put(keys.up("robot-1"), b"\xff garbage on a robot's own key")

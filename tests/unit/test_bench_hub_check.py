@@ -55,7 +55,7 @@ def test_an_air_below_the_target_sets_the_throughput_target():
             config["mac"].update(cca_us=128, turnaround_us=192)
             self.stats = {"nodes": {"a": per_node}, "config": config, "channels": {}, "hub": {}}
             self.delivered, self.sent, self.t_s = delivered, delivered, t_s
-            self.hub_cpu_s = self.hub_job_cpu_s = self.gens_cpu_s = 0.0
+            self.hub_cpu_s = self.hub_job_cpu_s = self.hub_world_cpu_s = self.gens_cpu_s = 0.0
             self.machine = (0.0, 1.0)
 
     lag = {k: 0 for k in ("lag_p50_us", "lag_p99_us", "lag_samples", "transport_gaps", "malformed")}
