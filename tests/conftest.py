@@ -1,7 +1,7 @@
 """Every test keeps its run records out of the working tree: ``./runs`` is for people's runs.
 
 The session also compiles the project's sources to bytecode once, before any test starts a process (see
-``pytest_sessionstart``).
+``pytest_sessionstart``), and runs the files marked ``long`` first (see ``pytest_collection_modifyitems``).
 
 ``petswarm run`` and ``petswarm experiment`` write to ``$PETSWARM_RUNS`` (default ``./runs``) unless given
 ``--record`` / ``--out``; the whole session points it into pytest's temporary directory, and the child
@@ -32,6 +32,16 @@ def pytest_sessionstart(session: pytest.Session) -> None:
         return
     for package in SOURCES:
         compileall.compile_dir(ROOT / package, quiet=1)
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """The tests marked ``long`` first, in their collection order, then the rest in theirs.
+
+    xdist hands whole files to its workers in the order they were collected; a file of a minute or more (a
+    20-robot lockstep run, the compose stack, a run of wall-clock process tests) that came after the short
+    ones started last and ran on alone at the end, a minute of one busy core while the other idled. Longest
+    first is the classic fix for the makespan of jobs on parallel machines."""
+    items.sort(key=lambda item: item.get_closest_marker("long") is None)
 
 
 @pytest.fixture(scope="session", autouse=True)

@@ -37,7 +37,7 @@ from .engine import (
     wait_for,
 )
 
-pytestmark = [pytest.mark.compose, pytest.mark.timeout(900)]
+pytestmark = [pytest.mark.compose, pytest.mark.long, pytest.mark.timeout(900)]
 
 ROBOTS = 5
 SEED, WORLD = "7", "compose-test"  # not compose.yaml's defaults: the test sees that both settings are read

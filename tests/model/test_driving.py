@@ -22,6 +22,8 @@ from petswarm.scenario import load, parse
 
 from .harness import SCENARIOS, ModelWorld, record_events, run_model_time, run_scenario
 
+pytestmark = pytest.mark.long
+
 FORMATION_MEDIAN_BOUND_M = 0.25
 """Documented bound (README, docs/RESULTS.md) on the median formation error of the following-turn scenario:
 IR fixes refresh once per token round (about 0.55 s for 4 robots) and the slaves dead-reckon between them."""

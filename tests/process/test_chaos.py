@@ -15,7 +15,7 @@ from radio_hub.interface import query_hub
 from . import swarm_of_four as rl
 from .conftest import LOSSLESS
 
-pytestmark = pytest.mark.process
+pytestmark = [pytest.mark.process, pytest.mark.long]
 
 
 def _chaos(air, *args: str) -> subprocess.CompletedProcess[str]:

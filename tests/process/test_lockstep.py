@@ -13,7 +13,7 @@ import pytest
 from petswarm.lab.processes import Supervisor, free_tcp_port
 from radio_hub.interface import HubUnavailable, Keys, open_session, query_hub
 
-pytestmark = pytest.mark.process
+pytestmark = [pytest.mark.process, pytest.mark.long]
 ROOT = Path(__file__).resolve().parents[2]
 
 

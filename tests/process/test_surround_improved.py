@@ -26,7 +26,7 @@ import pytest
 from petswarm.lab.metrics import read_world
 from petswarm.lab.surround_metrics import R_STAR_M, surround_metrics
 
-pytestmark = pytest.mark.process
+pytestmark = [pytest.mark.process, pytest.mark.long]
 ROOT = Path(__file__).resolve().parents[2]
 
 CONNECTED_FRACTION = 0.99
