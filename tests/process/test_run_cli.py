@@ -147,9 +147,11 @@ def test_a_run_killed_outright_still_leaves_a_readable_record(tmp_path):
 
 
 def test_an_experiment_file_runs_every_seed_with_its_fault_timeline(tmp_path):
+    """Its runs in model time: what is under test is the file (seeds, fault timeline, results, plot, errors);
+    the wall-clock path of an experiment is the next test's but one."""
     spec = tmp_path / "exp.toml"
     spec.write_text(
-        'name = "robot 3 fades"\nseeds = [4, 5]\n[run]\nrobots = 3\nduration = 2\n'
+        'name = "robot 3 fades"\nseeds = [4, 5]\n[run]\nrobots = 3\nduration = 2\nclock = "model"\n'
         '[[faults]]\nat = 0.2\nkind = "loss"\nnode = "robot-3"\n'
     )
     out = tmp_path / "out"
