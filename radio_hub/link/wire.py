@@ -423,12 +423,7 @@ def is_batch(data: bytes) -> bool:
 def split_batch(data: bytes, max_bytes: int = MAX_MESSAGE_BYTES) -> list[bytes]:
     """The encoded messages of a batch, in order; raises WireError unless ``data`` is an array of 1 to
     ``BATCH_MAX_PARTS`` byte strings, at most ``max_bytes`` long in all (each part is then decoded on its own)."""
-    if len(data) > max_bytes:
-        raise WireError(f"batch of {len(data)} bytes exceeds {max_bytes}")
-    try:
-        parts = msgpack.unpackb(data, raw=False)
-    except Exception as err:  # msgpack raises several unrelated types on garbage
-        raise WireError(f"not msgpack ({type(err).__name__})") from None
+    parts = _unpack(data, max_bytes, "batch")
     if not isinstance(parts, list) or not 0 < len(parts) <= BATCH_MAX_PARTS:
         raise WireError(f"a batch is a list of 1 to {BATCH_MAX_PARTS} messages")
     if not all(type(part) is bytes for part in parts):
@@ -442,15 +437,20 @@ def decode_all(data: bytes) -> list[Message]:
     return [decode(part) for part in split_batch(data)] if is_batch(data) else [decode(data)]
 
 
+def _unpack(data: bytes, max_bytes: int, what: str) -> Any:
+    """msgpack's value of ``data``, its length checked before any parsing; WireError on anything else."""
+    if len(data) > max_bytes:
+        raise WireError(f"{what} of {len(data)} bytes exceeds {max_bytes}")
+    try:
+        return msgpack.unpackb(data, raw=False)
+    except Exception as err:  # msgpack raises several unrelated types on garbage
+        raise WireError(f"not msgpack ({type(err).__name__})") from None
+
+
 def decode(data: bytes, max_bytes: int = MAX_MESSAGE_BYTES) -> Message:
     """Parse one message; raises WireError on anything but a well-formed, known, current message of at most
     ``max_bytes`` bytes."""
-    if len(data) > max_bytes:
-        raise WireError(f"message of {len(data)} bytes exceeds {max_bytes}")
-    try:
-        body = msgpack.unpackb(data, raw=False)
-    except Exception as err:  # msgpack raises several unrelated types on garbage
-        raise WireError(f"not msgpack ({type(err).__name__})") from None
+    body = _unpack(data, max_bytes, "message")
     if not isinstance(body, dict):
         raise WireError("message is not a map")
     if body.pop("v", None) != WIRE_VERSION:

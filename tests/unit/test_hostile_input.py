@@ -17,6 +17,8 @@ from radio_hub.air.mac import Frame, FrameType
 from radio_hub.environment import GONE_KEPT, Environment, EnvironmentConfig
 from radio_hub.link import wire
 
+from .recorder import Recorder
+
 UP_TYPES = [
     wire.Attach,
     wire.Configure,
@@ -33,22 +35,6 @@ UP_TYPES = [
 ]
 KEY = 4242
 """The session key the fuzzed environment's robot attached with."""
-
-
-class Recorder:
-    """A downlink that keeps what the environment sends (and checks it can be decoded back)."""
-
-    def __init__(self) -> None:
-        self.sent: list[tuple[str, wire.Message]] = []
-
-    def send(self, node_id: str, data: bytes) -> None:
-        self.sent.append((node_id, wire.decode(data)))
-
-    def forget(self, node_id: str) -> None:
-        pass
-
-    def publish_world(self, state: dict[str, Any]) -> None:
-        msgpack.packb(state, use_bin_type=True)
 
 
 def _environment() -> tuple[Environment, Recorder]:

@@ -7,30 +7,15 @@ from __future__ import annotations
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
-from typing import Any
 
 from radio_hub.air.mac import Frame, FrameType
 from radio_hub.environment import Environment, EnvironmentConfig
 from radio_hub.link import wire
 from radio_hub.shell.hub import RadioHub
 
+from .recorder import Recorder
+
 WORLD = "wt"
-
-
-class Recorder:
-    """A downlink that keeps what the environment sends, decoded."""
-
-    def __init__(self) -> None:
-        self.sent: list[tuple[str, wire.Message]] = []
-
-    def send(self, node_id: str, data: bytes) -> None:
-        self.sent.append((node_id, wire.decode(data)))
-
-    def forget(self, node_id: str) -> None:
-        pass
-
-    def publish_world(self, state: dict[str, Any]) -> None:
-        pass
 
 
 @contextmanager
