@@ -159,6 +159,8 @@ class _Node:
     waiting_since: float = field(default_factory=time.monotonic)
     dying_since: float | None = None
     """Wall time its liveliness ended while it was busy (it may be leaving cleanly)."""
+    key: int = 0
+    """The session key of its Attach: an idle with another is an earlier process's of the same id."""
 
 
 class LockstepHub:
@@ -305,6 +307,9 @@ class LockstepHub:
             self.env.counters.foreign += 1  # another session's idle must not move this node's rounds
             return
         node = self.nodes.get(node_id)
+        if isinstance(msg, wire.Idle) and node is not None and node.key and msg.s != node.key:
+            self.stale_idles += 1  # an earlier process of the id, whose new Attach the world has not taken yet
+            return
         if node is None:
             if isinstance(msg, wire.Idle) and msg.seen:
                 # a node taken as gone that was only slow: it was granted before, so brought back it would
@@ -320,6 +325,8 @@ class LockstepHub:
             node.idle = msg.seen == node.granted
             return
         node.idle = False  # it sent something: it is busy until it says idle again
+        if isinstance(msg, wire.Attach):
+            node.key = msg.s
         self.coordinator.up(node_id, data)
         if isinstance(msg, wire.Detach):
             self.nodes.pop(node_id, None)  # it leaves: no idle will come
@@ -336,8 +343,14 @@ class LockstepHub:
             instance = self.env.instance_of(node_id) or ""
             if node.dying_since is not None and wall - node.dying_since > LEAVING_GRACE_S:
                 self._gone(node_id, instance, "its liveliness ended")
-            elif not node.idle and node.granted and wall - node.waiting_since > self.dead_after_s:
-                self._gone(node_id, instance, f"no idle within {self.dead_after_s:g} s of wall time")
+            elif not node.idle and wall - node.waiting_since > self._patience(node):
+                self._gone(node_id, instance, f"no idle within {self._patience(node):g} s of wall time")
+
+    def _patience(self, node: _Node) -> float:
+        """Wall seconds a busy node has for its idle: ``dead_after_s`` once it was granted or model time runs;
+        before that, a node that attached and never said idle has the start's window (a slow start is normal),
+        and then goes, so that neither the start nor the world waits on it for good."""
+        return self.dead_after_s if node.granted or self._started else self.start_within_s
 
     # -- the rounds ---------------------------------------------------------------------------------------
 

@@ -53,3 +53,41 @@ def test_a_node_taken_as_gone_that_answers_late_does_not_stall_the_others() -> N
     assert "robot-2" not in hub.nodes and hub.stats()["lockstep"]["stale_idles"] == 1
     _up(hub, "robot-1", wire.Idle(seen=hub.nodes["robot-1"].granted, next_s=0.5, n=4, s=11))
     assert hub.now_s > at  # robot-1 goes on alone
+
+
+def test_a_late_attach_of_a_node_taken_as_gone_does_not_stall_the_world_either() -> None:
+    """The slow node's last round held a (re)sent Attach before its idle: the Attach makes it a node again, never
+    granted; it is taken as gone once it stays busy past dead_after_s, and the world goes on."""
+    hub = _hub()
+    _attach(hub, "robot-1", 11)
+    _attach(hub, "robot-2", 12)
+    late = hub.nodes["robot-2"].granted
+    time.sleep(0.1)
+    _up(hub, "robot-1", wire.Idle(seen=hub.nodes["robot-1"].granted, next_s=0.5, n=3, s=11))
+    _up(hub, "robot-2", wire.Attach(ext_addr=12, short_addr=12, instance="i12", n=3, s=12))
+    _up(hub, "robot-2", wire.Idle(seen=late, next_s=0.5, n=4, s=12))
+    at = hub.now_s
+    time.sleep(0.1)
+    _up(hub, "robot-1", wire.Idle(seen=hub.nodes["robot-1"].granted, next_s=0.5, n=4, s=11))
+    assert [d["node"] for d in hub.dead] == ["robot-2", "robot-2"] and hub.now_s > at
+
+
+def test_an_earlier_process_idle_does_not_count_for_the_new_one() -> None:
+    """A restarted process's Attach made the node; the old process's idle (its own session key) must not mark
+    the new one idle before the new one has said so itself."""
+    hub = _hub(expect=1)
+    _up(hub, "robot-1", wire.Attach(ext_addr=11, short_addr=11, instance="new", n=1, s=21))
+    _up(hub, "robot-1", wire.Idle(seen=0, next_s=0.5, n=9, s=11))  # the old process's
+    assert hub.rounds == 0 and hub.stale_idles == 1 and not hub.nodes["robot-1"].idle
+
+
+def test_a_node_that_attaches_and_never_says_idle_does_not_hold_the_start_for_good() -> None:
+    hub = LockstepHub(
+        "tcp/127.0.0.1:1", "unit", EnvironmentConfig(), seed=1, expect=2, dead_after_s=0.05, start_within_s=0.05
+    )
+    _attach(hub, "robot-1", 11)
+    _up(hub, "robot-2", wire.Attach(ext_addr=12, short_addr=12, instance="i12", n=1, s=12))  # then it hangs
+    time.sleep(0.1)
+    _up(hub, "robot-1", wire.Idle(seen=0, next_s=0.5, n=3, s=11))
+    assert hub.rounds > 0 and "robot-2" not in hub.nodes
+    assert any("did not come" in d["why"] for d in hub.dead) and any(d["node"] == "robot-2" for d in hub.dead)
