@@ -8,6 +8,7 @@ later ones of that kind are only counted (a flood must not turn into a flood of 
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import traceback
 from collections import Counter
@@ -37,7 +38,10 @@ class Faults:
             at = f" at {frame[0].filename}:{frame[0].lineno}" if frame else ""
             extra = f" ({context[:200]})" if context else ""
             stream = self._stream or sys.stderr
-            print(f"{self.who}: {kind}: {str(err)[:300]}{at}{extra}; counted, going on", file=stream, flush=True)
+            # a log that cannot be written (stderr a closed pipe) must not raise in the handler that counts: the
+            # world thread would end there, and ticks, sensors and IR stop while frames flow
+            with contextlib.suppress(OSError, ValueError):
+                print(f"{self.who}: {kind}: {str(err)[:300]}{at}{extra}; counted, going on", file=stream, flush=True)
 
     @property
     def total(self) -> int:
