@@ -27,6 +27,18 @@ def _attach(hub: LockstepHub, node_id: str, key: int) -> None:
     _up(hub, node_id, wire.Idle(seen=0, next_s=0.5, n=2, s=key))
 
 
+def _robot_2_slow_and_taken_as_gone() -> tuple[LockstepHub, int]:
+    """Two robots in their rounds; robot-2 says nothing past dead_after_s while robot-1 answers. Returns the hub
+    and the grant robot-2 was last sent."""
+    hub = _hub()
+    _attach(hub, "robot-1", 11)
+    _attach(hub, "robot-2", 12)
+    late = hub.nodes["robot-2"].granted
+    time.sleep(0.1)
+    _up(hub, "robot-1", wire.Idle(seen=hub.nodes["robot-1"].granted, next_s=0.5, n=3, s=11))
+    return hub, late
+
+
 def test_rounds_go_on_once_every_node_is_idle_and_stop_at_a_busy_one() -> None:
     hub = _hub()
     _attach(hub, "robot-1", 11)
@@ -41,12 +53,7 @@ def test_rounds_go_on_once_every_node_is_idle_and_stop_at_a_busy_one() -> None:
 def test_a_node_taken_as_gone_that_answers_late_does_not_stall_the_others() -> None:
     """A node silent past dead_after_s is taken as gone; its late idle (it was only slow) must not bring it
     back as a node that is never granted again and so never idle: that stalled every run for good."""
-    hub = _hub()
-    _attach(hub, "robot-1", 11)
-    _attach(hub, "robot-2", 12)
-    late = hub.nodes["robot-2"].granted
-    time.sleep(0.1)
-    _up(hub, "robot-1", wire.Idle(seen=hub.nodes["robot-1"].granted, next_s=0.5, n=3, s=11))
+    hub, late = _robot_2_slow_and_taken_as_gone()
     assert [d["node"] for d in hub.dead] == ["robot-2"] and "robot-2" not in hub.nodes
     at = hub.now_s
     _up(hub, "robot-2", wire.Idle(seen=late, next_s=0.5, n=3, s=12))  # it was only slow
@@ -58,12 +65,7 @@ def test_a_node_taken_as_gone_that_answers_late_does_not_stall_the_others() -> N
 def test_a_late_attach_of_a_node_taken_as_gone_does_not_stall_the_world_either() -> None:
     """The slow node's last round held a (re)sent Attach before its idle: the Attach makes it a node again, never
     granted; it is taken as gone once it stays busy past dead_after_s, and the world goes on."""
-    hub = _hub()
-    _attach(hub, "robot-1", 11)
-    _attach(hub, "robot-2", 12)
-    late = hub.nodes["robot-2"].granted
-    time.sleep(0.1)
-    _up(hub, "robot-1", wire.Idle(seen=hub.nodes["robot-1"].granted, next_s=0.5, n=3, s=11))
+    hub, late = _robot_2_slow_and_taken_as_gone()
     _up(hub, "robot-2", wire.Attach(ext_addr=12, short_addr=12, instance="i12", n=3, s=12))
     _up(hub, "robot-2", wire.Idle(seen=late, next_s=0.5, n=4, s=12))
     at = hub.now_s
