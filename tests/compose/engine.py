@@ -11,13 +11,13 @@ import os
 import re
 import shutil
 import subprocess
-import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import pytest
 
+from ..waiting import wait_for as wait_for
 from . import base_image
 from .base_image import run
 
@@ -174,19 +174,3 @@ class Stack:
             "networks": docker("network", "ls", "-q", "--filter", label).stdout.split(),
             "volumes": docker("volume", "ls", "-q", "--filter", label).stdout.split(),
         }
-
-
-def wait_for(what: str, probe: Any, timeout: float, every: float = 0.5) -> Any:
-    """Poll ``probe()`` until it returns something truthy; fail saying ``what`` and the last value otherwise."""
-    deadline = time.monotonic() + timeout
-    last: Any = None
-    while True:
-        try:
-            last = probe()
-        except Exception as err:  # a hub restarting, a robot not yet attached: try again
-            last = err
-        if last and not isinstance(last, Exception):
-            return last
-        if time.monotonic() >= deadline:
-            raise AssertionError(f"{what}: not within {timeout} s (last: {last!r})")
-        time.sleep(every)
