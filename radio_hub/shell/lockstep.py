@@ -205,7 +205,7 @@ class LockstepHub:
         self.dead: list[dict[str, Any]] = []
         self.rounds = 0
         self.stale_idles = 0
-        """Idles of nodes already taken as gone (counted and dropped)."""
+        """Idles of nodes already taken as gone, that were only slow (counted and dropped)."""
         self.now_s = 0.0
         self._started = False
         self._inbox: queue.SimpleQueue[tuple[Any, ...]] = queue.SimpleQueue()
@@ -302,13 +302,12 @@ class LockstepHub:
             msg = wire.decode(data)
         except wire.WireError:
             msg = None
-        key = self.env.session_key_of(node_id)
-        if isinstance(msg, wire.Idle) and key is not None and msg.s != key:
-            self.env.counters.foreign += 1  # another session's idle must not move this node's rounds
-            return
         node = self.nodes.get(node_id)
-        if isinstance(msg, wire.Idle) and node is not None and node.key and msg.s != node.key:
-            self.stale_idles += 1  # an earlier process of the id, whose new Attach the world has not taken yet
+        # the key of the node's own Attach (held until its round settles, so the world may not have it yet),
+        # else the world's: another session's idle (an earlier process of the id) must not move this node's rounds
+        key = node.key if node is not None and node.key else self.env.session_key_of(node_id)
+        if isinstance(msg, wire.Idle) and key is not None and msg.s != key:
+            self.env.counters.foreign += 1
             return
         if node is None:
             if isinstance(msg, wire.Idle) and msg.seen:

@@ -17,7 +17,6 @@ from typing import Any
 
 import pytest
 
-from ..waiting import wait_for as wait_for
 from . import base_image
 from .base_image import run
 

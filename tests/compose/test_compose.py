@@ -24,6 +24,7 @@ from petswarm import control
 from petswarm.lab.processes import free_tcp_port
 from radio_hub.interface import HubUnavailable, Keys, open_session, query_hub
 
+from ..waiting import wait_for
 from .engine import (
     BASE_IMAGE,
     ROOT,
@@ -34,7 +35,6 @@ from .engine import (
     ensure_base_image,
     ensure_engine,
     stop_engine,
-    wait_for,
 )
 
 pytestmark = [pytest.mark.compose, pytest.mark.long, pytest.mark.timeout(900)]

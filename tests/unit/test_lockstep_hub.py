@@ -80,7 +80,7 @@ def test_an_earlier_process_idle_does_not_count_for_the_new_one() -> None:
     hub = _hub(expect=1)
     _up(hub, "robot-1", wire.Attach(ext_addr=11, short_addr=11, instance="new", n=1, s=21))
     _up(hub, "robot-1", wire.Idle(seen=0, next_s=0.5, n=9, s=11))  # the old process's
-    assert hub.rounds == 0 and hub.stale_idles == 1 and not hub.nodes["robot-1"].idle
+    assert hub.rounds == 0 and hub.env.counters.foreign == 1 and not hub.nodes["robot-1"].idle
 
 
 def test_a_node_that_attaches_and_never_says_idle_does_not_hold_the_start_for_good() -> None:
