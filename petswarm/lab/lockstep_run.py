@@ -54,7 +54,9 @@ def run_lockstep(opts: RunOptions, scenario: Scenario | None) -> int:
         ctx.watch.world_over = True  # the nodes leave by themselves now
         hub = query_hub(ctx.session, ctx.keys.stats, timeout=10.0)
         summary["hub_process"] = hub.get("process")
-        summary["gone"] = hub.get("lockstep", {}).get("dead", [])
+        lockstep = hub.get("lockstep", {})
+        summary["gone"] = lockstep.get("dead", [])
+        summary["lockstep"] = {key: lockstep.get(key) for key in ("rounds", "stale_idles")}
         for gone in summary["gone"]:
             progress(f"{gone['node']} was taken as gone at model time {gone['model_time_s']:.3f} s: {gone['why']}")
         return summary

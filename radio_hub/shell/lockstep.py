@@ -57,6 +57,8 @@ START_WITHIN_BASE_S = 60.0
 START_WITHIN_PER_NODE_S = 1.0
 """Model time starts when every expected node is there, or, if some never come (a process that died at start),
 after START_WITHIN_BASE_S + START_WITHIN_PER_NODE_S x expected nodes of wall time, without them (recorded)."""
+LOOK_EVERY_S = 0.05
+"""How often (wall seconds) the hub looks for silent or leaving nodes: a round takes about a millisecond."""
 LEAVING_GRACE_S = 1.0
 """Wall seconds a busy node whose liveliness ended has for its last messages (and Detach) to arrive: zenoh
 orders a node's messages but not its liveliness against them."""
@@ -134,7 +136,15 @@ class LockstepLink(ZenohLink):
         await super().close()
 
 
+_GRANT_TYPE = b"\xa1t\xa5grant"
+"""The msgpack bytes of a grant's type field (``"t": "grant"``): a message without them is not a grant."""
+
+
 def _grant_of(data: bytes) -> wire.Grant | None:
+    # runs on zenoh's thread for every message a node is sent: most are frames and sensor readings, which are
+    # decoded (and checked) once, later, on the node's loop; only a message that may be a grant is decoded here
+    if _GRANT_TYPE not in data:
+        return None
     try:
         msg = wire.decode(data)
     except wire.WireError:
@@ -207,6 +217,8 @@ class LockstepHub:
         self.stale_idles = 0
         """Idles of nodes already taken as gone, that were only slow (counted and dropped)."""
         self.now_s = 0.0
+        self._looked_at = 0.0
+        """Wall time the hub last looked for nodes that are silent too long."""
         self._started = False
         self._inbox: queue.SimpleQueue[tuple[Any, ...]] = queue.SimpleQueue()
         self._stop = threading.Event()
@@ -299,9 +311,9 @@ class LockstepHub:
 
     def _on_up(self, node_id: str, data: bytes) -> None:
         try:
-            msg = wire.decode(data)
+            msg = wire.decode(data, wire.MAX_UP_BYTES)
         except wire.WireError:
-            msg = None
+            msg = None  # the environment gets the bytes, and counts them as it counts every malformed message
         node = self.nodes.get(node_id)
         # the key of the node's own Attach (held until its round settles, so the world may not have it yet),
         # else the world's: another session's idle (an earlier process of the id) must not move this node's rounds
@@ -316,7 +328,7 @@ class LockstepHub:
                 self.stale_idles += 1
                 return
             if not isinstance(msg, (wire.Attach, wire.Idle)):  # the last words of a node that has left
-                self.coordinator.up(node_id, data)
+                self.coordinator.up(node_id, data if msg is None else msg)
                 return
             node = self.nodes[node_id] = _Node()
         if isinstance(msg, wire.Idle):
@@ -326,7 +338,7 @@ class LockstepHub:
         node.idle = False  # it sent something: it is busy until it says idle again
         if isinstance(msg, wire.Attach):
             node.key = msg.s
-        self.coordinator.up(node_id, data)
+        self.coordinator.up(node_id, data if msg is None else msg)  # decoded once: the environment re-checks only
         if isinstance(msg, wire.Detach):
             self.nodes.pop(node_id, None)  # it leaves: no idle will come
 
@@ -338,6 +350,9 @@ class LockstepHub:
 
     def _bury_the_silent(self) -> None:
         wall = time.monotonic()
+        if wall - self._looked_at < LOOK_EVERY_S:  # patience is seconds: no need to look every round
+            return
+        self._looked_at = wall
         for node_id, node in list(self.nodes.items()):
             instance = self.env.instance_of(node_id) or ""
             if node.dying_since is not None and wall - node.dying_since > LEAVING_GRACE_S:

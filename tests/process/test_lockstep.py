@@ -44,6 +44,8 @@ def test_robot_processes_in_lockstep_do_exactly_what_the_model_time_run_does(tmp
     assert all(node["peak_rss_mb"] for node in lockstep["nodes"].values())
     assert set(lockstep["exit_codes"].values()) == {0}, lockstep["exit_codes"]  # every process ended cleanly
     assert lockstep["deaths"] == []  # nodes leaving once model time is over are not deaths
+    # the hub's rounds are reported: at least one per instant a node's timer was due over the 2 s
+    assert lockstep["lockstep"]["rounds"] > 100 and lockstep["lockstep"]["stale_idles"] == 0
     assert (tmp_path / "lockstep" / "air.pcap").read_bytes() == (tmp_path / "model" / "air.pcap").read_bytes()
 
 
