@@ -44,6 +44,8 @@ def run_lockstep(opts: RunOptions, scenario: Scenario | None) -> int:
             user += ["--seed", str(opts.seed), "--record", str(ctx.record.events_of(scenario.user.node_id))]
             user += ["--profile", opts.profile] if opts.profile != "ideal" else []
             ctx.sup.spawn("user", [*user, "--duration", str(scenario.duration_s), "--clock", "lockstep"])
+        ctx.watch.check()
+        ctx.watch.write_progress(force=True)  # the summary written as the run goes names every process from now on
         progress(f"lockstep: model time starts when the {nodes} nodes (robots, user, this run) are there")
         loop = LockstepLoop()
         try:

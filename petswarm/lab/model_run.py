@@ -478,7 +478,8 @@ async def orchestrate(opts: RunOptions, scenario: Scenario | None, ctl: RelayCon
     else:
         summary = await _follow_scenario(opts, scenario, ctl, faults, world)
     for rid in range(1, opts.robots + 1):
-        await ctl.command(rid, "stop")
+        if not summary["nodes"][f"robot-{rid}"].get("died"):
+            await ctl.command(rid, "stop")
     return summary
 
 
@@ -503,14 +504,17 @@ async def ping_and_organize(opts: RunOptions, ctl: RelayControl, faults: FaultTi
     for note in notes:
         progress(f"warning: {note}")
     start = asyncio.get_running_loop().time()
+    gone: set[int] = set()
     for second in range(1, math.ceil(opts.duration) + 1):
         until = min(float(second), opts.duration)
         while (elapsed := asyncio.get_running_loop().time() - start) < until:
             await _apply_faults(ctl, faults, elapsed)
             await ctl.sleep(min(0.1, until - elapsed))
-        _report(await ctl.hub("stats"), f"t={until:5.1f}/{opts.duration:g}s")
+        stats = await ctl.hub("stats")
+        _report(stats, f"t={until:5.1f}/{opts.duration:g}s")
+        gone = _gone_robots(stats)
     await _apply_faults(ctl, faults, float("inf"))  # what is left acts on the swarm phase
-    swarm = await organize_and_disperse(ctl, opts) if opts.organize else {}
+    swarm = await organize_and_disperse(ctl, opts, lambda: gone) if opts.organize else {}
     summary = await _summary(opts, ctl, world)
     summary["faults"] = faults.applied
     summary["notes"] = notes
@@ -540,7 +544,14 @@ async def _follow_scenario(
 
 async def _summary(opts: RunOptions, ctl: RelayControl, world: str) -> dict[str, Any]:
     stats = {"world": world, **await ctl.hub("stats")}
-    return summarise(stats, await statuses(ctl, opts.robots), opts, world, ENDPOINT)
+    return summarise(stats, await statuses(ctl, opts.robots, _gone_robots(stats)), opts, world, ENDPOINT)
+
+
+def _gone_robots(stats: dict[str, Any]) -> set[int]:
+    """The robots the hub no longer has: in lockstep, a process killed from outside (taken as gone, and recorded
+    as a death by the run's supervision); in model time, none. They are not asked, and nothing is expected of them."""
+    names = {f"robot-{rid}": rid for rid in range(1, len(stats["nodes"]) + 1)}
+    return {names[name] for name, node in stats["nodes"].items() if name in names and not node["attached"]}
 
 
 def _report(stats: dict[str, Any], what: str) -> None:
