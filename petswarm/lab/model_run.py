@@ -512,7 +512,7 @@ async def ping_and_organize(opts: RunOptions, ctl: RelayControl, faults: FaultTi
             await ctl.sleep(min(0.1, until - elapsed))
         stats = await ctl.hub("stats")
         _report(stats, f"t={until:5.1f}/{opts.duration:g}s")
-        gone = _gone_robots(stats)
+        gone = _gone_robots(stats, opts.robots)
     await _apply_faults(ctl, faults, float("inf"))  # what is left acts on the swarm phase
     swarm = await organize_and_disperse(ctl, opts, lambda: gone) if opts.organize else {}
     summary = await _summary(opts, ctl, world)
@@ -544,14 +544,15 @@ async def _follow_scenario(
 
 async def _summary(opts: RunOptions, ctl: RelayControl, world: str) -> dict[str, Any]:
     stats = {"world": world, **await ctl.hub("stats")}
-    return summarise(stats, await statuses(ctl, opts.robots, _gone_robots(stats)), opts, world, ENDPOINT)
+    return summarise(stats, await statuses(ctl, opts.robots, _gone_robots(stats, opts.robots)), opts, world, ENDPOINT)
 
 
-def _gone_robots(stats: dict[str, Any]) -> set[int]:
-    """The robots the hub no longer has: in lockstep, a process killed from outside (taken as gone, and recorded
-    as a death by the run's supervision); in model time, none. They are not asked, and nothing is expected of them."""
-    names = {f"robot-{rid}": rid for rid in range(1, len(stats["nodes"]) + 1)}
-    return {names[name] for name, node in stats["nodes"].items() if name in names and not node["attached"]}
+def _gone_robots(stats: dict[str, Any], robots: int) -> set[int]:
+    """Robots 1..``robots`` the hub had and no longer has: in lockstep, a process killed from outside (taken as
+    gone, and recorded as a death by the run's supervision); in model time, none. They are not asked, and nothing
+    is expected of them."""
+    nodes = stats["nodes"]
+    return {rid for rid in range(1, robots + 1) if not nodes.get(f"robot-{rid}", {"attached": True})["attached"]}
 
 
 def _report(stats: dict[str, Any], what: str) -> None:
