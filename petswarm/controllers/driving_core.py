@@ -882,11 +882,17 @@ class EchoRanges:
 
     def ranges(self, sensors: OwnSensors) -> Ranges:
         """The latest readings (nan = no echo) with their receding speeds."""
+        angles, ranges, receding = self.floats(sensors)
+        readings = tuple((a, None if math.isnan(r) else r) for a, r in zip(angles, ranges, strict=True))
+        return Ranges(readings, receding_mps=receding)
+
+    def floats(self, sensors: OwnSensors) -> tuple[list[float], list[float], tuple[float, ...]]:
+        """What ``ranges`` reads, in plain floats: the ring's angles, the latest ranges (nan = no echo) and their
+        receding speeds (empty when unknown), for ``pet_controller.SafetyStage``."""
         self.observe(sensors)
         ranges = _ranges_of(self._history[-1])
         angles, cos, sin = self._trig(sensors.angles_rad)
-        readings = tuple((a, None if math.isnan(r) else r) for a, r in zip(angles, ranges, strict=True))
-        return Ranges(readings, receding_mps=self._receding(sensors, ranges, cos, sin))
+        return angles, ranges, self._receding(sensors, ranges, cos, sin)
 
     def observe(self, sensors: OwnSensors) -> None:
         """Keep ``sensors`` in the history the range rates are taken over (once per sample)."""

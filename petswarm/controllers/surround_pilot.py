@@ -35,8 +35,8 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from petswarm.controllers.driving import EchoRanges
-from petswarm.controllers.motion import DriveLimits, MotorCommand
-from petswarm.controllers.pet_controller import PetControllerConfig, safety
+from petswarm.controllers.motion import DriveLimits
+from petswarm.controllers.pet_controller import PetControllerConfig, SafetyStage
 from petswarm.controllers.surround import SurroundConfig, SurroundController
 from petswarm.controllers.surround_improved import ImprovedSurroundController
 from petswarm.controllers.surround_memory import EchoMemory
@@ -106,7 +106,7 @@ class SurroundPilot:
         self.counters = {"steps": 0, "stale_steps": 0, "human_seen": 0, "echoes_dropped": 0, "beacons": 0}
         self._echoes = EchoRanges()
         self._memory = EchoMemory()
-        self._safety = SAFETY_IMPROVED if improved else SAFETY
+        self._safety = SafetyStage(SAFETY_IMPROVED if improved else SAFETY)
         self._sensing = config.sensing
         self._last_us: int | None = None
         self._sweep_t_us = 0
@@ -181,13 +181,13 @@ class SurroundPilot:
         else:
             vx, vy = controller.step_plain(neighbours, obstacles, human, velocity, dt)
         # the law's repulsion acts on IR estimates up to a sweep old; the ultrasonic ring is the last word
-        safe = safety(MotorCommand(vx, vy, 0.0), self._echoes.ranges(sensors), self._safety)
-        self.command = np.array([safe.vx, safe.vy])
+        vx, vy = self._safety.translation(vx, vy, *self._echoes.floats(sensors))
+        self.command = np.array([vx, vy])
         self.counters["steps"] += 1
         self.counters["human_seen"] += human is not None
         self.counters["echoes_dropped"] += dropped
         self.counters["beacons"] = len(tracker.names)
-        return safe.vx, safe.vy
+        return vx, vy
 
     def _remember(
         self, sensors: OwnSensors, names: list[str], positions: np.ndarray, velocity: tuple[float, float], dt: float
