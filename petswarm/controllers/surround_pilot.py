@@ -160,7 +160,8 @@ class SurroundPilot:
     def _drive(self, sensors: OwnSensors, dt: float) -> tuple[float, float] | None:
         config = self.config
         tracker = self.tracker
-        echoes = echo_list(sensors.ranges_m.tolist(), *self._ring(sensors.angles_rad), config.law.robot_radius_m)
+        ranges = sensors.ranges_m.tolist()
+        echoes = echo_list(ranges, *self._ring(sensors.angles_rad), config.law.robot_radius_m)
         neighbours, obstacles, human, dropped = sense_lists(
             tracker.names, tracker.positions, echoes, config.human_id, self._sensing
         )
@@ -181,7 +182,7 @@ class SurroundPilot:
         else:
             vx, vy = controller.step_plain(neighbours, obstacles, human, velocity, dt)
         # the law's repulsion acts on IR estimates up to a sweep old; the ultrasonic ring is the last word
-        vx, vy = self._safety.translation(vx, vy, *self._echoes.floats(sensors))
+        vx, vy = self._safety.translation(vx, vy, *self._echoes.floats(sensors, ranges))
         self.command = np.array([vx, vy])
         self.counters["steps"] += 1
         self.counters["human_seen"] += human is not None
