@@ -246,12 +246,15 @@ class SafetyStage:
                 continue
             if not rng >= 0:
                 raise ValueError(f"Ranges.readings: range at {angles[k]!r} rad must not be negative, got {rng!r}")
-            # allowed_approach_speed, inline
-            gap = max(0.0, rng - stop)
-            allowed = min(k_approach * gap, math.sqrt(2 * brake * gap))
+            # allowed_approach_speed inline, with conditionals that pick as max(0.0, x) and min(a, b) do
+            gap = rng - stop
+            if not gap > 0.0:
+                gap = 0.0
+            approach, braking = k_approach * gap, math.sqrt(2 * brake * gap)
+            allowed = braking if braking < approach else approach
             away = receding[k] if receding else 0.0
             c, s = self._trig[k]
-            constraints.append((c, s, allowed + max(0.0, away)))
+            constraints.append((c, s, allowed + away if away > 0.0 else allowed + 0.0))
         vx, vy = _nearest_allowed((vx, vy), constraints)
         # MotorCommand.limited
         speed = math.hypot(vx, vy)
@@ -267,6 +270,12 @@ def _nearest_allowed(v: tuple[float, float], constraints: list[tuple[float, floa
     """
 
     # (plain loops with early exits: the safety stage runs on every control step of every robot)
+    vx, vy = v
+    for ux, uy, limit in constraints:
+        if not ux * vx + uy * vy <= limit + 1e-12:
+            break
+    else:
+        return v  # nearest of all (the common case: nothing in the way)
     bounds = [(ux, uy, limit + 1e-12) for ux, uy, limit in constraints]
 
     def allowed(cx: float, cy: float) -> bool:
@@ -275,9 +284,6 @@ def _nearest_allowed(v: tuple[float, float], constraints: list[tuple[float, floa
                 return False
         return True
 
-    vx, vy = v
-    if allowed(vx, vy):  # nearest of all (the common case: nothing in the way)
-        return v
     candidates = [v, (0.0, 0.0)]
     for ux, uy, limit in constraints:
         excess = ux * vx + uy * vy - limit

@@ -100,7 +100,7 @@ class SurroundPilot:
         improved = config.law.law == "improved"
         self.controller = ImprovedSurroundController(config.law) if improved else SurroundController(config.law)
         self.tracker = BeaconTracker()
-        self.command = np.zeros(2)
+        self._command = (0.0, 0.0)
         self.engaged = False
         """True once the human's beacon was seen: the robot drives from then on."""
         self.counters = {"steps": 0, "stale_steps": 0, "human_seen": 0, "echoes_dropped": 0, "beacons": 0}
@@ -115,6 +115,11 @@ class SurroundPilot:
         self._ring_trig: tuple[list[float], list[float]] = ([], [])
         self._given: tuple[BeaconSweep, list[str], np.ndarray] | None = None
         """A sweep's fixes worked out for it ahead of its step (``give_fixes``)."""
+
+    @property
+    def command(self) -> np.ndarray:
+        """The last motor command (vx, vy) sent, (0, 0) before the first."""
+        return np.array(self._command)
 
     def sweep_job(self, sweep: BeaconSweep) -> SweepJob | None:
         """What the next step would estimate from ``sweep`` (None: nothing, the sweep is not new or its fixes
@@ -183,7 +188,7 @@ class SurroundPilot:
             vx, vy = controller.step_plain(neighbours, obstacles, human, velocity, dt)
         # the law's repulsion acts on IR estimates up to a sweep old; the ultrasonic ring is the last word
         vx, vy = self._safety.translation(vx, vy, *self._echoes.floats(sensors, ranges))
-        self.command = np.array([vx, vy])
+        self._command = (vx, vy)
         self.counters["steps"] += 1
         self.counters["human_seen"] += human is not None
         self.counters["echoes_dropped"] += dropped
