@@ -315,9 +315,16 @@ class World:
         bodies = list(self.bodies.values())
         for i, a in enumerate(bodies):
             for b in bodies[i + 1 :]:
+                # a pair further apart along x or y than its radii cannot overlap: np.hypot is within an ulp, so
+                # never below the larger leg (a float at most the exact norm), and the overlap is then <= 0;
+                # the legs are the very differences the gap below holds (poses move as pairs are pushed apart)
+                reach = a.radius + b.radius
+                gx, gy = a.pose[0] - b.pose[0], a.pose[1] - b.pose[1]
+                if gx >= reach or -gx >= reach or gy >= reach or -gy >= reach:
+                    continue
                 gap = a.pose[:2] - b.pose[:2]
                 dist = float(np.hypot(*gap))
-                overlap = a.radius + b.radius - dist
+                overlap = reach - dist
                 if overlap > 0:
                     contacts.add((a.body_id, b.body_id) if a.body_id < b.body_id else (b.body_id, a.body_id))
                     _push_apart(a, b, gap, dist, overlap)
@@ -333,9 +340,13 @@ class World:
         p = body.pose[:2]
         for k, obstacle in enumerate(self.obstacles):
             if obstacle.kind == "circle":
+                reach = body.radius + obstacle.r
+                gx, gy = p[0] - obstacle.x, p[1] - obstacle.y
+                if gx >= reach or -gx >= reach or gy >= reach or -gy >= reach:  # as for a pair of bodies
+                    continue
                 gap = p - (obstacle.x, obstacle.y)
                 dist = float(np.hypot(*gap))
-                depth = body.radius + obstacle.r - dist
+                depth = reach - dist
                 if depth > 0:
                     pushes.append((k, _unit(gap) * depth))
                 continue
