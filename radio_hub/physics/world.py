@@ -371,10 +371,18 @@ class World:
     def sense_many(self, body_ids: list[str], rng: np.random.Generator) -> list[OwnSensors]:
         """``sense`` for several robots: one ray computation for all, and the noise drawn as ``sense`` called
         for each in turn draws it (per body: its echoes' ranges, the yaw, the three odometry values)."""
+        if not body_ids:
+            return []
+        ranges, yaws, odometry = self.sense_arrays(body_ids, rng)
+        return [OwnSensors(ranges[k], yaws[k], odometry[k]) for k in range(len(body_ids))]
+
+    def sense_arrays(self, body_ids: list[str], rng: np.random.Generator) -> tuple[np.ndarray, list[float], np.ndarray]:
+        """``sense_many`` as arrays for all the robots at once: ranges (bodies, sensors), yaws, odometry (bodies, 3)
+        (what the hub sends, converted once for all rather than per robot)."""
         cfg = self.config
         n = len(body_ids)
         if not n:
-            return []
+            return np.zeros((0, len(self._ultrasonic_rad))), [], np.zeros((0, 3))
         ranges = self.ultrasonic_many(body_ids)
         bodies = [self.bodies[b] for b in body_ids]
         pose = np.array([b.pose for b in bodies], dtype=float).reshape(n, 3)
@@ -393,8 +401,7 @@ class World:
         c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
         vx, vy, omega = velocity.T
         odometry = np.stack([c * vx + s * vy, -s * vx + c * vy, omega], axis=1) * (1.0 + odometry_noise)
-        yaws = yaw.tolist()
-        return [OwnSensors(ranges[k], yaws[k], odometry[k]) for k in range(n)]
+        return ranges, yaw.tolist(), odometry
 
     def ultrasonic(self, body_id: str) -> np.ndarray:
         """Noise-free range of the nearest echo in each sensor's cone (nan when nothing within range)."""
