@@ -165,7 +165,7 @@ class SurroundPilot:
     def _drive(self, sensors: OwnSensors, dt: float) -> tuple[float, float] | None:
         config = self.config
         tracker = self.tracker
-        ranges = sensors.ranges_m.tolist()
+        ranges = sensors.ranges_list()
         echoes = echo_list(ranges, *self._ring(sensors.angles_rad), config.law.robot_radius_m)
         neighbours, obstacles, human, dropped = sense_lists(
             tracker.names, tracker.positions, echoes, config.human_id, self._sensing
@@ -199,7 +199,7 @@ class SurroundPilot:
         self, sensors: OwnSensors, names: list[str], positions: np.ndarray, velocity: tuple[float, float], dt: float
     ) -> list[tuple[float, float]]:
         """The echo memory's step (``surround_memory``): the wall points the law must stop short of."""
-        ranges = sensors.ranges_m.tolist()
+        ranges = sensors.ranges_list()
         cos, sin = self._ring(sensors.angles_rad)
         radius = self.config.law.robot_radius_m
         points = [(c * (radius + r), s * (radius + r)) for r, c, s in zip(ranges, cos, sin, strict=True)]

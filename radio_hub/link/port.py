@@ -10,10 +10,12 @@ model-time run (``runner.model``). This module imports no zenoh.
 
 from __future__ import annotations
 
+import array
 import asyncio
 import contextlib
 import itertools
 import os
+import sys
 from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -172,6 +174,17 @@ class OwnSensors:
         if isinstance(self._ranges_m, bytes):
             self._ranges_m = np.frombuffer(self._ranges_m, dtype="<f4").astype(float)
         return self._ranges_m
+
+    def ranges_list(self) -> list[float]:
+        """``ranges_m`` as Python floats, the same values: from the bytes as they came (float32, widened exactly)
+        without an array, for a control step that reads them in plain floats."""
+        raw = self._ranges_m
+        if isinstance(raw, bytes):
+            values = array.array("f", raw)
+            if sys.byteorder != "little":  # the wire's float32 are little-endian
+                values.byteswap()
+            return values.tolist()
+        return np.asarray(raw, dtype=float).tolist()
 
     @property
     def angles_rad(self) -> np.ndarray:
