@@ -354,15 +354,14 @@ class Environment:
 
     def _send_sensors(self, now: int) -> None:
         robots = [n for n, kind in self._kinds.items() if kind == "robot" and n in self.world.bodies]
-        for node_id, own in zip(robots, self.world.sense_many(robots, self._body_rng), strict=True):
+        if not robots:
+            return
+        # every robot's sample converted at once: the same float32 bytes and floats as robot by robot
+        ranges, yaws, odometry = self.world.sense_arrays(robots, self._body_rng)
+        wire_ranges = ranges.astype("<f4")
+        for k, (node_id, yaw, own_odometry) in enumerate(zip(robots, yaws, odometry.tolist(), strict=True)):
             self._send_down(
-                node_id,
-                wire.Sensors(
-                    t_us=now,
-                    ranges=own.ranges_m.astype("<f4").tobytes(),
-                    yaw=float(own.yaw_rad),
-                    odometry=[float(v) for v in own.odometry],
-                ),
+                node_id, wire.Sensors(t_us=now, ranges=wire_ranges[k].tobytes(), yaw=yaw, odometry=own_odometry)
             )
 
     def _record_world(self, now: int) -> None:

@@ -882,17 +882,27 @@ class EchoRanges:
 
     def ranges(self, sensors: OwnSensors) -> Ranges:
         """The latest readings (nan = no echo) with their receding speeds."""
-        self.observe(sensors)
+        angles, ranges, receding = self.floats(sensors)
+        readings = tuple((a, None if math.isnan(r) else r) for a, r in zip(angles, ranges, strict=True))
+        return Ranges(readings, receding_mps=receding)
+
+    def floats(
+        self, sensors: OwnSensors, ranges: list[float] | None = None
+    ) -> tuple[list[float], list[float], tuple[float, ...]]:
+        """What ``ranges`` reads, in plain floats: the ring's angles, the latest ranges (nan = no echo) and their
+        receding speeds (empty when unknown), for ``pet_controller.SafetyStage``. ``ranges``: ``sensors``'
+        ranges as floats when the caller has them already (``sensors.ranges_m.tolist()``)."""
+        self.observe(sensors, ranges)
         ranges = _ranges_of(self._history[-1])
         angles, cos, sin = self._trig(sensors.angles_rad)
-        readings = tuple((a, None if math.isnan(r) else r) for a, r in zip(angles, ranges, strict=True))
-        return Ranges(readings, receding_mps=self._receding(sensors, ranges, cos, sin))
+        return angles, ranges, self._receding(sensors, ranges, cos, sin)
 
-    def observe(self, sensors: OwnSensors) -> None:
-        """Keep ``sensors`` in the history the range rates are taken over (once per sample)."""
+    def observe(self, sensors: OwnSensors, ranges: list[float] | None = None) -> None:
+        """Keep ``sensors`` in the history the range rates are taken over (once per sample); ``ranges``: its
+        ranges as floats, if the caller has them."""
         history = self._history
         if not history or history[-1][0] != sensors.t_us:
-            history.append([sensors.t_us, sensors, None])
+            history.append([sensors.t_us, sensors, ranges])
 
     def _trig(self, angles_rad: Any) -> tuple[list[float], list[float], list[float]]:
         """The ring's angles, their cosines and sines, worked out again only when the ring changes."""

@@ -353,10 +353,16 @@ class SurroundController:
     ) -> tuple[tuple[float, float], int]:
         count = sum(near)
         gx = gy = 0.0
-        for i, ((x, y), seen) in enumerate(zip(neighbours, near, strict=True)):
-            x, y = (x, y) if seen else (0.0, 0.0)
+        first = True
+        for (x, y), seen in zip(neighbours, near, strict=True):
+            if not seen:
+                x = y = 0.0
             # numpy's sum starts from the first term (0.0 + -0.0 would lose the sign of a lone -0.0)
-            gx, gy = (x, y) if i == 0 else (gx + x, gy + y)
+            if first:
+                gx, gy, first = x, y, False
+            else:
+                gx += x
+                gy += y
         g = (gx / (count + 1), gy / (count + 1))
         tau = self.config.centroid_filter_s
         if tau > 0 and self._g is not None:
@@ -391,16 +397,36 @@ class SurroundController:
         obstacles: Sequence[Sequence[float]],
     ) -> tuple[float, float]:
         c = self.config
+        avoidance, repulsion = c.avoidance_m, c.repulsion
         sx = sy = 0.0
-        points = [(p, d, seen) for p, d, seen in zip(neighbours, distances, near, strict=True)]
-        points += [(p, math.sqrt(p[0] * p[0] + p[1] * p[1]), True) for p in obstacles]
-        for i, ((x, y), d, seen) in enumerate(points):
-            inside = seen and d <= c.avoidance_m and d > 0
-            reach = max(d, MIN_RANGE_M)
-            magnitude = c.repulsion / (reach * reach) if inside else 0.0
-            scale = max(d, 1e-12)
-            px, py = magnitude * (x / scale), magnitude * (y / scale)
-            sx, sy = (px, py) if i == 0 else (sx + px, sy + py)
+        first = True
+        # the neighbours, then the obstacles (seen whatever their distance), summed from the first term on;
+        # (plain loops and conditionals for max(): the law runs on every control step of every robot)
+        for (x, y), d, seen in zip(neighbours, distances, near, strict=True):
+            if seen and d <= avoidance and d > 0:
+                reach = MIN_RANGE_M if d < MIN_RANGE_M else d  # max(d, MIN_RANGE_M)
+                magnitude = repulsion / (reach * reach)
+            else:
+                magnitude = 0.0
+            scale = 1e-12 if d < 1e-12 else d  # max(d, 1e-12), nan included
+            if first:
+                sx, sy, first = magnitude * (x / scale), magnitude * (y / scale), False
+            else:
+                sx += magnitude * (x / scale)
+                sy += magnitude * (y / scale)
+        for x, y in obstacles:
+            d = math.sqrt(x * x + y * y)
+            if d <= avoidance and d > 0:
+                reach = MIN_RANGE_M if d < MIN_RANGE_M else d
+                magnitude = repulsion / (reach * reach)
+            else:
+                magnitude = 0.0
+            scale = 1e-12 if d < 1e-12 else d
+            if first:
+                sx, sy, first = magnitude * (x / scale), magnitude * (y / scale), False
+            else:
+                sx += magnitude * (x / scale)
+                sy += magnitude * (y / scale)
         return -sx, -sy
 
     def _surround(

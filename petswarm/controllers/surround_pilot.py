@@ -35,8 +35,8 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from petswarm.controllers.driving import EchoRanges
-from petswarm.controllers.motion import DriveLimits, MotorCommand
-from petswarm.controllers.pet_controller import PetControllerConfig, safety
+from petswarm.controllers.motion import DriveLimits
+from petswarm.controllers.pet_controller import PetControllerConfig, SafetyStage
 from petswarm.controllers.surround import SurroundConfig, SurroundController
 from petswarm.controllers.surround_improved import ImprovedSurroundController
 from petswarm.controllers.surround_memory import EchoMemory
@@ -100,13 +100,13 @@ class SurroundPilot:
         improved = config.law.law == "improved"
         self.controller = ImprovedSurroundController(config.law) if improved else SurroundController(config.law)
         self.tracker = BeaconTracker()
-        self.command = np.zeros(2)
+        self._command = (0.0, 0.0)
         self.engaged = False
         """True once the human's beacon was seen: the robot drives from then on."""
         self.counters = {"steps": 0, "stale_steps": 0, "human_seen": 0, "echoes_dropped": 0, "beacons": 0}
         self._echoes = EchoRanges()
         self._memory = EchoMemory()
-        self._safety = SAFETY_IMPROVED if improved else SAFETY
+        self._safety = SafetyStage(SAFETY_IMPROVED if improved else SAFETY)
         self._sensing = config.sensing
         self._last_us: int | None = None
         self._sweep_t_us = 0
@@ -115,6 +115,11 @@ class SurroundPilot:
         self._ring_trig: tuple[list[float], list[float]] = ([], [])
         self._given: tuple[BeaconSweep, list[str], np.ndarray] | None = None
         """A sweep's fixes worked out for it ahead of its step (``give_fixes``)."""
+
+    @property
+    def command(self) -> np.ndarray:
+        """The last motor command (vx, vy) sent, (0, 0) before the first."""
+        return np.array(self._command)
 
     def sweep_job(self, sweep: BeaconSweep) -> SweepJob | None:
         """What the next step would estimate from ``sweep`` (None: nothing, the sweep is not new or its fixes
@@ -160,7 +165,8 @@ class SurroundPilot:
     def _drive(self, sensors: OwnSensors, dt: float) -> tuple[float, float] | None:
         config = self.config
         tracker = self.tracker
-        echoes = echo_list(sensors.ranges_m.tolist(), *self._ring(sensors.angles_rad), config.law.robot_radius_m)
+        ranges = sensors.ranges_list()
+        echoes = echo_list(ranges, *self._ring(sensors.angles_rad), config.law.robot_radius_m)
         neighbours, obstacles, human, dropped = sense_lists(
             tracker.names, tracker.positions, echoes, config.human_id, self._sensing
         )
@@ -181,19 +187,19 @@ class SurroundPilot:
         else:
             vx, vy = controller.step_plain(neighbours, obstacles, human, velocity, dt)
         # the law's repulsion acts on IR estimates up to a sweep old; the ultrasonic ring is the last word
-        safe = safety(MotorCommand(vx, vy, 0.0), self._echoes.ranges(sensors), self._safety)
-        self.command = np.array([safe.vx, safe.vy])
+        vx, vy = self._safety.translation(vx, vy, *self._echoes.floats(sensors, ranges))
+        self._command = (vx, vy)
         self.counters["steps"] += 1
         self.counters["human_seen"] += human is not None
         self.counters["echoes_dropped"] += dropped
         self.counters["beacons"] = len(tracker.names)
-        return safe.vx, safe.vy
+        return vx, vy
 
     def _remember(
         self, sensors: OwnSensors, names: list[str], positions: np.ndarray, velocity: tuple[float, float], dt: float
     ) -> list[tuple[float, float]]:
         """The echo memory's step (``surround_memory``): the wall points the law must stop short of."""
-        ranges = sensors.ranges_m.tolist()
+        ranges = sensors.ranges_list()
         cos, sin = self._ring(sensors.angles_rad)
         radius = self.config.law.robot_radius_m
         points = [(c * (radius + r), s * (radius + r)) for r, c, s in zip(ranges, cos, sin, strict=True)]

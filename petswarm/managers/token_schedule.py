@@ -233,6 +233,11 @@ class TokenSchedule:
         self._ids = itertools.count(1)
         self._wakeups: dict[int, tuple[float, Callable[[float], list[Action]]]] = {}
         self._pending: dict[int, Callable[[float], list[Action]]] = {}
+        self._watch_at = math.inf
+        """When the lost-token check is next due on its ``WATCH_PERIOD_S`` grid (kept, not woken for, while out of
+        a swarm)."""
+        self._watching = False
+        """Whether a wakeup for that check is pending."""
 
     @property
     def active(self) -> bool:
@@ -247,8 +252,9 @@ class TokenSchedule:
     # -- time ---------------------------------------------------------------------------------------
 
     def start(self, now: float) -> list[Action]:
-        """The robot runs: start looking for a lost token every ``WATCH_PERIOD_S``."""
-        self._wake(now + WATCH_PERIOD_S, self._watch)
+        """The robot runs: start looking for a lost token every ``WATCH_PERIOD_S`` (while in a swarm)."""
+        self._watch_at, self._watching = now + WATCH_PERIOD_S, True
+        self._wake(self._watch_at, self._watch)
         return []
 
     def timers(self) -> dict[int, float]:
@@ -275,6 +281,7 @@ class TokenSchedule:
         self, session: int, chain: tuple[int, ...], neighbours: tuple[int, ...], is_master: bool, now: float
     ) -> list[Action]:
         """Take part in the schedule of a swarm (the master starts the first round)."""
+        self._resume_watch(now)
         self.session, self.chain, self.neighbours, self.is_master = session, chain, neighbours, is_master
         self.round = 0
         self.last_activity = now
@@ -567,15 +574,34 @@ class TokenSchedule:
     # -- a lost token -------------------------------------------------------------------------------
 
     def _watch(self, now: float) -> list[Action]:
-        """The master regenerates the token after ``regen_timeout_s`` of silence."""
+        """The master regenerates the token after ``regen_timeout_s`` of silence.
+
+        Out of a swarm the check finds nothing to do, and what it would note (``last_activity`` while the air
+        is away) counts only in a swarm, whose ``join`` sets it afresh: so it stops waking there (a surround
+        robot never joins one, and these wakeups were 20 a second per robot) and ``join`` takes it up again on
+        the same grid of instants, as if it had gone on."""
         actions: list[Action] = []
         if not self.air:
             self.last_activity = now  # no air, no token to lose
         elif self.active and self.is_master and now - self.last_activity > self.config.regen_timeout_s:
             self.regenerations += 1
             actions = [Log("token_regenerated", {"round": self.round + 1}), *self._hold(self.round + 1, now)]
-        self._wake(now + WATCH_PERIOD_S, self._watch)
+        self._watch_at = now + WATCH_PERIOD_S
+        self._watching = self.active
+        if self._watching:
+            self._wake(self._watch_at, self._watch)
         return actions
+
+    def _resume_watch(self, now: float) -> None:
+        """Wake for the lost-token check again, at its next instant after ``now`` on its grid (one at ``now``
+        itself would have found the swarm just joined, with nothing to regenerate)."""
+        if self._watching or self._watch_at == math.inf:  # still waking, or not started
+            return
+        at = self._watch_at
+        while at <= now:
+            at = at + WATCH_PERIOD_S  # as each check would have set it: its instant plus the period
+        self._watch_at, self._watching = at, True
+        self._wake(at, self._watch)
 
     # -- bookkeeping --------------------------------------------------------------------------------
 

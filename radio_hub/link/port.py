@@ -10,10 +10,12 @@ model-time run (``runner.model``). This module imports no zenoh.
 
 from __future__ import annotations
 
+import array
 import asyncio
 import contextlib
 import itertools
 import os
+import sys
 from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -172,6 +174,17 @@ class OwnSensors:
         if isinstance(self._ranges_m, bytes):
             self._ranges_m = np.frombuffer(self._ranges_m, dtype="<f4").astype(float)
         return self._ranges_m
+
+    def ranges_list(self) -> list[float]:
+        """``ranges_m`` as Python floats, the same values: from the bytes as they came (float32, widened exactly)
+        without an array, for a control step that reads them in plain floats."""
+        raw = self._ranges_m
+        if isinstance(raw, bytes):
+            values = array.array("f", raw)
+            if sys.byteorder != "little":  # the wire's float32 are little-endian
+                values.byteswap()
+            return values.tolist()
+        return np.asarray(raw, dtype=float).tolist()
 
     @property
     def angles_rad(self) -> np.ndarray:
@@ -625,6 +638,17 @@ class RadioClient:
             self.faults.record("downlink", err, msg.TYPE)
 
     def _on_message(self, msg: wire.Message) -> None:
+        kind = type(msg)
+        if kind is wire.Sensors or kind is wire.IrBeacons:  # most of the traffic, by its exact type
+            if msg.n > self._down_seq + 1:
+                self.transport_gaps += msg.n - self._down_seq - 1
+            if msg.n > self._down_seq:
+                self._down_seq = msg.n
+            if kind is wire.Sensors:
+                self._on_sensors(msg)  # type: ignore[arg-type]
+            else:
+                self._on_beacons(msg)  # type: ignore[arg-type]
+            return
         if isinstance(msg, (wire.Attached, wire.Error)) and msg.instance not in ("", self.instance):
             return  # another process claiming our id at the same moment: its answer, not ours
         if isinstance(msg, wire.Attached) and msg.token == 0:
@@ -716,11 +740,12 @@ class RadioClient:
         if block.size != len(msg.sources) * IR_RECEIVERS or len(gains) != len(msg.sources):
             self.malformed += 1
             return
-        if not all(0 < g <= 1 for g in gains):
+        # (min and max: the wire checks made every gain a finite int or float)
+        if gains and not (min(gains) > 0 and max(gains) <= 1):
             self.malformed += 1
             return
         block = block.reshape(-1, IR_RECEIVERS)
-        gains = [float(g) for g in gains]
+        gains = list(map(float, gains))
         if len(set(msg.sources)) == len(msg.sources):
             self.beacons = BeaconSweep.of_block(msg.t_us, msg.sources, block, gains)
         else:  # a source named twice: its last sweep counts, as in a map

@@ -315,9 +315,16 @@ class World:
         bodies = list(self.bodies.values())
         for i, a in enumerate(bodies):
             for b in bodies[i + 1 :]:
+                # a pair further apart along x or y than its radii cannot overlap: np.hypot is within an ulp, so
+                # never below the larger leg (a float at most the exact norm), and the overlap is then <= 0;
+                # the legs are the very differences the gap below holds (poses move as pairs are pushed apart)
+                reach = a.radius + b.radius
+                gx, gy = a.pose[0] - b.pose[0], a.pose[1] - b.pose[1]
+                if gx >= reach or -gx >= reach or gy >= reach or -gy >= reach:
+                    continue
                 gap = a.pose[:2] - b.pose[:2]
                 dist = float(np.hypot(*gap))
-                overlap = a.radius + b.radius - dist
+                overlap = reach - dist
                 if overlap > 0:
                     contacts.add((a.body_id, b.body_id) if a.body_id < b.body_id else (b.body_id, a.body_id))
                     _push_apart(a, b, gap, dist, overlap)
@@ -333,9 +340,13 @@ class World:
         p = body.pose[:2]
         for k, obstacle in enumerate(self.obstacles):
             if obstacle.kind == "circle":
+                reach = body.radius + obstacle.r
+                gx, gy = p[0] - obstacle.x, p[1] - obstacle.y
+                if gx >= reach or -gx >= reach or gy >= reach or -gy >= reach:  # as for a pair of bodies
+                    continue
                 gap = p - (obstacle.x, obstacle.y)
                 dist = float(np.hypot(*gap))
-                depth = body.radius + obstacle.r - dist
+                depth = reach - dist
                 if depth > 0:
                     pushes.append((k, _unit(gap) * depth))
                 continue
@@ -360,10 +371,18 @@ class World:
     def sense_many(self, body_ids: list[str], rng: np.random.Generator) -> list[OwnSensors]:
         """``sense`` for several robots: one ray computation for all, and the noise drawn as ``sense`` called
         for each in turn draws it (per body: its echoes' ranges, the yaw, the three odometry values)."""
+        if not body_ids:
+            return []
+        ranges, yaws, odometry = self.sense_arrays(body_ids, rng)
+        return [OwnSensors(ranges[k], yaws[k], odometry[k]) for k in range(len(body_ids))]
+
+    def sense_arrays(self, body_ids: list[str], rng: np.random.Generator) -> tuple[np.ndarray, list[float], np.ndarray]:
+        """``sense_many`` as arrays for all the robots at once: ranges (bodies, sensors), yaws, odometry (bodies, 3)
+        (what the hub sends, converted once for all rather than per robot)."""
         cfg = self.config
         n = len(body_ids)
         if not n:
-            return []
+            return np.zeros((0, len(self._ultrasonic_rad))), [], np.zeros((0, 3))
         ranges = self.ultrasonic_many(body_ids)
         bodies = [self.bodies[b] for b in body_ids]
         pose = np.array([b.pose for b in bodies], dtype=float).reshape(n, 3)
@@ -382,8 +401,7 @@ class World:
         c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
         vx, vy, omega = velocity.T
         odometry = np.stack([c * vx + s * vy, -s * vx + c * vy, omega], axis=1) * (1.0 + odometry_noise)
-        yaws = yaw.tolist()
-        return [OwnSensors(ranges[k], yaws[k], odometry[k]) for k in range(n)]
+        return ranges, yaw.tolist(), odometry
 
     def ultrasonic(self, body_id: str) -> np.ndarray:
         """Noise-free range of the nearest echo in each sensor's cone (nan when nothing within range)."""

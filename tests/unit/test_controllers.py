@@ -27,6 +27,7 @@ from petswarm.controllers.motion import (
 from petswarm.controllers.pet_controller import (
     PetControllerConfig,
     Ranges,
+    SafetyStage,
     UserObservation,
     allowed_approach_speed,
     follow,
@@ -303,3 +304,31 @@ def test_safety_lets_a_robot_follow_closely_what_drives_away_but_not_what_stands
     assert driving_on.vx == pytest.approx(allowed_approach_speed(0.32, cfg) + 0.6)
     coming = safety(MotorCommand(0.8, 0.0, 0.0), Ranges(ahead, receding_mps=(-0.5,)), cfg)
     assert coming.vx == pytest.approx(standing.vx)  # something approaching gives no extra room
+
+
+def test_the_safety_stage_in_plain_floats_is_safety_bit_for_bit():
+    """``SafetyStage.translation`` (the surround pilot's) against ``safety`` on random rings: echoes near and
+    far, missing ones, receding speeds of both signs or none, commands inside and outside the limits."""
+    rng = np.random.default_rng(12)
+    angles = np.radians([0.0, 45.0, 90.0, 135.0, 180.0, -135.0, -90.0, -45.0]).tolist()
+    for cfg in (PetControllerConfig(stop_distance_m=0.04), PetControllerConfig(stop_distance_m=0.04, k_approach=4.0)):
+        stage = SafetyStage(cfg)
+        cut = 0
+        for _ in range(3000):
+            ranges = rng.uniform(0.0, 0.6, 8)
+            ranges[rng.random(8) < 0.4] = math.nan
+            ranges[rng.random(8) < 0.1] = cfg.stop_distance_m  # exactly at the stop distance
+            receding = tuple(rng.normal(0.0, 0.5, 8).tolist()) if rng.random() < 0.7 else ()
+            vx, vy = rng.normal(0.0, 1.2, 2).tolist()
+            readings = tuple((a, None if math.isnan(r) else r) for a, r in zip(angles, ranges.tolist(), strict=True))
+            want = safety(MotorCommand(vx, vy, 0.0), Ranges(readings, receding_mps=receding), cfg)
+            got = stage.translation(vx, vy, angles, ranges.tolist(), receding)
+            assert got == (want.vx, want.vy)
+            assert [math.copysign(1.0, v) for v in got] == [math.copysign(1.0, want.vx), math.copysign(1.0, want.vy)]
+            cut += got != (vx, vy)
+        assert cut > 1000  # the obstacles did cut most commands: the projections and corners were compared too
+
+
+def test_the_safety_stage_in_plain_floats_refuses_a_negative_range_as_ranges_does():
+    with pytest.raises(ValueError, match="must not be negative"):
+        SafetyStage(PetControllerConfig()).translation(0.5, 0.0, [0.0, 1.0], [0.3, -0.1], ())

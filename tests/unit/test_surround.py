@@ -2,11 +2,16 @@
 
 from __future__ import annotations
 
+import math
+import random
+import struct
+
 import numpy as np
 import pytest
 
 from petswarm.bench import surround_sim as sim
 from petswarm.controllers.surround import (
+    MIN_RANGE_M,
     Obstacles,
     SurroundConfig,
     SurroundController,
@@ -157,3 +162,39 @@ def test_noisy_runs_follow_the_seed() -> None:
     first, again, other = (sim.simulate(CONFIG, noisy, seed, 0.5) for seed in (7, 7, 8))
     np.testing.assert_array_equal(first.positions, again.positions)
     assert not np.allclose(first.positions, other.positions)
+
+
+def _repulsion_as_summed_before(
+    config: SurroundConfig, neighbours: list[list[float]], near: list[bool], obstacles: list[tuple[float, float]]
+) -> tuple[float, float]:
+    """The repulsion as the controller first wrote it (one list of points, ``max`` for the floors): the
+    reference its faster loops must equal, zero signs and nans included."""
+    sx = sy = 0.0
+    points = [(p, math.sqrt(p[0] * p[0] + p[1] * p[1]), seen) for p, seen in zip(neighbours, near, strict=True)]
+    points += [(p, math.sqrt(p[0] * p[0] + p[1] * p[1]), True) for p in obstacles]
+    for i, ((x, y), d, seen) in enumerate(points):
+        inside = seen and d <= config.avoidance_m and d > 0
+        reach = max(d, MIN_RANGE_M)
+        magnitude = config.repulsion / (reach * reach) if inside else 0.0
+        scale = max(d, 1e-12)
+        px, py = magnitude * (x / scale), magnitude * (y / scale)
+        sx, sy = (px, py) if i == 0 else (sx + px, sy + py)
+    return -sx, -sy
+
+
+def test_the_repulsion_loops_sum_as_the_list_of_points_did_to_the_sign_of_zero() -> None:
+    rng = random.Random(5)
+    controller = SurroundController(CONFIG)
+    special = [0.0, -0.0, 1e-13, -1e-13, 0.01, -0.01, 0.3, -0.3, 2.0, math.nan]
+
+    def value() -> float:
+        return rng.choice(special) if rng.random() < 0.5 else rng.uniform(-1.5, 1.5)
+
+    for _ in range(20000):
+        neighbours = [[value(), value()] for _ in range(rng.randint(0, 5))]
+        obstacles = [(value(), value()) for _ in range(rng.randint(0, 4))]
+        distances = [math.sqrt(x * x + y * y) for x, y in neighbours]
+        near = [d <= CONFIG.sight_m for d in distances]
+        want = _repulsion_as_summed_before(CONFIG, neighbours, near, obstacles)
+        got = controller._repulsion(neighbours, distances, near, obstacles)
+        assert struct.pack("2d", *got) == struct.pack("2d", *want)

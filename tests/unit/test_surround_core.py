@@ -137,3 +137,18 @@ def test_a_sweep_batch_steps_every_robot_as_its_own_estimate_would() -> None:
     radios[0].beacons = _sweep_of(rng, 30 * 40_000, ["user", "robot-2"])
     batch.prepare(batched[1], radios[1].beacons)
     assert batched[0].sweep_job(radios[0].beacons) is not None  # a robot that left is not estimated for
+
+
+def test_a_samples_ranges_as_floats_are_its_array_bit_for_bit() -> None:
+    # what the pilot reads (OwnSensors.ranges_list, from the wire's bytes) against what it read before
+    rng = np.random.default_rng(8)
+    special = np.array([np.nan, np.inf, -np.inf, -0.0, 0.0, 1e-45, 3.4e38], dtype="<f4")
+    for _ in range(500):
+        values = rng.uniform(0.0, 3.0, 8).astype("<f4")
+        picks = rng.random(8) < 0.3
+        values[picks] = rng.choice(special, int(picks.sum()))
+        sensors = OwnSensors.of_wire(0, values.tobytes(), lambda: np.zeros(8), 0.0, (0.0, 0.0, 0.0))
+        got = sensors.ranges_list()
+        want = OwnSensors.of_wire(0, values.tobytes(), lambda: np.zeros(8), 0.0, (0.0, 0.0, 0.0)).ranges_m.tolist()
+        assert np.array(got).tobytes() == np.array(want).tobytes()
+        assert sensors.ranges_m.tolist() == got or np.isnan(got).any()  # the array is still there to read

@@ -225,10 +225,12 @@ def test_leaving_drops_the_round_switches_off_and_forgets() -> None:
     assert actions == [ts.SetIrMode("idle"), ts.DropWindow(), ts.ForgetTable(), ts.SetIrMode("idle")]
     assert not core.active and core.holding is None
     assert core.receive(2, m.IrStart(SESSION, 2), 1.1) == []  # no longer ours
-    now = 1.05
-    while now < 5.0:  # and a former master regenerates nothing
+    now: float | None = 1.05
+    while now is not None and now < 5.0:  # and a former master regenerates nothing (its watch stops too)
         now = core.next_timer()
-        assert core.handle_timer(now) == []
+        if now is not None:
+            assert core.handle_timer(now) == []
+    assert core.next_timer() is None
 
 
 def test_the_master_regenerates_after_regen_timeout_of_silence_seen_at_its_watch() -> None:
@@ -270,6 +272,45 @@ def test_with_the_hub_away_silence_is_no_lost_token() -> None:
         now = master.next_timer()
         actions = master.handle_timer(now)
     assert CONFIG.regen_timeout_s < now - start <= CONFIG.regen_timeout_s + WATCH_PERIOD_S + 1e-9
+
+
+def test_out_of_a_swarm_the_watch_stops_waking_and_joining_takes_it_up_on_its_grid() -> None:
+    # a robot that is in no swarm (a surround robot) checks once, then has no timer at all; a later join
+    # wakes the check again at the next instant of the grid the watch ticked on (0.05, 0.10, ... as
+    # accumulated), and a master's lost token is still regenerated within a period of the timeout
+    core = TokenSchedule(1, CONFIG, 0.0, CLEAN)
+    core.start(0.0)
+    assert core.next_timer() == WATCH_PERIOD_S
+    assert core.handle_timer(WATCH_PERIOD_S) == [] and core.next_timer() is None
+    grid = [WATCH_PERIOD_S]
+    while grid[-1] <= 3.01:
+        grid.append(grid[-1] + WATCH_PERIOD_S)
+    core.join(SESSION, (1, 2), (), True, 3.01)
+    assert min(t for t in core.timers().values()) <= grid[-1]  # the master's own round comes first
+    assert grid[-1] in core.timers().values()
+    core.leave(3.02)
+    core.join(SESSION + 1, (1, 2), (), True, 3.03)  # back before the pending check: still one check
+    assert list(core.timers().values()).count(grid[-1]) == 1
+    # joined as a member and silent from then on: a member checks but never regenerates
+    member = TokenSchedule(2, CONFIG, 0.0, CLEAN)
+    member.start(0.0)
+    member.handle_timer(WATCH_PERIOD_S)
+    member.join(SESSION, (1, 2), (), False, 1.0)
+    t = 1.0
+    while t < 4.0:
+        t = member.next_timer()
+        assert not _logs(member.handle_timer(t), "token_regenerated")
+    master = TokenSchedule(1, CONFIG, 0.0, CLEAN)
+    master.start(0.0)
+    master.handle_timer(WATCH_PERIOD_S)
+    master.join(SESSION, (1, 2), (), False, 0.5)
+    master.rejoin((1, 2), (), True, 0.5)
+    master.receive(2, m.Sync(SESSION, 7, 2), 2.0123)
+    now, actions = 2.0123, []
+    while not _logs(actions, "token_regenerated"):
+        now = master.next_timer()
+        actions = master.handle_timer(now)
+    assert CONFIG.regen_timeout_s < now - 2.0123 <= CONFIG.regen_timeout_s + WATCH_PERIOD_S
 
 
 # -- a few robots on an instant air --------------------------------------------------------------------
