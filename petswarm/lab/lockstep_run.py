@@ -79,6 +79,14 @@ async def _orchestrate(ctx: RunContext, scenario: Scenario | None) -> dict[str, 
     link = LockstepLink(ctx.session, ctx.keys, owns_session=False)
     radio = await RadioClient.connect(CONTROL_IDENTITY, world=ctx.world, link=link, timeout=5.0)
     try:
-        return await orchestrate(ctx.opts, scenario, RelayControl(radio), ctx.world)
+        return await orchestrate(ctx.opts, scenario, RelayControl(radio), ctx.world, lambda: _died(ctx))
     finally:
         await radio.close()
+
+
+def _died(ctx: RunContext) -> set[int]:
+    """The robots whose processes died so far, as the run's supervision sees them (RunAborted if the run cannot
+    go on): the hub has taken them as gone, and the run asks nothing more of them. A robot the hub took as gone
+    that is still alive (stopped, cut off) is not among them: it fails the run's checks."""
+    ctx.watch.check()
+    return ctx.watch.dead_robots()

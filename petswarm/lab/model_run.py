@@ -18,7 +18,7 @@ import functools
 import math
 import time
 import weakref
-from collections.abc import Callable, Coroutine
+from collections.abc import Callable, Collection, Coroutine
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -468,18 +468,29 @@ def _start_user(
     return task
 
 
-async def orchestrate(opts: RunOptions, scenario: Scenario | None, ctl: RelayControl, world: str) -> dict[str, Any]:
+async def orchestrate(
+    opts: RunOptions,
+    scenario: Scenario | None,
+    ctl: RelayControl,
+    world: str,
+    dead: Callable[[], Collection[int]] = frozenset,
+) -> dict[str, Any]:
     """What a model or lockstep run does, on model time, through the relay: wait for the robots, the
-    traffic or scenario phase with its faults, the summary, then every robot told to stop."""
+    traffic or scenario phase with its faults, the summary, then every robot told to stop. Robots in ``dead()``
+    (a lockstep run's robot processes that died, as its supervision saw them; none in model time) are neither
+    asked nor expected to do anything; any other robot that does not answer is a problem of the run."""
     await _wait_attached(ctl, opts.robots)
     faults = FaultTimeline(list(opts.faults) + (list(scenario.faults) if scenario is not None else []))
     if scenario is None:
-        summary = await ping_and_organize(opts, ctl, faults, world)
+        summary = await ping_and_organize(opts, ctl, faults, world, dead)
     else:
-        summary = await _follow_scenario(opts, scenario, ctl, faults, world)
-    for rid in range(1, opts.robots + 1):
-        if not summary["nodes"][f"robot-{rid}"].get("died"):
+        summary = await _follow_scenario(opts, scenario, ctl, faults, world, dead)
+    for rid in sorted(set(range(1, opts.robots + 1)) - set(dead())):
+        try:
             await ctl.command(rid, "stop")
+        except HubUnavailable as err:  # alive but out of the world (a lockstep node taken as gone): say so
+            summary["problems"].append(f"robot {rid} could not be told to stop: {err}")
+            summary["ok"] = False
     return summary
 
 
@@ -499,23 +510,22 @@ async def _apply_faults(ctl: RelayControl, faults: FaultTimeline, elapsed: float
         faults.applied_or_refused(at, request, answer)
 
 
-async def ping_and_organize(opts: RunOptions, ctl: RelayControl, faults: FaultTimeline, world: str) -> dict[str, Any]:
+async def ping_and_organize(
+    opts: RunOptions, ctl: RelayControl, faults: FaultTimeline, world: str, dead: Callable[[], Collection[int]]
+) -> dict[str, Any]:
     notes = organize_shortfall(opts)
     for note in notes:
         progress(f"warning: {note}")
     start = asyncio.get_running_loop().time()
-    gone: set[int] = set()
     for second in range(1, math.ceil(opts.duration) + 1):
         until = min(float(second), opts.duration)
         while (elapsed := asyncio.get_running_loop().time() - start) < until:
             await _apply_faults(ctl, faults, elapsed)
             await ctl.sleep(min(0.1, until - elapsed))
-        stats = await ctl.hub("stats")
-        _report(stats, f"t={until:5.1f}/{opts.duration:g}s")
-        gone = _gone_robots(stats, opts.robots)
+        _report(await ctl.hub("stats"), f"t={until:5.1f}/{opts.duration:g}s")
     await _apply_faults(ctl, faults, float("inf"))  # what is left acts on the swarm phase
-    swarm = await organize_and_disperse(ctl, opts, lambda: gone) if opts.organize else {}
-    summary = await _summary(opts, ctl, world)
+    swarm = await organize_and_disperse(ctl, opts, dead) if opts.organize else {}
+    summary = await _summary(opts, ctl, world, dead)
     summary["faults"] = faults.applied
     summary["notes"] = notes
     problems = summary["problems"] + swarm.pop("problems", [])
@@ -524,7 +534,12 @@ async def ping_and_organize(opts: RunOptions, ctl: RelayControl, faults: FaultTi
 
 
 async def _follow_scenario(
-    opts: RunOptions, scenario: Scenario, ctl: RelayControl, faults: FaultTimeline, world: str
+    opts: RunOptions,
+    scenario: Scenario,
+    ctl: RelayControl,
+    faults: FaultTimeline,
+    world: str,
+    dead: Callable[[], Collection[int]],
 ) -> dict[str, Any]:
     loop = asyncio.get_running_loop()
     start = loop.time()
@@ -535,24 +550,18 @@ async def _follow_scenario(
         if loop.time() - start >= next_report:
             progress(f"t={next_report:5.1f}/{scenario.duration_s:g}s")
             next_report += 5.0
-    summary = await _summary(opts, ctl, world)
+    summary = await _summary(opts, ctl, world, dead)
     summary["problems"] = [p for p in summary["problems"] if p not in HEARING_PROBLEMS]  # no ping phase here
     summary.update(scenario=scenario.name, faults=faults.applied, duration_s=scenario.duration_s)
     summary["ok"] = not summary["problems"]
     return summary
 
 
-async def _summary(opts: RunOptions, ctl: RelayControl, world: str) -> dict[str, Any]:
+async def _summary(
+    opts: RunOptions, ctl: RelayControl, world: str, dead: Callable[[], Collection[int]]
+) -> dict[str, Any]:
     stats = {"world": world, **await ctl.hub("stats")}
-    return summarise(stats, await statuses(ctl, opts.robots, _gone_robots(stats, opts.robots)), opts, world, ENDPOINT)
-
-
-def _gone_robots(stats: dict[str, Any], robots: int) -> set[int]:
-    """Robots 1..``robots`` the hub had and no longer has: in lockstep, a process killed from outside (taken as
-    gone, and recorded as a death by the run's supervision); in model time, none. They are not asked, and nothing
-    is expected of them."""
-    nodes = stats["nodes"]
-    return {rid for rid in range(1, robots + 1) if not nodes.get(f"robot-{rid}", {"attached": True})["attached"]}
+    return summarise(stats, await statuses(ctl, opts.robots, dead()), opts, world, ENDPOINT)
 
 
 def _report(stats: dict[str, Any], what: str) -> None:

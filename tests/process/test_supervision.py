@@ -110,22 +110,28 @@ class _StderrLines:
 
     def __init__(self, proc: subprocess.Popen[str]) -> None:
         self._lines: list[str] = []
+        self._ended = False
         self._new = threading.Condition()
         self._thread = threading.Thread(target=self._read, args=(proc,), daemon=True)
         self._thread.start()
 
     def _read(self, proc: subprocess.Popen[str]) -> None:
         assert proc.stderr is not None
-        for line in proc.stderr:
+        try:
+            for line in proc.stderr:
+                with self._new:
+                    self._lines.append(line)
+                    self._new.notify_all()
+        finally:  # the end of its stderr: a wait for a line that will never come ends now
             with self._new:
-                self._lines.append(line)
+                self._ended = True
                 self._new.notify_all()
 
     def wait_for(self, text: str, timeout: float) -> bool:
         """True once a line holding ``text`` has come; False after ``timeout`` seconds or at its end."""
         with self._new:
             return self._new.wait_for(
-                lambda: any(text in line for line in self._lines) or not self._thread.is_alive(), timeout
+                lambda: any(text in line for line in self._lines) or self._ended, timeout
             ) and any(text in line for line in self._lines)
 
     def text(self) -> str:
@@ -166,6 +172,7 @@ def test_a_run_survives_a_robot_killed_from_outside(tmp_path: Path) -> None:
         out, err = run.stdout.read() if run.stdout else "", stderr.text()
     finally:
         run.kill()
+        run.wait()
     assert run.returncode == DEATHS_ONLY, err[-3000:]
     final = json.loads(out)
     assert final["ok"] and final["problems"] == [] and final["invariants"] == "all hold", final["problems"]
@@ -176,6 +183,39 @@ def test_a_run_survives_a_robot_killed_from_outside(tmp_path: Path) -> None:
     died = [json.loads(line) for line in (record / "supervision.jsonl").read_text().splitlines()]
     assert [d["process"] for d in died] == ["robot-5"]
     assert "robot-5 died (SIGKILL)" in err
+
+
+def test_a_lockstep_robot_taken_as_gone_while_alive_fails_the_run(tmp_path: Path) -> None:
+    """A robot process that stops answering (paused, not dead) is taken as gone by the lockstep hub after 10 s
+    of wall time and the world goes on; the run does not excuse it as it excuses a death: it says so."""
+    env, record = _env(tmp_path), tmp_path / "record"
+    run = _run(env, record, "paused", "--robots", "2", "--duration", "3", "--json", "--clock", "lockstep")
+    stderr = _StderrLines(run)
+    try:
+        assert stderr.wait_for("t=  1.0/3s", timeout=60), stderr.text()[-3000:]
+        pid = _running_summary(record, run, "processes")["processes"]["robot-2"]
+        os.kill(pid, signal.SIGSTOP)
+        assert _wait_gone(record, run, timeout=30), stderr.text()[-3000:]
+        os.kill(pid, signal.SIGCONT)
+        run.wait(timeout=120)
+        out = run.stdout.read() if run.stdout else ""
+    finally:
+        run.kill()
+        run.wait()
+    final = json.loads(out)
+    assert run.returncode == 1 and not final["ok"], final["problems"]
+    assert [g["node"] for g in final["gone"]] == ["robot-2"] and final["deaths"] == []
+    assert any("robot 2 could not be told to stop" in p for p in final["problems"]), final["problems"]
+
+
+def _wait_gone(record: Path, run: subprocess.Popen[str], timeout: float) -> bool:
+    """Until the hub's log says a node was taken as gone (True), or ``timeout`` seconds."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and run.poll() is None:
+        if "is gone at model time" in (record / "logs" / "hub.log").read_text(errors="replace"):
+            return True
+        time.sleep(0.2)
+    return False
 
 
 def test_a_robot_death_ends_the_run_under_fail_fast(tmp_path: Path) -> None:
