@@ -185,6 +185,25 @@ def test_a_run_survives_a_robot_killed_from_outside(tmp_path: Path) -> None:
     assert "robot-5 died (SIGKILL)" in err
 
 
+def test_a_wall_clock_run_survives_a_robot_killed_during_its_pings(tmp_path: Path) -> None:
+    """The wall-clock path of the same: no swarm to form (that depends on the machine's load), only the death
+    recorded, the dead robot left out of the hearing checks, and the exit status saying robots died."""
+    env, record = _env(tmp_path), tmp_path / "record"
+    run = _run(env, record, "survive-wall", "--robots", "3", "--duration", "4", "--json")
+    try:
+        summary = _running_summary(record, run, "totals")  # the ping phase has begun: every robot attached
+        os.kill(summary["processes"]["robot-3"], signal.SIGKILL)
+        out, err = run.communicate(timeout=60)
+    finally:
+        run.kill()
+        run.wait()
+    assert run.returncode == DEATHS_ONLY, err[-3000:]
+    final = json.loads(out)
+    assert final["ok"] and final["problems"] == [], final["problems"]
+    assert [(d["process"], d["cause"]) for d in final["deaths"]] == [("robot-3", "SIGKILL")]
+    assert final["nodes"]["robot-3"]["died"] is True and "died" not in final["nodes"]["robot-2"]
+
+
 def test_a_lockstep_robot_taken_as_gone_while_alive_fails_the_run(tmp_path: Path) -> None:
     """A robot process that stops answering (paused, not dead) is taken as gone by the lockstep hub after 10 s
     of wall time and the world goes on; the run does not excuse it as it excuses a death: it says so."""

@@ -9,7 +9,7 @@ import time
 
 from radio_hub.environment import EnvironmentConfig
 from radio_hub.link import wire
-from radio_hub.shell.lockstep import LockstepHub
+from radio_hub.shell.lockstep import _GRANT_TYPE, LockstepHub, _grant_of
 
 
 def _hub(expect: int = 2) -> LockstepHub:
@@ -93,3 +93,13 @@ def test_a_node_that_attaches_and_never_says_idle_does_not_hold_the_start_for_go
     _up(hub, "robot-1", wire.Idle(seen=0, next_s=0.5, n=3, s=11))
     assert hub.rounds > 0 and "robot-2" not in hub.nodes
     assert any("did not come" in d["why"] for d in hub.dead) and any(d["node"] == "robot-2" for d in hub.dead)
+
+
+def test_every_grant_carries_the_bytes_a_node_looks_for_and_nothing_else_is_taken_for_one() -> None:
+    """A node's zenoh thread decodes only messages holding ``_GRANT_TYPE``: every grant must hold them."""
+    for grant in (wire.Grant(), wire.Grant(at_s=1e300, n=2**63 - 1, s=7), wire.Grant(at_s=-0.0, n=1)):
+        data = grant.encode()
+        assert _GRANT_TYPE in data and _grant_of(data) == grant
+    idle = wire.Idle(seen=3, next_s=0.5).encode()
+    frame = wire.Received(psdu=b"\xa1t\xa5grant", rssi_dbm=-50.0).encode()  # the bytes inside a frame's payload
+    assert _grant_of(idle) is None and _grant_of(frame) is None
