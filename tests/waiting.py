@@ -1,9 +1,10 @@
-"""Waiting on real processes in tests: poll for a condition, fail saying what was awaited."""
+"""Waiting on real processes in tests: poll for a condition, or read a child's output up to a line; fail saying
+what was awaited."""
 
 from __future__ import annotations
 
 import time
-from typing import Any
+from typing import IO, Any
 
 
 def wait_for(what: str, probe: Any, timeout: float, every: float = 0.5) -> Any:
@@ -20,3 +21,16 @@ def wait_for(what: str, probe: Any, timeout: float, every: float = 0.5) -> Any:
         if time.monotonic() >= deadline:
             raise AssertionError(f"{what}: not within {timeout} s (last: {last!r})")
         time.sleep(every)
+
+
+def read_until(stream: IO[str] | None, text: str, timeout: float) -> str:
+    """A child's output read line by line up to the first line holding ``text``, or all of it that came before
+    its end or ``timeout`` seconds (the read blocks: a child that falls silent is left to the test's timeout)."""
+    assert stream is not None, "the child's output is not a pipe"
+    seen, deadline = "", time.monotonic() + timeout
+    while text not in seen and time.monotonic() < deadline:
+        line = stream.readline()
+        if not line:  # its end
+            break
+        seen += line
+    return seen

@@ -13,6 +13,8 @@ from pathlib import Path
 
 import pytest
 
+from ..waiting import read_until
+
 pytestmark = [pytest.mark.process, pytest.mark.long]
 
 
@@ -28,9 +30,7 @@ def _started_run(robots: int, *args: str) -> subprocess.Popen[str]:
         stderr=subprocess.PIPE,
         text=True,
     )
-    seen, deadline = "", time.monotonic() + 60
-    while f"{robots}/{robots} robots attached" not in seen and time.monotonic() < deadline:
-        seen += proc.stderr.readline()
+    seen = read_until(proc.stderr, f"{robots}/{robots} robots attached", timeout=60)
     if f"{robots}/{robots} robots attached" not in seen:
         proc.kill()
         raise AssertionError(seen)

@@ -8,7 +8,6 @@ import os
 import signal
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -17,6 +16,8 @@ import pytest
 
 from petswarm.lab.processes import free_tcp_port
 from petswarm.lab.supervision import DEATHS_ONLY
+
+from ..waiting import read_until, wait_for
 
 pytestmark = pytest.mark.process
 
@@ -105,42 +106,6 @@ def _run(env: dict[str, str], record: Path, world: str, *args: str) -> subproces
     return subprocess.Popen(argv, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
-class _StderrLines:
-    """A child's stderr, read line by line on a thread as it comes (its progress says where model time is)."""
-
-    def __init__(self, proc: subprocess.Popen[str]) -> None:
-        self._lines: list[str] = []
-        self._ended = False
-        self._new = threading.Condition()
-        self._thread = threading.Thread(target=self._read, args=(proc,), daemon=True)
-        self._thread.start()
-
-    def _read(self, proc: subprocess.Popen[str]) -> None:
-        assert proc.stderr is not None
-        try:
-            for line in proc.stderr:
-                with self._new:
-                    self._lines.append(line)
-                    self._new.notify_all()
-        finally:  # the end of its stderr: a wait for a line that will never come ends now
-            with self._new:
-                self._ended = True
-                self._new.notify_all()
-
-    def wait_for(self, text: str, timeout: float) -> bool:
-        """True once a line holding ``text`` has come; False after ``timeout`` seconds or at its end."""
-        with self._new:
-            return self._new.wait_for(
-                lambda: any(text in line for line in self._lines) or self._ended, timeout
-            ) and any(text in line for line in self._lines)
-
-    def text(self) -> str:
-        """Everything read so far (all of it once the child has ended and its pipe is drained)."""
-        self._thread.join(timeout=10)
-        with self._new:
-            return "".join(self._lines)
-
-
 def _running_summary(record: Path, run: subprocess.Popen[str], until: str, timeout: float = 30) -> dict[str, Any]:
     """The summary the run rewrites as it goes, once its phase has reached ``until`` (a key of it)."""
     deadline = time.monotonic() + timeout
@@ -162,14 +127,14 @@ def test_a_run_survives_a_robot_killed_from_outside(tmp_path: Path) -> None:
     env, record = _env(tmp_path), tmp_path / "record"
     argv = ["--robots", "5", "--organize", "3", "--duration", "20", "--json", "--clock", "lockstep"]
     run = _run(env, record, "survive", *argv)
-    stderr = _StderrLines(run)
     try:
         # model time runs once every node is there: the robots are attached, and the swarm forms at 20 s
-        assert stderr.wait_for("t=  2.0/20s", timeout=60), stderr.text()[-3000:]
+        seen = read_until(run.stderr, "t=  2.0/20s", timeout=60)
+        assert "t=  2.0/20s" in seen, seen[-3000:]
         summary = _running_summary(record, run, "processes")
         os.kill(summary["processes"]["robot-5"], signal.SIGKILL)
-        run.wait(timeout=120)
-        out, err = run.stdout.read() if run.stdout else "", stderr.text()
+        out, rest = run.communicate(timeout=120)
+        err = seen + rest
     finally:
         run.kill()
         run.wait()
@@ -209,15 +174,15 @@ def test_a_lockstep_robot_taken_as_gone_while_alive_fails_the_run(tmp_path: Path
     of wall time and the world goes on; the run does not excuse it as it excuses a death: it says so."""
     env, record = _env(tmp_path), tmp_path / "record"
     run = _run(env, record, "paused", "--robots", "2", "--duration", "3", "--json", "--clock", "lockstep")
-    stderr = _StderrLines(run)
     try:
-        assert stderr.wait_for("t=  1.0/3s", timeout=60), stderr.text()[-3000:]
+        seen = read_until(run.stderr, "t=  1.0/3s", timeout=60)
+        assert "t=  1.0/3s" in seen, seen[-3000:]
         pid = _running_summary(record, run, "processes")["processes"]["robot-2"]
         os.kill(pid, signal.SIGSTOP)
-        assert _wait_gone(record, run, timeout=30), stderr.text()[-3000:]
+        hub_log = record / "logs" / "hub.log"
+        wait_for("robot-2 taken as gone", lambda: "robot-2 is gone" in hub_log.read_text(errors="replace"), 30)
         os.kill(pid, signal.SIGCONT)
-        run.wait(timeout=120)
-        out = run.stdout.read() if run.stdout else ""
+        out, _ = run.communicate(timeout=120)
     finally:
         run.kill()
         run.wait()
@@ -225,16 +190,6 @@ def test_a_lockstep_robot_taken_as_gone_while_alive_fails_the_run(tmp_path: Path
     assert run.returncode == 1 and not final["ok"], final["problems"]
     assert [g["node"] for g in final["gone"]] == ["robot-2"] and final["deaths"] == []
     assert any("robot 2 could not be told to stop" in p for p in final["problems"]), final["problems"]
-
-
-def _wait_gone(record: Path, run: subprocess.Popen[str], timeout: float) -> bool:
-    """Until the hub's log says a node was taken as gone (True), or ``timeout`` seconds."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline and run.poll() is None:
-        if "is gone at model time" in (record / "logs" / "hub.log").read_text(errors="replace"):
-            return True
-        time.sleep(0.2)
-    return False
 
 
 def test_a_robot_death_ends_the_run_under_fail_fast(tmp_path: Path) -> None:
