@@ -791,8 +791,13 @@ class RadioClient:
     async def _reattach(self) -> None:
         orphans = [token for token in self._pending if token]  # sent before this attach: to the dead hub
         orphaned_frames, self._on_tx_done = self._on_tx_done, {}
-        attached = await self._request(0, self._attach_message(), resend_s=RESEND_S)
-
+        sent = self._attach_message()
+        attached = await self._request(0, sent, resend_s=RESEND_S)
+        # a configure while we attached (a robot going home as its swarm timed out) may have reached the new
+        # hub before our attach and been refused: the hub has the radio as the attach said, so say it again
+        while _configured(wanted := self._attach_message()) != _configured(sent):
+            sent = wanted
+            attached = await self._request(0, sent, resend_s=RESEND_S)
         self._adopt(attached)
         self.reattaches += 1
         self._settle_orphans(orphans, attached)
@@ -819,6 +824,11 @@ class RadioClient:
         fut = self._pending.get(token)
         if fut is not None and not fut.done():
             fut.set_result(msg)
+
+
+def _configured(attach: wire.Attach) -> tuple[int, int, int, tuple[float, ...]]:
+    """What of an attach a ``configure`` may change."""
+    return attach.short_addr, attach.pan_id, attach.channel, tuple(attach.position)
 
 
 def _tx_result(done: wire.TxDone) -> TxResult:

@@ -144,7 +144,8 @@ def test_the_hub_restarts_and_the_robots_reattach_and_carry_on_or_reorganize(mak
             break
         time.sleep(0.3)
     assert attached, nodes  # every robot attached itself to the new hub
-    assert _consistent(air), [air.cmd(rid, "status")["state"] for rid in (1, 2, 3, 4)]
+    radios = {rid: (s := air.cmd(rid, "status"))["state"] + f" pan {s['radio']['pan_id']:#x}" for rid in (1, 2, 3, 4)}
+    assert _consistent(air), (radios, {k: n["pan_id"] for k, n in air.stats()["nodes"].items() if n["attached"]})
     if air.cmd(1, "status")["state"] == "master-driving":
         air.cmd(1, "disperse", timeout=30)
         time.sleep(0.3)

@@ -16,12 +16,13 @@ class RecordingLink:
     def __init__(self) -> None:
         self.sent: list[wire.Message] = []
         self.on_down: Callable[[bytes], None] = lambda data: None
+        self.on_hub: Callable[[bool], None] = lambda present: None
         self.n = 0
 
     def open(
         self, node_id: str, instance: str, on_down: Callable[[bytes], None], on_hub: Callable[[bool], None]
     ) -> None:
-        self.on_down = on_down
+        self.on_down, self.on_hub = on_down, on_hub
 
     def put(self, data: bytes) -> None:
         self.sent.append(wire.decode(data))
@@ -74,5 +75,36 @@ def test_on_frame_takes_received_frames_instead_of_the_queue():
         assert queued.frame.payload == b"hi"
         assert [(f.frame.payload, f.rssi_dbm, f.end_us) for f in frames] == [(b"hi", -41.0, 4)]
         assert radio._rx.empty()
+
+    asyncio.run(scenario())
+
+
+def test_a_configure_refused_while_reattaching_is_carried_by_a_second_attach():
+    """A robot whose swarm timed out as the hub restarted: its configure (home PAN) reached the new hub before
+    its attach (swarm PAN) and was refused as "not attached"; the hub must end with the home PAN."""
+
+    async def scenario() -> None:
+        link = RecordingLink()
+        identity = RadioIdentity("n1", 0x1234, 1, 0xE74B, 11, (0.0, 0.0))
+        connecting = asyncio.ensure_future(RadioClient.connect(identity, link=link))
+        await asyncio.sleep(0)
+        link.down(wire.Attached(token=0, ext_addr=0x1234, short_addr=1, pan_id=0xE74B))
+        radio = await connecting
+        link.on_hub(True)  # the hub came back: attach again, on the swarm PAN
+        await asyncio.sleep(0)
+        assert isinstance(link.sent[-1], wire.Attach) and link.sent[-1].pan_id == 0xE74B
+        configuring = asyncio.ensure_future(radio.configure(pan_id=0x1000))
+        await asyncio.sleep(0)
+        configure = link.sent[-1]
+        assert isinstance(configure, wire.Configure)
+        link.down(wire.Error(token=configure.token, reason=wire.NOT_ATTACHED))
+        link.down(wire.Attached(token=0, ext_addr=0x1234, short_addr=1, pan_id=0xE74B))
+        for _ in range(5):  # the attach's answer wakes the re-attach, which looks at what is wanted now
+            await asyncio.sleep(0)
+        again = link.sent[-1]
+        assert isinstance(again, wire.Attach) and again.pan_id == 0x1000
+        link.down(wire.Attached(token=0, ext_addr=0x1234, short_addr=1, pan_id=0x1000))
+        assert (await asyncio.wait_for(configuring, 1.0)).pan_id == 0x1000
+        assert radio.identity.pan_id == 0x1000 and radio.reattaches == 1 and radio.faults.total == 0
 
     asyncio.run(scenario())
