@@ -6,6 +6,8 @@ from __future__ import annotations
 import math
 import time
 
+from ..waiting import wait_for
+
 # master at the origin; three more within IR range, each with its own heading (degrees)
 POSES = {1: (0.0, 0.0, 0.0), 2: (1.0, 0.0, 90.0), 3: (0.0, 1.2, 180.0), 4: (1.1, 1.0, -45.0)}
 NOISE_FREE_IR = {"relative_noise": 0.0, "noise_floor_counts": 0.0}
@@ -15,9 +17,28 @@ def _swarm_of_four(air, *extra: str) -> dict:
     for rid, (x, y, heading) in POSES.items():
         user = ["--user", "1"] if rid == 1 else []
         air.robot(rid, (x, y), 0x1000, 11, f"--heading={heading}", *user, *extra)
-    organized = air.cmd(1, "organize", timeout=30, count=3)
-    assert organized["members"] == [2, 3, 4], organized
-    return organized
+    return organize_all(air)
+
+
+def organize_all(air) -> dict:
+    """Robot 1 organizes robots 2-4: the starting point of the chaos tests, not what they test.
+
+    Organization is asserted in model time and lockstep (tests/model/test_formation*.py, test_lockstep.py),
+    where the machine's load cannot touch it. On the wall clock a robot starved of CPU misses a step's
+    deadline as a real one would, and is left out; the user then disperses and asks again, up to three times."""
+    organized: dict = {}
+    for _ in range(3):
+        organized = air.cmd(1, "organize", timeout=30, count=3)
+        if organized["members"] == [2, 3, 4]:
+            return organized
+        air.cmd(1, "disperse", timeout=30)
+        wait_for("robots 2-4 home after the disperse", lambda: _home(air), 10, every=0.2)
+    raise AssertionError(f"robot 1 organized {organized['members']} three times, not [2, 3, 4]")
+
+
+def _home(air) -> bool:
+    statuses = [air.cmd(rid, "status") for rid in (2, 3, 4)]
+    return all(s["state"] == "waiting" and s["radio"]["pan_id"] == 0x1000 for s in statuses)
 
 
 def _truth(me: int, other: int) -> tuple[float, float]:
