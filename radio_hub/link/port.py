@@ -445,7 +445,15 @@ class RadioClient:
     async def set_ir_mode(self, mode: str) -> None:
         """Switch the IR module: ``idle``, ``receive`` or ``transmit``; returns once the hub has it."""
         token = next(self._tokens)
-        await self._request(token, wire.SetIrMode(token=token, mode=mode), resend_s=RESEND_S)
+        try:
+            await self._request(token, wire.SetIrMode(token=token, mode=mode), resend_s=RESEND_S)
+        except RadioError as err:
+            if str(err) != wire.NOT_ATTACHED:
+                raise
+            # a restarted hub that has not had our attach yet: attach, then switch (a mode is idempotent)
+            await self._reattached()
+            token = next(self._tokens)
+            await self._request(token, wire.SetIrMode(token=token, mode=mode), resend_s=RESEND_S)
 
     async def ir_sample(self) -> IrSweep:
         """The next sweep of the 12 phototransistors (arrives only while receiving and something shines)."""

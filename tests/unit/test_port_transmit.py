@@ -108,3 +108,33 @@ def test_a_configure_refused_while_reattaching_is_carried_by_a_second_attach():
         assert radio.identity.pan_id == 0x1000 and radio.reattaches == 1 and radio.faults.total == 0
 
     asyncio.run(scenario())
+
+
+def test_an_ir_switch_refused_while_reattaching_is_made_once_attached():
+    """The IR module switched as the hub restarted: the new hub refuses it before our attach; the switch waits
+    for the attach and goes again, rather than failing the token schedule's step."""
+
+    async def scenario() -> None:
+        link = RecordingLink()
+        identity = RadioIdentity("n1", 0x1234, 1, 0xE74B, 11, (0.0, 0.0))
+        connecting = asyncio.ensure_future(RadioClient.connect(identity, link=link))
+        await asyncio.sleep(0)
+        link.down(wire.Attached(token=0, ext_addr=0x1234, short_addr=1, pan_id=0xE74B))
+        radio = await connecting
+        link.on_hub(True)
+        await asyncio.sleep(0)
+        switching = asyncio.ensure_future(radio.set_ir_mode("transmit"))
+        await asyncio.sleep(0)
+        refused = link.sent[-1]
+        assert isinstance(refused, wire.SetIrMode)
+        link.down(wire.Error(token=refused.token, reason=wire.NOT_ATTACHED))
+        link.down(wire.Attached(token=0, ext_addr=0x1234, short_addr=1, pan_id=0xE74B))
+        for _ in range(5):
+            await asyncio.sleep(0)
+        again = link.sent[-1]
+        assert isinstance(again, wire.SetIrMode) and again.mode == "transmit" and again.token != refused.token
+        link.down(wire.Attached(token=again.token, ext_addr=0x1234, short_addr=1, pan_id=0xE74B))
+        await asyncio.wait_for(switching, 1.0)
+        assert radio.reattaches == 1 and radio.faults.total == 0
+
+    asyncio.run(scenario())
