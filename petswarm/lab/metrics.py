@@ -149,16 +149,15 @@ def swarm_extent(positions: np.ndarray) -> float:
 
 def is_connected(positions: np.ndarray, sight_m: float) -> bool:
     """True when the graph of robots closer than ``sight_m`` is connected."""
-    n = len(positions)
     near = np.linalg.norm(positions[:, None] - positions[None], axis=2) < sight_m
-    seen, frontier = {0}, [0]
-    while frontier:
-        i = frontier.pop()
-        for j in np.flatnonzero(near[i]):
-            if int(j) not in seen:
-                seen.add(int(j))
-                frontier.append(int(j))
-    return len(seen) == n
+    reached = np.zeros(len(positions), dtype=bool)
+    reached[:1] = True
+    # grow the set reached from robot 0 by every neighbour of it at once (a tick's metric, 50 per model second)
+    while True:
+        grown = reached | near[reached].any(axis=0)
+        if (grown == reached).all():
+            return bool(reached.all())
+        reached = grown
 
 
 def _percentiles(values: list[float]) -> dict[str, float] | None:
