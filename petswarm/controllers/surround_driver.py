@@ -16,7 +16,7 @@ import weakref
 from typing import Any
 
 from petswarm import clock
-from petswarm.controllers.driving import sleep_until
+from petswarm.clock import sleep_until
 from petswarm.controllers.driving_core import Drive, Log, Telemetry
 from petswarm.controllers.surround_core import TELEMETRY_EVERY, SetIrMode, SurroundAction, SurroundCore
 from petswarm.controllers.surround_pilot import SurroundDriverConfig, SurroundPilot
@@ -63,16 +63,16 @@ class SurroundDriver:
         finally:
             SurroundTask.of_loop(asyncio.get_running_loop()).leave(self)
 
-    def step(self, batch: SweepBatch) -> None:
-        """Step the core on the radio's latest sample and sweep, and carry out what it asks (beaconing only
-        brings motor commands, records and telemetry: nothing to wait for)."""
+    def step(self, batch: SweepBatch, now: float) -> None:
+        """Step the core on the radio's latest sample and sweep at ``now``, and carry out what it asks
+        (beaconing only brings motor commands, records and telemetry: nothing to wait for)."""
         sensors = self.radio.sensors
         if sensors is None:
             return
         # read when the step runs, not when the sample came: a sweep of the same instant may be newer
         sweep = self.radio.beacons
         batch.prepare(self.pilot, sweep)
-        self.core.sensors_sample(sensors, sweep, clock.now())
+        self.core.sensors_sample(sensors, sweep, now)
         for action in self.core.actions():
             self._execute_now(action)
 
@@ -166,10 +166,11 @@ class SurroundTask:
             await self._wake.wait()
             self._wake.clear()
             fresh, self._fresh = list(self._fresh), {}
+            now = clock.now()
             for driver in fresh:
-                self._step(driver)
+                self._step(driver, now)
 
-    def _step(self, driver: SurroundDriver) -> None:
+    def _step(self, driver: SurroundDriver, now: float) -> None:
         member = self._members.get(driver)
         if member is None:
             return
@@ -177,7 +178,7 @@ class SurroundTask:
         if stepped.done() or (task is not None and (task.done() or task.cancelling())):
             return  # its robot is ending (killed, stopping): it steps no more, as its own loop would not
         try:
-            driver.step(self.sweeps)
+            driver.step(self.sweeps, now)
         except Exception as err:  # this robot's error ends this robot's surround task, not the others'
             stepped.set_exception(err)
 

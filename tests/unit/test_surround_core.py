@@ -178,7 +178,7 @@ class _StepDriver:
         self.radio = _StepRadio()
         self.fail = False
 
-    def step(self, sweeps: Any) -> None:
+    def step(self, sweeps: Any, now: float) -> None:
         self.steps.append(self.name)
         if self.fail:
             raise RuntimeError(f"{self.name} broke")
