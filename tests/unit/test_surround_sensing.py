@@ -244,3 +244,58 @@ def test_the_tracker_takes_a_sweep_in_any_order_of_its_beacons_row_by_row() -> N
         assert shuffled.positions.tobytes() == in_order.positions.tobytes()
         assert shuffled.velocities.tobytes() == in_order.velocities.tobytes()
     assert shuffled.velocity_of("robot-6") is not None
+
+
+class _ArrayTracker:
+    """The tracker's arithmetic as it was on arrays (numpy, row by row), to hold the plain-float one to its bits."""
+
+    def __init__(self) -> None:
+        self.names: list[str] = []
+        self.position = np.zeros((0, 2))
+        self.velocity = np.zeros((0, 2))
+        self.since = 0.0
+
+    def predict(self, own: np.ndarray, dt: float) -> None:
+        if self.names:
+            self.position = self.position + (self.velocity - np.asarray(own, dtype=float)) * dt
+        self.since += dt
+
+    def update(self, names: list[str], xy: np.ndarray, own: np.ndarray, alpha: float, beta: float) -> None:
+        period, self.since = self.since, 0.0
+        kept = [n for n in self.names if n in names]
+        order = kept + [n for n in names if n not in self.names]
+        fixed = xy[[names.index(n) for n in order]].reshape(-1, 2)
+        if period <= 0 or not kept:
+            position, velocity = fixed, np.tile(own, (len(order), 1))
+        else:
+            rows = [self.names.index(n) for n in kept]
+            innovation = fixed[: len(kept)] - self.position[rows]
+            position = np.concatenate([self.position[rows] + alpha * innovation, fixed[len(kept) :]])
+            velocity = np.concatenate(
+                [self.velocity[rows] + beta * innovation / period, np.tile(own, (len(order) - len(kept), 1))]
+            )
+        self.names, self.position, self.velocity = order, position.reshape(-1, 2), velocity.reshape(-1, 2)
+
+
+def test_the_tracker_in_plain_floats_gives_the_bits_the_array_arithmetic_gives() -> None:
+    rng = np.random.default_rng(12)
+    everyone = [f"robot-{i}" for i in range(12)] + ["user"]
+    for _ in range(40):
+        tracker, reference = BeaconTracker(), _ArrayTracker()
+        names = list(rng.choice(everyone, size=int(rng.integers(1, 8)), replace=False))
+        for _ in range(60):
+            own = rng.normal(0.0, 0.5, 2) * rng.choice([1.0, 0.0, 1e-300])
+            dt = float(rng.choice([0.04, 0.0, rng.uniform(0.0, 0.2)]))
+            tracker.predict(own, dt)
+            reference.predict(own, dt)
+            if rng.random() < 0.7:
+                if rng.random() < 0.3:  # beacons come and go, or the sweep lists them in another order
+                    names = list(rng.choice(everyone, size=int(rng.integers(0, 9)), replace=False))
+                elif rng.random() < 0.3:
+                    names = list(rng.permutation(names))
+                xy = rng.normal(0.0, 1.5, (len(names), 2))
+                tracker.update_many(names, xy, own)
+                reference.update(names, xy, own, tracker.alpha, tracker.beta)
+            assert tracker.names == reference.names
+            assert tracker.positions.tobytes() == reference.position.tobytes()
+            assert tracker.velocities.tobytes() == reference.velocity.tobytes()
