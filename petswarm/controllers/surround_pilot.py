@@ -146,8 +146,7 @@ class SurroundPilot:
         return self._drive(sensors, dt)
 
     def _track(self, sensors: OwnSensors, sweep: BeaconSweep, dt: float, now_s: float) -> None:
-        vx, vy = sensors.odometry[:2]
-        own_velocity = (float(vx), float(vy))
+        own_velocity = np.array(sensors.odometry[:2], dtype=float)
         self.tracker.predict(own_velocity, dt)
         if sweep.t_us != self._sweep_t_us:
             self._sweep_t_us, self._sweep_at = sweep.t_us, now_s
@@ -169,7 +168,7 @@ class SurroundPilot:
         ranges = sensors.ranges_list()
         echoes = echo_list(ranges, *self._ring(sensors.angles_rad), config.law.robot_radius_m)
         neighbours, obstacles, human, dropped = sense_lists(
-            tracker.names, tracker.position_rows, echoes, config.human_id, self._sensing
+            tracker.names, tracker.positions, echoes, config.human_id, self._sensing
         )
         if not self.engaged and human is None:
             return None
@@ -177,13 +176,13 @@ class SurroundPilot:
         velocity = (float(sensors.odometry[0]), float(sensors.odometry[1]))
         controller = self.controller
         if isinstance(controller, ImprovedSurroundController):
-            names, moving = tracker.names, tracker.velocity_rows
+            names, moving = tracker.names, tracker.velocities.tolist()
             others = [v for name, v in zip(names, moving, strict=True) if name != config.human_id]
             own = tracker.velocity_of(config.human_id)
             # the improved law keeps off the human's body itself (his centre and velocity): his surface point,
             # which sensing put last among the obstacles, is left out
             echoes = obstacles if human is None else obstacles[:-1]
-            walls = self._remember(sensors, tracker.names, tracker.position_rows, velocity, dt)
+            walls = self._remember(sensors, tracker.names, tracker.positions, velocity, dt)
             vx, vy = controller.step_plain(neighbours, echoes, human, velocity, dt, own, others, walls)
         else:
             vx, vy = controller.step_plain(neighbours, obstacles, human, velocity, dt)
@@ -197,12 +196,7 @@ class SurroundPilot:
         return vx, vy
 
     def _remember(
-        self,
-        sensors: OwnSensors,
-        names: list[str],
-        positions: list[list[float]],
-        velocity: tuple[float, float],
-        dt: float,
+        self, sensors: OwnSensors, names: list[str], positions: np.ndarray, velocity: tuple[float, float], dt: float
     ) -> list[tuple[float, float]]:
         """The echo memory's step (``surround_memory``): the wall points the law must stop short of."""
         ranges = sensors.ranges_list()

@@ -199,10 +199,8 @@ class BeaconTracker:
     keeps a velocity of its own (an alpha-beta filter on its fixes, in the robot's non-turning frame), so a
     neighbour driving along stays put relative to us.
 
-    The tracks are kept as plain float pairs (one row per beacon, in the order they were first seen): a step
-    moves some twenty of them, where numpy's per-call overhead was most of the cost. Every row is worked out
-    with the same IEEE operations, in the same order, as the arrays did (x + (v - own) * dt,
-    x + alpha * innovation, v + beta * innovation / period), so the tracks are the same bits.
+    The tracks are kept as arrays (one row per beacon, in the order they were first seen), so a step costs
+    a few array operations whatever the number of beacons.
     """
 
     def __init__(self, alpha: float = TRACK_ALPHA, beta: float = TRACK_BETA) -> None:
@@ -211,18 +209,18 @@ class BeaconTracker:
         self.alpha, self.beta = alpha, beta
         self._names: list[str] = []
         self._rows: dict[str, int] = {}
-        self._position: list[list[float]] = []
-        self._velocity: list[list[float]] = []
+        self._position = np.zeros((0, 2))
+        self._velocity = np.zeros((0, 2))
         """Each beacon's own velocity (not relative to us), in our frame."""
         self._since_fix = 0.0
-        self._reorder: tuple[list[str], list[str], list[int] | None] = ([], [], None)
+        self._reorder: tuple[list[str], list[str], np.ndarray | None] = ([], [], None)
         """The last ``_same_beacons`` answer that needed a reordering: the sweep's names, the tracks'
         names (that very list) and the order."""
 
     @property
     def points(self) -> dict[str, np.ndarray]:
         """The tracked beacons' positions now, in the robot's frame."""
-        return {name: np.array(xy, dtype=float) for name, xy in zip(self._names, self._position, strict=True)}
+        return dict(zip(self._names, self._position, strict=True))
 
     @property
     def names(self) -> list[str]:
@@ -232,21 +230,11 @@ class BeaconTracker:
     @property
     def positions(self) -> np.ndarray:
         """The tracked beacons' positions now (k, 2), in the order of ``names``."""
-        return np.array(self._position, dtype=float).reshape(-1, 2)
-
-    @property
-    def position_rows(self) -> list[list[float]]:
-        """``positions`` as [x, y] rows of floats (never changed in place: a predict or update makes new rows)."""
         return self._position
 
     @property
     def velocities(self) -> np.ndarray:
         """The tracked beacons' own velocities (k, 2), in the order of ``names``, in the robot's frame."""
-        return np.array(self._velocity, dtype=float).reshape(-1, 2)
-
-    @property
-    def velocity_rows(self) -> list[list[float]]:
-        """``velocities`` as [vx, vy] rows of floats (never changed in place)."""
         return self._velocity
 
     def velocity_of(self, name: str) -> tuple[float, float] | None:
@@ -254,20 +242,16 @@ class BeaconTracker:
         row = self._rows.get(name)
         if row is None:
             return None
-        vx, vy = self._velocity[row]
+        vx, vy = self._velocity[row].tolist()
         return vx, vy
 
-    def predict(self, own_velocity: np.ndarray | tuple[float, float], dt: float) -> None:
+    def predict(self, own_velocity: np.ndarray, dt: float) -> None:
         """Move every track ``dt`` seconds on: it drives at its velocity, we at ``own_velocity`` (odometry)."""
         if not dt >= 0:
             raise ValueError(f"dt must be >= 0, not {dt!r}")
         if self._names:
-            ox, oy = _pair(own_velocity)
-            # new rows, never written in place: points handed out before stay as they were
-            self._position = [
-                [x + (vx - ox) * dt, y + (vy - oy) * dt]
-                for (x, y), (vx, vy) in zip(self._position, self._velocity, strict=True)
-            ]
+            # a new array, never written in place: points handed out before stay as they were
+            self._position = self._position + (self._velocity - np.asarray(own_velocity, dtype=float)) * dt
         self._since_fix += dt
 
     def update(self, fixes: dict[str, np.ndarray], own_velocity: np.ndarray) -> None:
@@ -277,54 +261,44 @@ class BeaconTracker:
         xy = np.array([np.asarray(fixes[n], dtype=float) for n in names], dtype=float).reshape(-1, 2)
         self.update_many(names, xy, own_velocity)
 
-    def update_many(self, names: list[str], xy: np.ndarray, own_velocity: np.ndarray | tuple[float, float]) -> None:
+    def update_many(self, names: list[str], xy: np.ndarray, own_velocity: np.ndarray) -> None:
         """``update`` with the fixes as arrays: ``names`` (k) and their positions ``xy`` (k, 2)."""
-        own = list(_pair(own_velocity))
+        own = np.asarray(own_velocity, dtype=float)
         period = self._since_fix
         self._since_fix = 0.0
-        fixed = np.asarray(xy, dtype=float).reshape(-1, 2).tolist()
         if period > 0 and names:
             order = self._same_beacons(names)
             if order is not None:  # the same beacons as last sweep: every track goes on, in its row
-                if order is not _IN_ORDER:
-                    fixed = [fixed[i] for i in order]
-                self._position, self._velocity = self._corrected(fixed, self._position, self._velocity, period)
+                fixed = np.asarray(xy, dtype=float).reshape(-1, 2)
+                innovation = fixed[order] - self._position
+                self._position = self._position + self.alpha * innovation
+                self._velocity = self._velocity + self.beta * innovation / period
                 return
         fix_row = {n: i for i, n in enumerate(names)}
         old = self._rows
         kept = [n for n in self._names if n in fix_row]  # tracks go on in their order, new ones after
         new = [n for n in names if n not in old]
         order = kept + new
-        if order != names:
-            fixed = [fixed[fix_row[n]] for n in order]
+        fixed = xy[[fix_row[n] for n in order]] if order != names else np.asarray(xy, dtype=float)
         if period <= 0 or not kept:
-            position, velocity = fixed, [list(own) for _ in order]
+            position, velocity = fixed, np.tile(own, (len(order), 1))
         else:
             k = len(kept)
             if kept == self._names:  # every track goes on, in its row
                 tracked, moving = self._position, self._velocity
             else:
                 rows = [old[n] for n in kept]
-                tracked, moving = [self._position[r] for r in rows], [self._velocity[r] for r in rows]
-            position, velocity = self._corrected(fixed[:k], tracked, moving, period)
-            position += fixed[k:]
-            velocity += [list(own) for _ in new]
+                tracked, moving = self._position[rows], self._velocity[rows]
+            innovation = fixed[:k] - tracked
+            position = tracked + self.alpha * innovation
+            velocity = moving + self.beta * innovation / period
+            if new:
+                position = np.concatenate([position, fixed[k:]])
+                velocity = np.concatenate([velocity, np.tile(own, (len(new), 1))])
         self._names, self._rows = order, {n: i for i, n in enumerate(order)}
-        self._position, self._velocity = position, velocity
+        self._position, self._velocity = position.reshape(-1, 2), velocity.reshape(-1, 2)
 
-    def _corrected(
-        self, fixed: list[list[float]], tracked: list[list[float]], moving: list[list[float]], period: float
-    ) -> tuple[list[list[float]], list[list[float]]]:
-        """The tracks moved toward their fixes: x + alpha * innovation, v + beta * innovation / period."""
-        alpha, beta = self.alpha, self.beta
-        position, velocity = [], []
-        for (fx, fy), (x, y), (vx, vy) in zip(fixed, tracked, moving, strict=True):
-            ix, iy = fx - x, fy - y
-            position.append([x + alpha * ix, y + alpha * iy])
-            velocity.append([vx + beta * ix / period, vy + beta * iy / period])
-        return position, velocity
-
-    def _same_beacons(self, names: list[str]) -> list[int] | slice | None:
+    def _same_beacons(self, names: list[str]) -> np.ndarray | slice | None:
         """When ``names`` are the tracked beacons, perhaps in another order: the row of ``names`` for each track
         (``_IN_ORDER`` when the orders agree), else None. A sweep lists its beacons in its own order, most often
         the same from sweep to sweep, so the last answer is kept."""
@@ -336,20 +310,14 @@ class BeaconTracker:
         if len(names) != len(self._names) or set(names) != self._rows.keys():
             return None
         row = {n: i for i, n in enumerate(names)}
-        order = [row[n] for n in self._names]
+        order = np.array([row[n] for n in self._names], dtype=np.intp)
         self._reorder = (list(names), self._names, order)
         return order
 
     def clear(self) -> None:
         """Forget every beacon (the sweeps stopped)."""
         self._names, self._rows = [], {}
-        self._position, self._velocity = [], []
-
-
-def _pair(vector: np.ndarray | tuple[float, float]) -> tuple[float, float]:
-    """A velocity (2,) as two floats, as numpy would take it into an array of float64."""
-    x, y = (vector.tolist() if isinstance(vector, np.ndarray) else vector)[:2]
-    return float(x), float(y)
+        self._position, self._velocity = np.zeros((0, 2)), np.zeros((0, 2))
 
 
 def echo_points(ranges_m: np.ndarray, angles_rad: np.ndarray, robot_radius_m: float) -> np.ndarray:
@@ -395,7 +363,7 @@ def sense_many(
     """``sense`` with the beacons as arrays: ``names`` (k) at ``xy`` (k, 2)."""
     xy = np.asarray(xy, dtype=float).reshape(-1, 2)
     echoes = np.asarray(echoes, dtype=float).reshape(-1, 2)
-    neighbours, obstacles, human, dropped = sense_lists(names, xy.tolist(), echoes.tolist(), human_id, config)
+    neighbours, obstacles, human, dropped = sense_lists(names, xy, echoes.tolist(), human_id, config)
     return SurroundSensing(
         np.array(neighbours, dtype=float).reshape(-1, 2),
         np.array(obstacles, dtype=float).reshape(-1, 2),
@@ -408,11 +376,12 @@ Point = tuple[float, float]
 
 
 def sense_lists(
-    names: list[str], rows: list[list[float]], echoes: list[Point], human_id: str, config: SensingConfig
+    names: list[str], xy: np.ndarray, echoes: list[Point], human_id: str, config: SensingConfig
 ) -> tuple[list[list[float]], list[Point], list[float] | None, int]:
-    """``sense_many`` in plain floats (what a pilot step runs): the beacons ``names`` at ``rows`` ([x, y] each),
-    the echo points; returns the neighbours, the obstacle points, the human (or None) and how many echoes a
+    """``sense_many`` in plain floats (what a pilot step runs): the beacons ``names`` at ``xy`` (k, 2), the
+    echo points; returns the neighbours, the obstacle points, the human (or None) and how many echoes a
     beacon explained."""
+    rows = xy.tolist()
     at = names.index(human_id) if human_id in names else None
     human = None if at is None else rows[at]
     neighbours = rows if at is None else rows[:at] + rows[at + 1 :]
@@ -425,16 +394,16 @@ def sense_lists(
         obstacles = [p for p in echoes if not _explained(p, rows, reaches)]
     dropped = len(echoes) - len(obstacles)
     if at is not None:
-        obstacles = [*obstacles, _surface_toward_me(np.array(rows[at], dtype=float), config.person_radius_m)]
+        obstacles = [*obstacles, _surface_toward_me(xy[at], config.person_radius_m)]
     return neighbours, obstacles, human, dropped
 
 
 def explained_echoes(
-    points: list[Point], names: list[str], rows: list[list[float]], human_id: str, config: SensingConfig
+    points: list[Point], names: list[str], xy: np.ndarray, human_id: str, config: SensingConfig
 ) -> list[bool]:
-    """Per echo point (nan for a cone without echo: False), whether a tracked beacon's body (at ``rows``,
-    [x, y] each) explains it, as ``sense_lists`` decides when it drops echoes (the improved law's echo memory
-    keeps only the others)."""
+    """Per echo point (nan for a cone without echo: False), whether a tracked beacon's body explains it, as
+    ``sense_lists`` decides when it drops echoes (the improved law's echo memory keeps only the others)."""
+    rows = xy.tolist()
     radius = config.robot_radius_m + config.echo_match_m
     person = config.person_radius_m + config.echo_match_m
     reaches = [person if name == human_id else radius for name in names]
