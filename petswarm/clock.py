@@ -177,6 +177,25 @@ class LockstepLoop(ModelClockLoop):
         return super().wait_quiet(real_select)
 
 
+async def sleep_until(when: float) -> None:
+    """Sleep until the loop's clock reads ``when`` (not at all if it already does). ``call_at`` takes the
+    deadline itself: ``asyncio.sleep(when - now)`` would add it back to ``now`` and may miss it by a rounding."""
+    if when <= now():
+        return
+    loop = asyncio.get_running_loop()
+    woken = loop.create_future()
+    handle = loop.call_at(when, _wake, woken)
+    try:
+        await woken
+    finally:
+        handle.cancel()
+
+
+def _wake(future: asyncio.Future[None]) -> None:
+    if not future.done():
+        future.set_result(None)
+
+
 def now() -> float:
     """Monotonic seconds on the running loop's clock (model time on a ``ModelClockLoop``)."""
     try:

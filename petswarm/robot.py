@@ -141,6 +141,7 @@ class Robot:
         self.formation = NetworkFormation(
             self.rf, self.sequence, self.mpm, self.log, formation_config, self.rng, config.user, self._swarm_changed
         )
+        self.formation.rests = config.formation_mode == "surround"
         self.ir = IrModuleManager(radio)
         self.locations = RelativeLocationManager()
         self.schedule = IrTokenSchedule(

@@ -25,6 +25,7 @@ import asyncio
 from typing import Any
 
 from petswarm import clock
+from petswarm.clock import sleep_until
 from petswarm.controllers.driving_core import (
     BROADCAST_TIMER,
     CONTROL,
@@ -57,25 +58,6 @@ __all__ = ["Driver", "DrivingConfig", "EchoRanges", "sleep_until"]
 
 FORMATION_ERRORS = (FormationError, RadioError, HubUnavailable, TransitionError)
 """How a formation request the driver asked for can fail (recorded, never fatal)."""
-
-
-async def sleep_until(when: float) -> None:
-    """Sleep until the loop's clock reads ``when`` (not at all if it already does). ``call_at`` takes the
-    deadline itself: ``asyncio.sleep(when - now)`` would add it back to ``now`` and may miss it by a rounding."""
-    if when <= clock.now():
-        return
-    loop = asyncio.get_running_loop()
-    woken = loop.create_future()
-    handle = loop.call_at(when, _wake, woken)
-    try:
-        await woken
-    finally:
-        handle.cancel()
-
-
-def _wake(future: asyncio.Future[None]) -> None:
-    if not future.done():
-        future.set_result(None)
 
 
 class Driver:

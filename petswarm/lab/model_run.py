@@ -128,8 +128,9 @@ class MemoryAir:
             on_down = self._nodes.get(node_id)
             if on_down is None:  # a node that left meanwhile
                 continue
-            for data in messages:
-                self.loop.call_soon(on_down, data)
+            # one callback per node for all its messages, in order: as a callback each, every one of them runs
+            # before anything they make ready (that is queued behind every node's delivery either way)
+            self.loop.call_soon(self._deliver, on_down, messages)
             delivered = True
         if delivered:
             return True
@@ -140,6 +141,17 @@ class MemoryAir:
         for future in waiting:
             future.set_result(None)
         return bool(waiting)
+
+    def _deliver(self, on_down: Callable[[bytes | Message], None], messages: list[bytes | Message]) -> None:
+        """A node's messages of this round, one after another; a message whose handling fails is reported as
+        a callback's error is, and the next ones still come."""
+        for data in messages:
+            try:
+                on_down(data)
+            except (SystemExit, KeyboardInterrupt):
+                raise
+            except BaseException as err:
+                self.loop.call_exception_handler({"message": f"Exception in callback {on_down!r}", "exception": err})
 
     async def settled(self) -> None:
         """Until every message of this instant, held both ways, has been handled (no model time passes)."""

@@ -106,6 +106,9 @@ class NetworkFormation:
         """Dissolutions waiting for the request lock (kept: the loop holds only weak references to tasks)."""
         self._busy = asyncio.Lock()
         self._member_lock = asyncio.Lock()
+        self.rests = False
+        """Let the watch stop waking while there is nothing to watch (a surround robot's: see ``watch``)."""
+        self._stirred = asyncio.Event()
 
     # -- what the robot and the driver read and set ------------------------------------------------
 
@@ -142,6 +145,7 @@ class NetworkFormation:
         """The core, told what the radio is now (its address and PAN may have been configured meanwhile)."""
         identity = self.rf.radio.identity
         self.core.me, self.core.pan_id = identity.short_addr, identity.pan_id
+        self._stirred.set()  # the core may start a timer: a resting watch looks again
         return self.core
 
     # -- master side -------------------------------------------------------------------------------
@@ -200,20 +204,41 @@ class NetworkFormation:
             await self._run(self._core().receive(incoming, clock.now()))
 
     async def watch(self) -> None:
-        """Member-side timeouts: a candidate never told the result, a member whose master went silent."""
+        """Member-side timeouts: a candidate never told the result, a member whose master went silent.
+
+        With ``rests`` (a surround robot, which never organizes) the watch stops waking while the core has no
+        timer and the hub is there: a tick then does nothing (the hub's absence only moves a deadline that
+        is set afresh whenever a timer starts), and these ticks were 20 a second per robot. Whatever the core
+        is told wakes it (``_core``), and it takes up its ticks again on the same grid of instants."""
         while True:
             await asyncio.sleep(WATCH_PERIOD_S)
-            if not self.rf.radio.hub_present:
-                self.core.hub_absent(clock.now())
-                continue
-            timer = self.core.get_timer()
-            if timer is None or clock.now() <= timer:
-                continue
-            try:
-                async with self._member_lock:
-                    await self._run(self._core().handle_timer(clock.now()))
-            except Exception as err:  # a hub hiccup must not end the robot; the next tick tries again
-                self._error("watch", err)
+            if self.rests and self.rf.radio.hub_present and self.core.get_timer() is None:
+                await self._rest()
+            await self._tick()
+
+    async def _tick(self) -> None:
+        if not self.rf.radio.hub_present:
+            self.core.hub_absent(clock.now())
+            return
+        timer = self.core.get_timer()
+        if timer is None or clock.now() <= timer:
+            return
+        try:
+            async with self._member_lock:
+                await self._run(self._core().handle_timer(clock.now()))
+        except Exception as err:  # a hub hiccup must not end the robot; the next tick tries again
+            self._error("watch", err)
+
+    async def _rest(self) -> None:
+        """Until the core is told something, then until the next tick of the grid the watch was on (a tick at
+        this instant has been: ticks are timers, which run before the instant's messages)."""
+        last = clock.now()
+        self._stirred.clear()
+        await self._stirred.wait()
+        at = last + WATCH_PERIOD_S
+        while at <= clock.now():
+            at = at + WATCH_PERIOD_S  # as each tick would have set it: its instant plus the period
+        await clock.sleep_until(at)
 
     # -- carrying actions out ----------------------------------------------------------------------
 

@@ -3,6 +3,7 @@ every machine), and a robot's end (kill, stop) ends everything it had started.""
 
 from __future__ import annotations
 
+import asyncio
 from typing import Any
 
 from .harness import LOSSLESS, ModelWorld, run_model_time
@@ -78,3 +79,27 @@ def test_sensor_and_motor_messages_are_handed_over_in_memory_and_checked_as_thei
         assert hub.malformed == refused + 1
 
     run_model_time(body, config=LOSSLESS, seed=1)
+
+
+def test_a_nodes_messages_of_a_round_come_in_order_and_one_that_fails_does_not_stop_the_next() -> None:
+    async def deliver(w: ModelWorld) -> tuple[list[str], list[dict[str, Any]]]:
+        loop = asyncio.get_running_loop()
+        errors: list[dict[str, Any]] = []
+        loop.set_exception_handler(lambda _loop, context: errors.append(context))
+        heard: list[str] = []
+
+        def on_down(data: Any) -> None:
+            heard.append(data)
+            if data == "bad":
+                raise ValueError("a handler failed")
+
+        w.air.opened("probe", on_down)
+        w.air.coordinator.send("probe", b"one")  # type: ignore[arg-type]
+        w.air.coordinator.send("probe", "bad")  # type: ignore[arg-type]
+        w.air.coordinator.send("probe", b"two")  # type: ignore[arg-type]
+        await w.advance(0.01)
+        return heard, errors
+
+    heard, errors = run_model_time(deliver, config=LOSSLESS, seed=1)
+    assert heard == [b"one", "bad", b"two"]
+    assert [type(e["exception"]) for e in errors] == [ValueError]

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import asyncio
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from petswarm import clock
+from petswarm.clock import ModelClockLoop
 from petswarm.managers import messages as m
 from petswarm.managers.formation import ANSWER_ATTEMPTS, FormationConfig, NetworkFormation
 from petswarm.managers.rf import Incoming
@@ -27,6 +30,7 @@ class _Identity:
 @dataclass
 class _Radio:
     identity: _Identity = field(default_factory=_Identity)
+    hub_present: bool = True
 
 
 @dataclass
@@ -105,3 +109,44 @@ async def test_an_answer_that_gets_out_on_a_retry_is_not_reported_failed():
     await formation.on_message(_incoming(m.Scan(6, 0, 0)))
     assert len(rf.sent) == 2 and rng.pauses == 1
     assert [e["kind"] for e in log.events] == ["answer_retry"]
+
+
+def test_a_resting_watch_stops_ticking_when_idle_and_gives_up_on_the_tick_an_always_ticking_one_does() -> None:
+    async def scenario(rests: bool) -> tuple[list[float], list[tuple[float, RobotState]]]:
+        log = EventLog()
+        sequence = SequenceManager(log, RobotState.WAITING)
+        formation = _formation(FakeRf(), sequence, log)
+        formation.rests = rests
+        ticks: list[float] = []
+        states: list[tuple[float, RobotState]] = []
+        tick = formation._tick
+
+        async def counted() -> None:
+            ticks.append(clock.now())
+            await tick()
+            states.append((clock.now(), sequence.state))
+
+        formation._tick = counted  # type: ignore[method-assign]
+        watch = asyncio.create_task(formation.watch())
+        await clock.sleep_until(0.37)  # between two ticks: a master's query makes it a candidate
+        await formation.on_message(_incoming(m.JoinQuery(5, 0, -70, 0, ())))
+        assert sequence.state == RobotState.ORGANIZING
+        await clock.sleep_until(8.0)
+        watch.cancel()
+        return ticks, states
+
+    def run(rests: bool) -> tuple[list[float], list[tuple[float, RobotState]]]:
+        loop = ModelClockLoop()
+        try:
+            return loop.run_until_complete(scenario(rests))
+        finally:
+            loop.close()
+
+    ticking, ticking_states = run(False)
+    resting, resting_states = run(True)
+    gave_up = next(t for t, state in ticking_states if t > 0.37 and state == RobotState.WAITING)
+    assert 0.37 + FormationConfig().candidate_timeout_s < gave_up < 8.0
+    # the resting watch ticks only while there is a timer, on the instants the ticking one does
+    assert resting and set(resting) <= set(ticking) and len(resting) < len(ticking) / 2
+    assert resting[0] == min(t for t in ticking if t > 0.37) and resting[-1] == gave_up
+    assert next(t for t, state in resting_states if t > 0.37 and state == RobotState.WAITING) == gave_up

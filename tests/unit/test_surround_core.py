@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import math
 from typing import Any
 
@@ -152,3 +153,86 @@ def test_a_samples_ranges_as_floats_are_its_array_bit_for_bit() -> None:
         want = OwnSensors.of_wire(0, values.tobytes(), lambda: np.zeros(8), 0.0, (0.0, 0.0, 0.0)).ranges_m.tolist()
         assert np.array(got).tobytes() == np.array(want).tobytes()
         assert sensors.ranges_m.tolist() == got or np.isnan(got).any()  # the array is still there to read
+
+
+class _StepRadio(_Radio):
+    """What ``SurroundTask`` uses of a robot's radio: its sample callbacks and latest sweep."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.on_sensors: list[Any] = []
+
+    def sample_comes(self) -> None:
+        for callback in self.on_sensors:
+            callback(None)
+
+
+class _StepDriver:
+    """Stands in for a ``SurroundDriver``: notes when it is stepped, fails when told to."""
+
+    def __init__(self, name: str, steps: list[str]) -> None:
+        from petswarm.controllers.surround_pilot import SurroundPilot
+
+        self.name, self.steps = name, steps
+        self.pilot = SurroundPilot(SurroundDriverConfig())
+        self.radio = _StepRadio()
+        self.fail = False
+
+    def step(self, sweeps: Any, now: float) -> None:
+        self.steps.append(self.name)
+        if self.fail:
+            raise RuntimeError(f"{self.name} broke")
+
+
+def test_one_task_steps_every_robot_in_the_order_their_samples_came() -> None:
+    from petswarm.controllers.surround_driver import SurroundTask
+
+    async def scenario() -> tuple[list[list[str]], BaseException | None, bool]:
+        steps: list[str] = []
+        drivers = [_StepDriver(f"robot-{i}", steps) for i in (1, 2, 3)]
+        surround = SurroundTask.of_loop(asyncio.get_running_loop())
+
+        async def robot(driver: _StepDriver) -> None:
+            stepped = surround.join(driver)  # type: ignore[arg-type]
+            try:
+                await stepped
+            finally:
+                surround.leave(driver)  # type: ignore[arg-type]
+
+        tasks = [asyncio.create_task(robot(d)) for d in drivers]
+        await asyncio.sleep(0)
+        rounds: list[list[str]] = []
+
+        async def one_round(*order: int) -> None:
+            for i in order:
+                drivers[i].radio.sample_comes()
+            drivers[order[0]].radio.sample_comes()  # twice in a round: one step
+            for _ in range(3):
+                await asyncio.sleep(0)
+            rounds.append(list(steps))
+            steps.clear()
+
+        await one_round(2, 0, 1)
+        drivers[1].fail = True
+        await one_round(0, 1, 2)  # robot 2's error ends its task only
+        await one_round(1, 2, 0)
+        tasks[2].cancel()  # robot 3 killed: it is not stepped even before its task unwinds
+        drivers[2].radio.sample_comes()
+        await one_round(0)
+        error = tasks[1].exception() if tasks[1].done() else None
+        alive = not tasks[0].done()
+        for task in tasks:
+            task.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+        await asyncio.sleep(0)
+        return rounds, error, alive and surround._task is not None and surround._task.done()
+
+    rounds, error, ended = asyncio.run(scenario())
+    assert rounds == [
+        ["robot-3", "robot-1", "robot-2"],
+        ["robot-1", "robot-2", "robot-3"],
+        ["robot-3", "robot-1"],
+        ["robot-1"],
+    ]
+    assert isinstance(error, RuntimeError) and str(error) == "robot-2 broke"
+    assert ended  # robot 1 lived until the end, and the task ended with its last member
