@@ -348,6 +348,8 @@ class RadioClient:
         self.on_reattach: list[Callable[[], None]] = []
         """Called after the radio attached again to a restarted hub (the hub forgot IR modes and the like)."""
         self._attached_once = False
+        self._ir_wanted = "idle"
+        """The IR mode last asked for: a switch retried after a re-attach must not undo a later one."""
         self._reattaching: asyncio.Task[None] | None = None
         if hasattr(link, "session_key"):  # a link that speaks for the node itself (a lockstep idle)
             link.session_key = self.session_key
@@ -444,14 +446,18 @@ class RadioClient:
 
     async def set_ir_mode(self, mode: str) -> None:
         """Switch the IR module: ``idle``, ``receive`` or ``transmit``; returns once the hub has it."""
+        self._ir_wanted = mode
         token = next(self._tokens)
         try:
             await self._request(token, wire.SetIrMode(token=token, mode=mode), resend_s=RESEND_S)
         except RadioError as err:
             if str(err) != wire.NOT_ATTACHED:
                 raise
-            # a restarted hub that has not had our attach yet: attach, then switch (a mode is idempotent)
+            # a restarted hub that has not had our attach yet: attach, then switch (a mode is idempotent),
+            # unless a later switch has taken its place meanwhile (the hub applies switches in order)
             await self._reattached()
+            if mode != self._ir_wanted:
+                return
             token = next(self._tokens)
             await self._request(token, wire.SetIrMode(token=token, mode=mode), resend_s=RESEND_S)
 
@@ -802,10 +808,12 @@ class RadioClient:
         sent = self._attach_message()
         attached = await self._request(0, sent, resend_s=RESEND_S)
         # a configure while we attached (a robot going home as its swarm timed out) may have reached the new
-        # hub before our attach and been refused: the hub has the radio as the attach said, so say it again
-        while _configured(wanted := self._attach_message()) != _configured(sent):
-            sent = wanted
-            attached = await self._request(0, sent, resend_s=RESEND_S)
+        # hub before our attach and been refused: the hub has the radio as the attach said, so configure it
+        # (another attach would start the node afresh on the hub, dropping frames sent meanwhile)
+        changes = _still_wanted(sent, self._attach_message(), attached)
+        if changes:
+            token = next(self._tokens)
+            attached = await self._request(token, wire.Configure(token=token, **changes), resend_s=RESEND_S)
         self._adopt(attached)
         self.reattaches += 1
         self._settle_orphans(orphans, attached)
@@ -834,9 +842,19 @@ class RadioClient:
             fut.set_result(msg)
 
 
-def _configured(attach: wire.Attach) -> tuple[int, int, int, tuple[float, ...]]:
-    """What of an attach a ``configure`` may change."""
-    return attach.short_addr, attach.pan_id, attach.channel, tuple(attach.position)
+def _still_wanted(sent: wire.Attach, wanted: wire.Attach, attached: wire.Attached) -> dict[str, Any]:
+    """What a configure must still change after an attach answered ``attached``: the radio's fields where
+    ``wanted`` differs from the answer (an answer to an earlier copy of the attach may arrive late, so the
+    answer is what counts), and the position if it was moved since the attach was ``sent`` (the hub answers
+    with its own world's position)."""
+    changes: dict[str, Any] = {
+        name: getattr(wanted, name)
+        for name in ("short_addr", "pan_id", "channel")
+        if getattr(wanted, name) != getattr(attached, name)
+    }
+    if wanted.position != sent.position:
+        changes["position"] = wanted.position
+    return changes
 
 
 def _tx_result(done: wire.TxDone) -> TxResult:

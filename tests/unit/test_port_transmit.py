@@ -79,33 +79,74 @@ def test_on_frame_takes_received_frames_instead_of_the_queue():
     asyncio.run(scenario())
 
 
-def test_a_configure_refused_while_reattaching_is_carried_by_a_second_attach():
+SWARM_PAN, HOME_PAN = 0xE74B, 0x1000
+
+
+def _attached(pan: int, token: int = 0) -> wire.Attached:
+    return wire.Attached(token=token, ext_addr=0x1234, short_addr=1, pan_id=pan)
+
+
+async def _settle() -> None:
+    for _ in range(5):  # an answer wakes the waiting request, which wakes the re-attach
+        await asyncio.sleep(0)
+
+
+async def _reattaching() -> tuple[RadioClient, RecordingLink]:
+    """A radio on the swarm's PAN whose hub has just restarted: its attach to the new hub is on the way."""
+    link = RecordingLink()
+    identity = RadioIdentity("n1", 0x1234, 1, SWARM_PAN, 11, (0.0, 0.0))
+    connecting = asyncio.ensure_future(RadioClient.connect(identity, link=link))
+    await asyncio.sleep(0)
+    link.down(_attached(SWARM_PAN))
+    radio = await connecting
+    link.on_hub(True)
+    await asyncio.sleep(0)
+    assert isinstance(link.sent[-1], wire.Attach) and link.sent[-1].pan_id == SWARM_PAN
+    return radio, link
+
+
+def test_a_configure_refused_while_reattaching_is_made_once_attached():
     """A robot whose swarm timed out as the hub restarted: its configure (home PAN) reached the new hub before
-    its attach (swarm PAN) and was refused as "not attached"; the hub must end with the home PAN."""
+    its attach (swarm PAN) and was refused as "not attached"; the hub must end with the home PAN, configured
+    (another attach would start the node afresh there)."""
 
     async def scenario() -> None:
-        link = RecordingLink()
-        identity = RadioIdentity("n1", 0x1234, 1, 0xE74B, 11, (0.0, 0.0))
-        connecting = asyncio.ensure_future(RadioClient.connect(identity, link=link))
+        radio, link = await _reattaching()
+        configuring = asyncio.ensure_future(radio.configure(pan_id=HOME_PAN))
         await asyncio.sleep(0)
-        link.down(wire.Attached(token=0, ext_addr=0x1234, short_addr=1, pan_id=0xE74B))
-        radio = await connecting
-        link.on_hub(True)  # the hub came back: attach again, on the swarm PAN
-        await asyncio.sleep(0)
-        assert isinstance(link.sent[-1], wire.Attach) and link.sent[-1].pan_id == 0xE74B
-        configuring = asyncio.ensure_future(radio.configure(pan_id=0x1000))
-        await asyncio.sleep(0)
-        configure = link.sent[-1]
-        assert isinstance(configure, wire.Configure)
-        link.down(wire.Error(token=configure.token, reason=wire.NOT_ATTACHED))
-        link.down(wire.Attached(token=0, ext_addr=0x1234, short_addr=1, pan_id=0xE74B))
-        for _ in range(5):  # the attach's answer wakes the re-attach, which looks at what is wanted now
-            await asyncio.sleep(0)
+        refused = link.sent[-1]
+        assert isinstance(refused, wire.Configure)
+        link.down(wire.Error(token=refused.token, reason=wire.NOT_ATTACHED))
+        link.down(_attached(SWARM_PAN))
+        await _settle()
         again = link.sent[-1]
-        assert isinstance(again, wire.Attach) and again.pan_id == 0x1000
-        link.down(wire.Attached(token=0, ext_addr=0x1234, short_addr=1, pan_id=0x1000))
-        assert (await asyncio.wait_for(configuring, 1.0)).pan_id == 0x1000
-        assert radio.identity.pan_id == 0x1000 and radio.reattaches == 1 and radio.faults.total == 0
+        assert isinstance(again, wire.Configure) and again.pan_id == HOME_PAN and again.token != refused.token
+        assert again.short_addr is None and again.channel is None and again.position is None  # only what differs
+        link.down(_attached(HOME_PAN, again.token))
+        assert (await asyncio.wait_for(configuring, 1.0)).pan_id == HOME_PAN
+        assert radio.identity.pan_id == HOME_PAN and radio.reattaches == 1 and radio.faults.total == 0
+
+    asyncio.run(scenario())
+
+
+def test_a_late_answer_to_an_earlier_attach_copy_does_not_undo_a_configure():
+    """The attach goes again every 0.5 s until answered: a slow new hub may answer two copies, and the second
+    answer (swarm PAN) must not settle the configure that the robot still wants made."""
+
+    async def scenario() -> None:
+        radio, link = await _reattaching()
+        configuring = asyncio.ensure_future(radio.configure(pan_id=HOME_PAN))
+        await asyncio.sleep(0)
+        link.down(wire.Error(token=link.sent[-1].token, reason=wire.NOT_ATTACHED))
+        link.down(_attached(SWARM_PAN))
+        await _settle()
+        configure = link.sent[-1]
+        link.down(_attached(SWARM_PAN))  # the late answer to the attach's earlier copy
+        await _settle()
+        assert not configuring.done()
+        link.down(_attached(HOME_PAN, configure.token))
+        assert (await asyncio.wait_for(configuring, 1.0)).pan_id == HOME_PAN
+        assert radio.identity.pan_id == HOME_PAN
 
     asyncio.run(scenario())
 
@@ -115,26 +156,39 @@ def test_an_ir_switch_refused_while_reattaching_is_made_once_attached():
     for the attach and goes again, rather than failing the token schedule's step."""
 
     async def scenario() -> None:
-        link = RecordingLink()
-        identity = RadioIdentity("n1", 0x1234, 1, 0xE74B, 11, (0.0, 0.0))
-        connecting = asyncio.ensure_future(RadioClient.connect(identity, link=link))
-        await asyncio.sleep(0)
-        link.down(wire.Attached(token=0, ext_addr=0x1234, short_addr=1, pan_id=0xE74B))
-        radio = await connecting
-        link.on_hub(True)
-        await asyncio.sleep(0)
+        radio, link = await _reattaching()
         switching = asyncio.ensure_future(radio.set_ir_mode("transmit"))
         await asyncio.sleep(0)
         refused = link.sent[-1]
         assert isinstance(refused, wire.SetIrMode)
         link.down(wire.Error(token=refused.token, reason=wire.NOT_ATTACHED))
-        link.down(wire.Attached(token=0, ext_addr=0x1234, short_addr=1, pan_id=0xE74B))
-        for _ in range(5):
-            await asyncio.sleep(0)
+        link.down(_attached(SWARM_PAN))
+        await _settle()
         again = link.sent[-1]
         assert isinstance(again, wire.SetIrMode) and again.mode == "transmit" and again.token != refused.token
-        link.down(wire.Attached(token=again.token, ext_addr=0x1234, short_addr=1, pan_id=0xE74B))
+        link.down(_attached(SWARM_PAN, again.token))
         await asyncio.wait_for(switching, 1.0)
         assert radio.reattaches == 1 and radio.faults.total == 0
+
+    asyncio.run(scenario())
+
+
+def test_a_refused_ir_switch_is_not_retried_once_a_later_one_took_its_place():
+    """Switches overlap (the token schedule runs them in tasks of their own): "transmit" refused before the
+    attach, then "receive" accepted after it; a retried "transmit" would leave the module shining."""
+
+    async def scenario() -> None:
+        radio, link = await _reattaching()
+        first = asyncio.ensure_future(radio.set_ir_mode("transmit"))
+        await asyncio.sleep(0)
+        link.down(wire.Error(token=link.sent[-1].token, reason=wire.NOT_ATTACHED))
+        second = asyncio.ensure_future(radio.set_ir_mode("receive"))
+        await asyncio.sleep(0)
+        receive = link.sent[-1]
+        link.down(_attached(SWARM_PAN))
+        link.down(_attached(SWARM_PAN, receive.token))
+        await asyncio.wait_for(asyncio.gather(first, second), 1.0)
+        modes = [m.mode for m in link.sent if isinstance(m, wire.SetIrMode)]
+        assert modes == ["transmit", "receive"]
 
     asyncio.run(scenario())
