@@ -266,11 +266,25 @@ class ImprovedSurroundController(SurroundController):
         return -magnitude * ux, -magnitude * uy
 
     def _aim(self, human: Sequence[float] | None, human_velocity: Sequence[float] | None) -> Sequence[float] | None:
-        """Where the pull aims: the human, led by ``lead_s`` of his velocity when it is known."""
+        """Where the pull aims: the human, led by ``lead_s`` of his velocity when it is known, less of it the
+        further the robot is ahead of him (``_lead_share``)."""
         lead = self.config.lead_s
         if human is None or human_velocity is None or lead <= 0:
             return human
+        lead *= self._lead_share(human, human_velocity)
         return human[0] + lead * human_velocity[0], human[1] + lead * human_velocity[1]
+
+    def _lead_share(self, human: Sequence[float], human_velocity: Sequence[float]) -> float:
+        """How much of the lead a robot gets: all of it up to ``lead_fade_from_m`` ahead of the walking human (along
+        his walk), none ``lead_fade_m`` further on. Beyond the paper: with the full lead the robots far ahead of
+        him in the corridor were pulled on to where he would be while the walls held those behind him back, and
+        the swarm tore (seeds 3 and 5); those just ahead of him keep it, as he walks into them otherwise."""
+        c = self.config
+        speed = math.sqrt(human_velocity[0] ** 2 + human_velocity[1] ** 2)
+        if c.lead_fade_m <= 0 or not speed > 0:
+            return 1.0
+        ahead = -(human[0] * human_velocity[0] + human[1] * human_velocity[1]) / speed
+        return min(1.0, max(0.0, 1.0 - (ahead - c.lead_fade_from_m) / c.lead_fade_m))
 
     def _pull(self, human: Sequence[float] | None) -> tuple[float, float]:
         """f_P: toward the human, growing from 0 at ``pull_radius_m`` to ``pull_force`` ``pull_ramp_m`` further."""

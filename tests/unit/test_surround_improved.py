@@ -16,6 +16,7 @@ from petswarm.lab.surround_plots import is_surround_run, snapshot_instants
 from petswarm.scenario import _surround
 
 IMPROVED = SurroundConfig(law="improved")
+FADING = SurroundConfig(law="improved", lead_fade_m=0.6)
 DT = 0.04
 
 
@@ -56,6 +57,23 @@ def test_a_robot_the_human_left_behind_is_pulled_to_him_harder_than_one_beside_h
     v_near = near.step_plain([], [], (0.85, 0.0), (0.0, 0.0), DT, human_velocity=(0.0, 0.0))
     assert v_far[0] > v_near[0] > 0
     assert abs(v_far[1]) < 1e-12
+
+
+def test_a_robot_far_ahead_of_the_walking_human_waits_for_him_rather_than_being_pulled_on() -> None:
+    """The lead fades far ahead of him: with the full lead a robot 1.3 m ahead of him is pulled on toward where he
+    will be (the corridor's swarm tore between those far ahead of him and those the walls held back)."""
+    unfaded = IMPROVED  # the shipped default: the lead never fades
+    his_velocity = (1.0, 0.0)  # he walks toward the robot at 1 m/s
+
+    def command(config: SurroundConfig, he: tuple[float, float]) -> tuple[float, float]:
+        return ImprovedSurroundController(config).step_plain([], [], he, (1.0, 0.0), DT, human_velocity=his_velocity)
+
+    # 1.3 m ahead of him it slows for him to come up (the spring draws it back); unfaded it kept his pace further on
+    assert command(FADING, (-1.3, 0.0))[0] < command(unfaded, (-1.3, 0.0))[0] - 0.05
+    # just ahead of him, level with him or behind him the lead is whole: he would walk into the robots ahead of him,
+    # and the swarm ends round him, not behind
+    for he in ((-0.5, 0.0), (0.0, 0.7), (0.9, 0.0)):
+        assert command(FADING, he) == command(unfaded, he)
 
 
 def test_closing_on_an_obstacle_point_repels_harder_than_standing_off_it() -> None:
