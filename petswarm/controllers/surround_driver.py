@@ -57,11 +57,12 @@ class SurroundDriver:
                 await sleep_until(when)
                 self.core.handle_timer(clock.now())
         # from here on every sample is stepped by the loop's one surround task, with every other robot's
-        stepped = SurroundTask.of_loop(asyncio.get_running_loop()).join(self)
+        surround = SurroundTask.of_loop(asyncio.get_running_loop())
+        stepped = surround.join(self)
         try:
             await stepped  # only an error of this robot's step ends it
         finally:
-            SurroundTask.of_loop(asyncio.get_running_loop()).leave(self)
+            surround.leave(self)
 
     def step(self, batch: SweepBatch, now: float) -> None:
         """Step the core on the radio's latest sample and sweep at ``now``, and carry out what it asks
@@ -122,7 +123,8 @@ class SurroundTask:
 
     def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
         self._loop = loop
-        self._members: dict[SurroundDriver, tuple[asyncio.Future[None], asyncio.Task[Any] | None]] = {}
+        self._members: dict[SurroundDriver, asyncio.Future[None]] = {}
+        """Each member's future: its robot's task awaits it, so a killed robot's (cancelled with the task) is done."""
         self._fresh: dict[SurroundDriver, None] = {}
         """The members whose sample came since the last step, in the order they came."""
         self._wake = asyncio.Event()
@@ -140,12 +142,13 @@ class SurroundTask:
     def join(self, driver: SurroundDriver) -> asyncio.Future[None]:
         """Step ``driver`` on every sample its radio gets from now on; the future fails with its step's error."""
         stepped = self._loop.create_future()
-        self._members[driver] = (stepped, asyncio.current_task())
+        self._members[driver] = stepped
         self.sweeps.join(driver.pilot, driver.radio)
         driver.radio.on_sensors.append(lambda _sensors: self._came(driver))
         if self._task is None or self._task.done():
             # in a context of its own: not one of the robot's tasks (a model run ends those with the robot)
             self._task = self._loop.create_task(self._run(), context=contextvars.Context())
+            self._task.add_done_callback(self._ended)
         return stepped
 
     def leave(self, driver: SurroundDriver) -> None:
@@ -170,12 +173,20 @@ class SurroundTask:
             for driver in fresh:
                 self._step(driver, now)
 
+    def _ended(self, task: asyncio.Task[None]) -> None:
+        """The task is over: forget the loop (the entry holds it, so a process doing run after run would keep
+        every loop), and fail any member left (the task cancelled as its loop closes): none waits for good."""
+        if task is not self._task:
+            return  # an earlier task, ended before a member joined and started the current one
+        if self._of_loop.get(self._loop) is self and not self._members:
+            del self._of_loop[self._loop]
+        for stepped in self._members.values():
+            if not stepped.done():
+                stepped.set_exception(RuntimeError("the surround robots' stepping task ended"))
+
     def _step(self, driver: SurroundDriver, now: float) -> None:
-        member = self._members.get(driver)
-        if member is None:
-            return
-        stepped, task = member
-        if stepped.done() or (task is not None and (task.done() or task.cancelling())):
+        stepped = self._members.get(driver)
+        if stepped is None or stepped.done():
             return  # its robot is ending (killed, stopping): it steps no more, as its own loop would not
         try:
             driver.step(self.sweeps, now)

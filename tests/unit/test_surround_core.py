@@ -236,3 +236,36 @@ def test_one_task_steps_every_robot_in_the_order_their_samples_came() -> None:
     ]
     assert isinstance(error, RuntimeError) and str(error) == "robot-2 broke"
     assert ended  # robot 1 lived until the end, and the task ended with its last member
+
+
+def test_the_stepping_task_lets_its_loop_go_and_fails_members_left_when_it_is_cancelled() -> None:
+    """A process doing run after run (tests, sweeps) must not keep each run's loop; a stepping task cancelled
+    under its members (its loop closing) must not leave their robots waiting for good."""
+    from petswarm.controllers.surround_driver import SurroundTask
+
+    async def one_run() -> None:
+        driver = _StepDriver("robot-1", [])
+        surround = SurroundTask.of_loop(asyncio.get_running_loop())
+        stepped = surround.join(driver)  # type: ignore[arg-type]
+        driver.radio.sample_comes()
+        await asyncio.sleep(0)
+        surround.leave(driver)  # type: ignore[arg-type]
+        await asyncio.sleep(0)
+        await asyncio.sleep(0)
+        assert asyncio.get_running_loop() not in SurroundTask._of_loop
+        assert not stepped.done()  # left in good order: nothing to fail
+
+    async def cancelled() -> BaseException | None:
+        driver = _StepDriver("robot-1", [])
+        surround = SurroundTask.of_loop(asyncio.get_running_loop())
+        stepped = surround.join(driver)  # type: ignore[arg-type]
+        await asyncio.sleep(0)
+        assert surround._task is not None
+        surround._task.cancel()
+        await asyncio.sleep(0)
+        await asyncio.sleep(0)
+        return stepped.exception() if stepped.done() else None
+
+    for _ in range(3):
+        asyncio.run(one_run())
+    assert isinstance(asyncio.run(cancelled()), RuntimeError)
