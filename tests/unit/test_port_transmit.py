@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Callable
+from collections.abc import Callable, Coroutine
+from typing import Any
 
 from radio_hub.air.mac import Frame, FrameType, TxStatus
 from radio_hub.link import wire
@@ -105,6 +106,20 @@ async def _reattaching() -> tuple[RadioClient, RecordingLink]:
     return radio, link
 
 
+async def _refused_before_the_attach(
+    link: RecordingLink, request: Coroutine[Any, Any, Any]
+) -> tuple[asyncio.Future[Any], wire.Message, wire.Message]:
+    """Start ``request`` while re-attaching; the new hub refuses it as not attached, then answers the attach:
+    the request's future, what the radio sent first and what it sent then."""
+    pending = asyncio.ensure_future(request)
+    await asyncio.sleep(0)
+    refused = link.sent[-1]
+    link.down(wire.Error(token=refused.token, reason=wire.NOT_ATTACHED))  # type: ignore[attr-defined]
+    link.down(_attached(SWARM_PAN))
+    await _settle()
+    return pending, refused, link.sent[-1]
+
+
 def test_a_configure_refused_while_reattaching_is_made_once_attached():
     """A robot whose swarm timed out as the hub restarted: its configure (home PAN) reached the new hub before
     its attach (swarm PAN) and was refused as "not attached"; the hub must end with the home PAN, configured
@@ -112,14 +127,8 @@ def test_a_configure_refused_while_reattaching_is_made_once_attached():
 
     async def scenario() -> None:
         radio, link = await _reattaching()
-        configuring = asyncio.ensure_future(radio.configure(pan_id=HOME_PAN))
-        await asyncio.sleep(0)
-        refused = link.sent[-1]
+        configuring, refused, again = await _refused_before_the_attach(link, radio.configure(pan_id=HOME_PAN))
         assert isinstance(refused, wire.Configure)
-        link.down(wire.Error(token=refused.token, reason=wire.NOT_ATTACHED))
-        link.down(_attached(SWARM_PAN))
-        await _settle()
-        again = link.sent[-1]
         assert isinstance(again, wire.Configure) and again.pan_id == HOME_PAN and again.token != refused.token
         assert again.short_addr is None and again.channel is None and again.position is None  # only what differs
         link.down(_attached(HOME_PAN, again.token))
@@ -135,12 +144,7 @@ def test_a_late_answer_to_an_earlier_attach_copy_does_not_undo_a_configure():
 
     async def scenario() -> None:
         radio, link = await _reattaching()
-        configuring = asyncio.ensure_future(radio.configure(pan_id=HOME_PAN))
-        await asyncio.sleep(0)
-        link.down(wire.Error(token=link.sent[-1].token, reason=wire.NOT_ATTACHED))
-        link.down(_attached(SWARM_PAN))
-        await _settle()
-        configure = link.sent[-1]
+        configuring, _, configure = await _refused_before_the_attach(link, radio.configure(pan_id=HOME_PAN))
         link.down(_attached(SWARM_PAN))  # the late answer to the attach's earlier copy
         await _settle()
         assert not configuring.done()
@@ -157,14 +161,8 @@ def test_an_ir_switch_refused_while_reattaching_is_made_once_attached():
 
     async def scenario() -> None:
         radio, link = await _reattaching()
-        switching = asyncio.ensure_future(radio.set_ir_mode("transmit"))
-        await asyncio.sleep(0)
-        refused = link.sent[-1]
+        switching, refused, again = await _refused_before_the_attach(link, radio.set_ir_mode("transmit"))
         assert isinstance(refused, wire.SetIrMode)
-        link.down(wire.Error(token=refused.token, reason=wire.NOT_ATTACHED))
-        link.down(_attached(SWARM_PAN))
-        await _settle()
-        again = link.sent[-1]
         assert isinstance(again, wire.SetIrMode) and again.mode == "transmit" and again.token != refused.token
         link.down(_attached(SWARM_PAN, again.token))
         await asyncio.wait_for(switching, 1.0)
