@@ -846,13 +846,13 @@ def _still_wanted(sent: wire.Attach, wanted: wire.Attach, attached: wire.Attache
     """What a configure must still change after an attach answered ``attached``: the radio's fields where
     ``wanted`` differs from the answer (an answer to an earlier copy of the attach may arrive late, so the
     answer is what counts), and the position if it was moved since the attach was ``sent`` (the hub answers
-    with its own world's position)."""
+    with its own world's position, which a radio that took another answer meanwhile has as its own)."""
     changes: dict[str, Any] = {
         name: getattr(wanted, name)
         for name in ("short_addr", "pan_id", "channel")
         if getattr(wanted, name) != getattr(attached, name)
     }
-    if wanted.position != sent.position:
+    if wanted.position not in (sent.position, list(attached.position)):
         changes["position"] = wanted.position
     return changes
 

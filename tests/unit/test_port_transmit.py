@@ -190,3 +190,19 @@ def test_a_refused_ir_switch_is_not_retried_once_a_later_one_took_its_place():
         assert modes == ["transmit", "receive"]
 
     asyncio.run(scenario())
+
+
+def test_a_move_refused_while_reattaching_is_made_once_attached():
+    """A robot placed elsewhere (``configure(position=...)``) as the hub restarted: the attach said where it was
+    before, so the move goes as a configure of the position alone."""
+
+    async def scenario() -> None:
+        radio, link = await _reattaching()
+        moving, _, again = await _refused_before_the_attach(link, radio.configure(position=(2.0, -1.5)))
+        assert isinstance(again, wire.Configure) and again.position == [2.0, -1.5] and again.pan_id is None
+        link.down(
+            wire.Attached(token=again.token, ext_addr=0x1234, short_addr=1, pan_id=SWARM_PAN, position=[2.0, -1.5])
+        )
+        assert (await asyncio.wait_for(moving, 1.0)).position == (2.0, -1.5)
+
+    asyncio.run(scenario())
