@@ -132,6 +132,13 @@ def _consistent(air) -> bool:
     return master["state"] == "following" and master["radio"]["pan_id"] == 0x1000 and home and hub_home
 
 
+def _radios(air) -> tuple[dict[int, str], dict[str, int]]:
+    """Each robot's state and PAN as it sees them, and each attached node's PAN as the hub has it."""
+    robots = {rid: air.cmd(rid, "status") for rid in (1, 2, 3, 4)}
+    mine = {rid: f"{s['state']} pan {s['radio']['pan_id']:#x}" for rid, s in robots.items()}
+    return mine, {k: n["pan_id"] for k, n in air.stats()["nodes"].items() if n["attached"]}
+
+
 def test_the_hub_restarts_and_the_robots_reattach_and_carry_on_or_reorganize(make_air):
     air = make_air()
     _swarm_of_four(air)
@@ -144,8 +151,7 @@ def test_the_hub_restarts_and_the_robots_reattach_and_carry_on_or_reorganize(mak
             break
         time.sleep(0.3)
     assert attached, nodes  # every robot attached itself to the new hub
-    radios = {rid: (s := air.cmd(rid, "status"))["state"] + f" pan {s['radio']['pan_id']:#x}" for rid in (1, 2, 3, 4)}
-    assert _consistent(air), (radios, {k: n["pan_id"] for k, n in air.stats()["nodes"].items() if n["attached"]})
+    assert _consistent(air), _radios(air)
     if air.cmd(1, "status")["state"] == "master-driving":
         air.cmd(1, "disperse", timeout=30)
         time.sleep(0.3)
