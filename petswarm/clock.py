@@ -196,6 +196,16 @@ def _wake(future: asyncio.Future[None]) -> None:
         future.set_result(None)
 
 
+def next_on_grid(last: float, period: float, after: float) -> float:
+    """The first instant later than ``after`` on the grid ``last``, ``last + period``, ...: summed a period at a
+    time, as a periodic timer that had gone on would have set each of its instants (a product could round
+    differently, and model time compares instants exactly). A pure function: sans-IO cores use it too."""
+    at = last + period
+    while at <= after:
+        at = at + period
+    return at
+
+
 def now() -> float:
     """Monotonic seconds on the running loop's clock (model time on a ``ModelClockLoop``)."""
     try:

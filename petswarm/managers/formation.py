@@ -235,10 +235,7 @@ class NetworkFormation:
         last = clock.now()
         self._stirred.clear()
         await self._stirred.wait()
-        at = last + WATCH_PERIOD_S
-        while at <= clock.now():
-            at = at + WATCH_PERIOD_S  # as each tick would have set it: its instant plus the period
-        await clock.sleep_until(at)
+        await clock.sleep_until(clock.next_on_grid(last, WATCH_PERIOD_S, clock.now()))
 
     # -- carrying actions out ----------------------------------------------------------------------
 

@@ -32,6 +32,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+from petswarm.clock import next_on_grid
 from petswarm.managers import messages as m
 from petswarm.managers.decisions import reply_delay_s
 from petswarm.managers.exchange import SendRequest, Step, StepTiming, WaitUntil
@@ -597,9 +598,7 @@ class TokenSchedule:
         itself would have found the swarm just joined, with nothing to regenerate)."""
         if self._watching or self._watch_at == math.inf:  # still waking, or not started
             return
-        at = self._watch_at
-        while at <= now:
-            at = at + WATCH_PERIOD_S  # as each check would have set it: its instant plus the period
+        at = self._watch_at if self._watch_at > now else next_on_grid(self._watch_at, WATCH_PERIOD_S, now)
         self._watch_at, self._watching = at, True
         self._wake(at, self._watch)
 

@@ -133,3 +133,14 @@ def test_timers_order_by_deadline_then_by_when_they_were_scheduled_as_tuples_of_
         assert timers[6] < timers[7]  # one nan object: as a tuple compares it, the same
     finally:
         loop.close()
+
+
+def test_the_next_instant_on_a_grid_is_the_one_a_periodic_timer_would_have_reached() -> None:
+    ticks, at = [], 0.1
+    for _ in range(200):  # a timer that went on: each instant its last plus the period
+        at = at + 0.05
+        ticks.append(at)
+    for after in (0.1, 0.12, ticks[40], ticks[40] + 1e-12, 9.0):
+        expected = next(t for t in [0.1 + 0.05, *ticks] if t > after)
+        assert clock.next_on_grid(0.1, 0.05, after) == expected  # exactly: instants are compared exactly
+    assert clock.next_on_grid(0.1, 0.05, 0.0) == 0.1 + 0.05  # never before the grid's next instant
