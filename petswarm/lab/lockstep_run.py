@@ -58,7 +58,10 @@ def run_lockstep(opts: RunOptions, scenario: Scenario | None) -> int:
         summary["hub_process"] = hub.get("process")
         lockstep = hub.get("lockstep", {})
         summary["gone"] = lockstep.get("dead", [])
-        summary["lockstep"] = {key: lockstep.get(key) for key in ("rounds", "stale_idles")}
+        summary["lockstep"] = {
+            key: lockstep.get(key)
+            for key in ("rounds", "stale_idles", "grants", "down_puts", "down_messages", "up_puts")
+        }
         for gone in summary["gone"]:
             progress(f"{gone['node']} was taken as gone at model time {gone['model_time_s']:.3f} s: {gone['why']}")
         return summary

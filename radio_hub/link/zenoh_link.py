@@ -234,15 +234,27 @@ class HubDownlink:
 
 DOWN_BATCH_BYTES = 256 << 10
 """A batch's parts together at most (a lone longer message goes on its own): well under what a node takes."""
+UP_BATCH_BYTES = wire.MAX_UP_BYTES - 5 * (wire.BATCH_MAX_PARTS + 1)
+"""The same for a lockstep node's batch to the hub: with msgpack's headers (5 bytes at most per part and for the
+array) a batch stays within what the hub takes from a node."""
 
 
-def _batches(parts: list[bytes]) -> list[list[bytes]]:
-    """``parts`` in order, cut into runs of at most ``wire.BATCH_MAX_PARTS`` messages and ``DOWN_BATCH_BYTES``."""
+def put_batches(pub: zenoh.Publisher | None, parts: list[bytes], max_bytes: int) -> int:
+    """``parts`` on ``pub`` in as few puts as ``_batches`` allows (a lone message as it is); the number of puts.
+    Raises HubUnavailable as ``put_up`` does."""
+    runs = _batches(parts, max_bytes)
+    for run in runs:
+        put_up(pub, run[0] if len(run) == 1 else wire.encode_batch(run))
+    return len(runs)
+
+
+def _batches(parts: list[bytes], max_bytes: int = DOWN_BATCH_BYTES) -> list[list[bytes]]:
+    """``parts`` in order, cut into runs of at most ``wire.BATCH_MAX_PARTS`` messages and ``max_bytes``."""
     batches: list[list[bytes]] = [[]]
     size = 0
     for part in parts:
         last = batches[-1]
-        if last and (len(last) >= wire.BATCH_MAX_PARTS or size + len(part) > DOWN_BATCH_BYTES):
+        if last and (len(last) >= wire.BATCH_MAX_PARTS or size + len(part) > max_bytes):
             batches.append(last := [])
             size = 0
         last.append(part)

@@ -38,9 +38,11 @@ from radio_hub.link import wire
 from radio_hub.link.keys import Keys
 from radio_hub.link.port import HubUnavailable
 from radio_hub.link.zenoh_link import (
+    UP_BATCH_BYTES,
     HubDownlink,
     ZenohLink,
     declare_hub_keys,
+    put_batches,
     reliable_publisher,
     reply,
     session_config,
@@ -74,6 +76,8 @@ class LockstepLink(ZenohLink):
         self._seen = 0
         self._loop: Any = None
         self._on_down: Callable[[bytes], None] | None = None
+        self._outbox: list[bytes] = []
+        """The node's messages of the round so far: they go to the hub with its idle, in one put."""
         self.session_key = 0
         """The node's session key (its radio sets it): an idle carries it like every message of the node."""
 
@@ -123,13 +127,28 @@ class LockstepLink(ZenohLink):
         self._release = []
         return True
 
+    def put(self, data: bytes) -> None:
+        """One message to the hub, held until the round's idle while the node is in the world (the hub reads
+        none of it before that idle anyway); HubUnavailable when the link is not open."""
+        if self._pub is None or self._loop is None or self._loop.sync is not self:
+            super().put(data)
+            return
+        self._outbox.append(data)
+
     def idle(self, next_timer: float | None) -> None:
-        """Tell the hub: handled up to the last grant, the next timer is due at ``next_timer``."""
+        """Tell the hub: handled up to the last grant, the next timer is due at ``next_timer``; the round's
+        messages go first, in the same put."""
+        self._outbox.append(wire.Idle(seen=self._seen, next_s=next_timer, s=self.session_key).encode())
+        self._send_outbox()
+
+    def _send_outbox(self) -> None:
+        outbox, self._outbox = self._outbox, []
         with contextlib.suppress(HubUnavailable):
-            self.put(wire.Idle(seen=self._seen, next_s=next_timer, s=self.session_key).encode())
+            put_batches(self._pub, outbox, UP_BATCH_BYTES)
 
     async def close(self) -> None:
-        """Leave the world: no more idles; then undeclare and close as a zenoh link does."""
+        """Leave the world: what is held goes, no more idles; then undeclare and close as a zenoh link does."""
+        self._send_outbox()
         if self._loop is not None:
             self._loop.attach_sync(None)
             self._loop.on_quiescent = None
@@ -141,12 +160,14 @@ _GRANT_TYPE = b"\xa1t\xa5grant"
 
 
 def _grant_of(data: bytes) -> wire.Grant | None:
-    # runs on zenoh's thread for every message a node is sent: most are frames and sensor readings, which are
-    # decoded (and checked) once, later, on the node's loop; only a message that may be a grant is decoded here
+    """The grant that ``data`` is or that closes it (a batch's last message), else None.
+
+    Runs on zenoh's thread for every message a node is sent: most are frames and sensor readings, which are
+    decoded (and checked) once, later, on the node's loop; only a message that may hold a grant is decoded here."""
     if _GRANT_TYPE not in data:
         return None
     try:
-        msg = wire.decode(data)
+        msg = wire.decode(wire.split_batch(data)[-1] if wire.is_batch(data) else data)
     except wire.WireError:
         return None
     return msg if isinstance(msg, wire.Grant) else None
@@ -209,12 +230,17 @@ class LockstepHub:
             environment, seed, wall_epoch_us=MODEL_EPOCH_US, pcap_path=pcap_path, world_log=world_log
         )
         self.env = self.coordinator.env
-        self._downlink = HubDownlink(self.keys)
+        # a node's messages of a round and its grant leave in one put (one batch): a zenoh put and its
+        # delivery cost the hub and the node more than the messages' own work, and a round ends with the grant
+        self._downlink = HubDownlink(self.keys, batching=True)
         self.coordinator.on_world = self._downlink.publish_world
         self.nodes: dict[str, _Node] = {}
         self.dead: list[dict[str, Any]] = []
         self.rounds = 0
         self.stale_idles = 0
+        self.up_puts = 0
+        """Transport messages nodes put to the hub (a batch counts once)."""
+        self.grants = 0
         """Idles of nodes already taken as gone, that were only slow (counted and dropped)."""
         self.now_s = 0.0
         self._looked_at = 0.0
@@ -282,6 +308,10 @@ class LockstepHub:
             "nodes": len(self.nodes),
             "stale_idles": self.stale_idles,
             "dead": self.dead,
+            "down_puts": self._downlink.puts,
+            "down_messages": self._downlink.messages,
+            "up_puts": self.up_puts,
+            "grants": self.grants,
         }
         from radio_hub.environment import process_usage
 
@@ -293,6 +323,7 @@ class LockstepHub:
     def _handle(self, item: tuple[Any, ...]) -> None:
         kind = item[0]
         if kind == "up":
+            self.up_puts += 1
             self._on_up(self.keys.node_of(item[1]), item[2])
         elif kind == "alive" and item[2] == zenoh.SampleKind.DELETE:
             node_id, instance = self.keys.alive_of(item[1])
@@ -310,6 +341,18 @@ class LockstepHub:
             reply(item[1], self.env.world_state())
 
     def _on_up(self, node_id: str, data: bytes) -> None:
+        if wire.is_batch(data):  # a node's messages of a round and its idle, in order
+            try:
+                parts = wire.split_batch(data, wire.MAX_UP_BYTES)
+            except wire.WireError:
+                self.env.counters.malformed += 1
+                return
+            for part in parts:
+                self._on_message_up(node_id, part)
+        else:
+            self._on_message_up(node_id, data)
+
+    def _on_message_up(self, node_id: str, data: bytes) -> None:
         try:
             msg = wire.decode(data, wire.MAX_UP_BYTES)
         except wire.WireError:
@@ -409,6 +452,7 @@ class LockstepHub:
                 continue
             grant = wire.Grant(at_s=self.now_s)
             self.env.send_to(node_id, grant)
+            self.grants += 1
             node.granted, node.idle, node.waiting_since = grant.n, False, wall
         for node_id, messages in self.coordinator.take_downs().items():
             for data in [*downs.pop(node_id, []), *messages]:
@@ -416,3 +460,4 @@ class LockstepHub:
         for node_id, messages in downs.items():  # messages for nodes not in the round (gone meanwhile)
             for data in messages:
                 self._downlink.send(node_id, data)
+        self._downlink.flush()

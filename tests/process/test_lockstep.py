@@ -85,6 +85,9 @@ def test_a_following_swarm_of_robot_processes_keeps_its_formation_through_the_tu
     processes = {"hub", "user", "robot-1", "robot-2", "robot-3", "robot-4"}
     assert lockstep["exit_codes"] == dict.fromkeys(processes, 0)
     assert all(node["peak_rss_mb"] for node in lockstep["nodes"].values())
+    puts = lockstep["lockstep"]
+    assert puts["down_puts"] == puts["grants"] < puts["down_messages"]  # a node's round, grant last, in one put
+    assert puts["up_puts"] <= puts["grants"] + 2 * 6  # and one back (six nodes: run, user, robots; attach, leave)
 
 
 def _scenario(tmp: Path, scenario: str, clock: str, seed: int) -> dict:

@@ -103,3 +103,39 @@ def test_every_grant_carries_the_bytes_a_node_looks_for_and_nothing_else_is_take
     idle = wire.Idle(seen=3, next_s=0.5).encode()
     frame = wire.Received(psdu=b"\xa1t\xa5grant", rssi_dbm=-50.0).encode()  # the bytes inside a frame's payload
     assert _grant_of(idle) is None and _grant_of(frame) is None
+
+
+def test_a_grant_that_closes_a_batch_is_found_and_nothing_else_in_a_batch_is_taken_for_one() -> None:
+    """The hub sends a node's messages of a round and its grant in one batch: the node's zenoh thread must see
+    the grant that closes it, and only that (a grant is always a round's last message)."""
+    grant = wire.Grant(at_s=2.5, n=9)
+    frame = wire.Received(psdu=b"\xa1t\xa5grant", rssi_dbm=-50.0).encode()
+    assert _grant_of(wire.encode_batch([frame, grant.encode()])) == grant
+    assert _grant_of(wire.encode_batch([grant.encode(), frame])) is None
+    assert _grant_of(wire.encode_batch([frame, frame])) is None
+    assert _grant_of(wire.encode_batch([frame, grant.encode()])[:-3]) is None  # cut short: malformed, not a grant
+
+
+def test_a_node_batch_is_taken_as_its_messages_in_order() -> None:
+    """A lockstep node puts its round's messages and its idle as one batch: the hub takes them as if sent one by
+    one (here an attach and its first idle start model time as two separate puts do)."""
+    one_by_one, batched = _hub(expect=1), _hub(expect=1)
+    attach = wire.Attach(ext_addr=11, short_addr=11, instance="i11", n=1, s=11).encode()
+    idle = wire.Idle(seen=0, next_s=0.5, n=2, s=11).encode()
+    for data in (attach, idle):
+        one_by_one._handle(("up", one_by_one.keys.up("robot-1"), data))
+    batched._handle(("up", batched.keys.up("robot-1"), wire.encode_batch([attach, idle])))
+    for hub in (one_by_one, batched):
+        hub._run_rounds()
+    assert batched.rounds == one_by_one.rounds > 0
+    node, reference = batched.nodes["robot-1"], one_by_one.nodes["robot-1"]
+    assert (node.granted, node.idle, node.next_s, node.key) == (reference.granted, reference.idle, reference.next_s, 11)
+    assert batched.up_puts == 1 and one_by_one.up_puts == 2
+
+
+def test_a_malformed_node_batch_is_counted_once_and_dropped_whole() -> None:
+    hub = _hub(expect=1)
+    attach = wire.Attach(ext_addr=11, short_addr=11, instance="i11", n=1, s=11).encode()
+    hub._handle(("up", hub.keys.up("robot-1"), wire.encode_batch([attach, attach])[:-4]))
+    hub._handle(("up", hub.keys.up("robot-1"), wire.encode_batch([attach, 7])))  # type: ignore[list-item]
+    assert hub.env.counters.malformed == 2 and not hub.nodes
