@@ -1,0 +1,50 @@
+"""``petswarm bench surround --clock lockstep``: the bench's robots as processes give the model-time bench's row.
+
+Five robots of the improved cylinder scenario for 5 s (the human sets off at 3 s), so the proof costs seconds, not
+the minute of the 20-robot run that tests/process/test_surround_improved.py spends through ``petswarm run``."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+from cli.main import main
+
+pytestmark = pytest.mark.process
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _short_scenario(tmp: Path) -> Path:
+    """The improved cylinder scenario cut to its lattice's second row of five robots and 5 s."""
+    text = (ROOT / "scenarios" / "surround-cylinder-improved.toml").read_text()
+    head, positions = text.split("positions = [", 1)
+    rows = re.findall(r"\[[^\[\]]+\]", positions)[5:10]
+    head = head.replace("duration_s = 22", "duration_s = 5").replace("count = 20", "count = 5")
+    head = head.replace('name = "surround-cylinder-improved"', 'name = "surround-five"')
+    path = tmp / "surround-five.toml"
+    path.write_text(head + "positions = [" + ", ".join(rows) + "]\n")
+    return path
+
+
+@pytest.mark.timeout(300)
+def test_the_lockstep_bench_gives_the_model_time_bench_row_run_by_processes(tmp_path: Path, capsys) -> None:
+    scenario = str(_short_scenario(tmp_path))
+    rows = {}
+    for clock in ("model", "lockstep"):
+        argv = ["bench", "surround", scenario, "--law", "improved", "--seeds", "1", "--clock", clock, "--json"]
+        assert main([*argv, "--out", str(tmp_path / clock)]) == 0
+        results = json.loads(capsys.readouterr().out)
+        assert results["clock"] == clock
+        [rows[clock]] = results["runs"]["surround-five"]["improved"]
+    assert rows["lockstep"]["ok"], rows["lockstep"]["problems"]
+    assert rows["lockstep"]["digest"] and rows["lockstep"] == rows["model"]
+    assert rows["model"]["centre_to_human_walking_m"] is not None  # the human walked: the figures are not empty
+
+
+def test_a_clock_the_bench_cannot_repeat_is_refused(capsys) -> None:
+    with pytest.raises(SystemExit) as exit_:
+        main(["bench", "surround", "--clock", "wall"])
+    assert exit_.value.code == 2 and "invalid choice: 'wall'" in capsys.readouterr().err
