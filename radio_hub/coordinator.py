@@ -66,6 +66,11 @@ class Coordinator:
         """Messages still held for a node that left go nowhere."""
         self._downs.pop(node_id, None)
 
+    @property
+    def publishes_world(self) -> bool:
+        """Whether a viewer callback takes the world's states (else the environment makes none)."""
+        return self.on_world is not None
+
     def publish_world(self, state: dict[str, Any]) -> None:
         """Hand the world's state to the viewer callback, if any."""
         if self.on_world is not None:

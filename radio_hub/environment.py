@@ -82,7 +82,8 @@ class Downlink(Protocol):
         """``node_id`` detached: release whatever was kept for it."""
 
     def publish_world(self, state: dict[str, Any]) -> None:
-        """The world's state for viewers (10 Hz)."""
+        """The world's state for viewers (10 Hz). A downlink whose ``publishes_world`` is False (optional,
+        default True) drops it, and the environment then does not make it."""
 
 
 class MessageDownlink(Downlink, Protocol):
@@ -372,7 +373,8 @@ class Environment:
             except (OSError, ValueError) as err:  # a full disk must not take the world down
                 print(f"hub: world log: {err}; no longer recording", file=sys.stderr)
                 self._world_log = None
-        if self._ticks % PUBLISH_EVERY == 0:
+        # a downlink may say nobody watches (a model run without a viewer): no state is made for nobody
+        if self._ticks % PUBLISH_EVERY == 0 and getattr(self.downlink, "publishes_world", True):
             self.downlink.publish_world(self.world_state(now))
 
     def world_line(self, now: int | None = None) -> str:

@@ -111,6 +111,21 @@ def beacon_fixes(
     return [n for n, v in zip(names, valid.tolist(), strict=True) if v], xy[valid]
 
 
+def _brightness(job: SweepJob) -> list[float]:
+    """``beacon_fixes``'s brightness of each of a sweep's beacons: its gain (1.0 g, which ``estimate_many`` reads as
+    the very number g is), the human's times his beacon's power (a sweep naming him twice: the general way)."""
+    if job.person not in job.names:
+        return list(job.gains)
+    if job.names.count(job.person) > 1:
+        return [
+            (PERSON_BEACON_POWER if n == job.person else 1.0) * g for n, g in zip(job.names, job.gains, strict=True)
+        ]
+    brightness = list(job.gains)
+    at = job.names.index(job.person)
+    brightness[at] = PERSON_BEACON_POWER * brightness[at]
+    return brightness
+
+
 _IN_ORDER = slice(None)
 """``BeaconTracker._same_beacons``: the fixes are in the tracks' order already (every row, as it is)."""
 
@@ -137,9 +152,13 @@ def beacon_fixes_batch(jobs: list[SweepJob], ir: IrConfig, method: str = "lsq") 
     are batched (finite readings, gains > 0): the others go alone too, so a bad one fails as it would alone.
     """
     together = [job for job in jobs if _batchable(job)]
-    if together and not np.isfinite(np.concatenate([job.readings for job in together])).all():
+    readings = np.concatenate([job.readings for job in together]) if together else None
+    if readings is not None and not np.isfinite(readings).all():
         together = [job for job in together if np.isfinite(job.readings).all()]
-    found = dict(zip(map(id, together), _fixes_together(together, ir, method), strict=True)) if together else {}
+        readings = np.concatenate([job.readings for job in together]) if together else None
+    found = {}
+    if readings is not None:
+        found = dict(zip(map(id, together), _fixes_together(together, readings, ir, method), strict=True))
     return [
         found[id(job)] if id(job) in found else beacon_fixes(job.names, job.readings, job.gains, ir, method, job.person)
         for job in jobs
@@ -153,14 +172,14 @@ def _batchable(job: SweepJob) -> bool:
     return len(job.names) >= 2 and readings.shape == (len(job.names), RECEIVERS) and all(g > 0 for g in job.gains)
 
 
-def _fixes_together(jobs: list[SweepJob], ir: IrConfig, method: str) -> list[tuple[list[str], np.ndarray]]:
-    """``beacon_fixes`` of every job, through one ``estimate_many`` of all their rows."""
-    readings = np.concatenate([job.readings for job in jobs])
-    brightness = [
-        (PERSON_BEACON_POWER if n == job.person else 1.0) * g
-        for job in jobs
-        for n, g in zip(job.names, job.gains, strict=True)
-    ]
+def _fixes_together(
+    jobs: list[SweepJob], readings: np.ndarray, ir: IrConfig, method: str
+) -> list[tuple[list[str], np.ndarray]]:
+    """``beacon_fixes`` of every job, through one ``estimate_many`` of all their rows (``readings``, the jobs'
+    readings one under the other)."""
+    brightness: list[float] = []
+    for job in jobs:
+        brightness += _brightness(job)
     found = estimate_many(readings, ir, method, brightness, [len(job.names) for job in jobs])
     xy = np.empty((len(readings), 2))
     np.multiply(np.cos(found.bearing_rad), found.distance_m, out=xy[:, 0])

@@ -207,8 +207,10 @@ def test_a_batch_of_sweeps_gives_each_robot_its_own_estimate_bit_for_bit(method:
         jobs = []
         for size in rng.integers(0, 22, size=rng.integers(2, 20)):
             names = [f"robot-{i}" for i in range(size)]
-            if size and rng.random() < 0.3:
-                names[-1] = "user"
+            if size and rng.random() < 0.3:  # the human's beacon anywhere in the sweep, now and then twice
+                names[int(rng.integers(size))] = "user"
+                if size > 3 and rng.random() < 0.2:
+                    names[0] = names[1] = "user"
             gains = rng.choice([1.0, 0.5, 0.125], size=size).tolist()
             jobs.append(SweepJob(names, _robot_sweeps(rng, config, size), gains, "user"))
         jobs.append(SweepJob(["robot-1", "robot-2"], np.full((2, 12), np.nan), [1.0, 1.0], "user"))

@@ -77,3 +77,28 @@ def test_round_places_is_round_bit_for_bit_near_halves_signed_zeros_and_beyond()
     want = [[round(v, 4) for v in row] for row in table.tolist()]
     assert [[repr(v) for v in row] for row in got] == [[repr(v) for v in row] for row in want]
     assert [repr(v) for v in round_places(np.array([[0.123456, -0.5]]), 2)[0]] == ["0.12", "-0.5"]
+
+
+def test_world_states_are_made_only_for_a_downlink_that_publishes_them() -> None:
+    """A model run's coordinator without a viewer says so: the environment makes no state for it every fifth
+    tick; with a viewer (lockstep's), or a downlink that does not say (the hub's), every fifth tick's goes out."""
+    from radio_hub.coordinator import Coordinator
+
+    def states_made(coordinator: Coordinator | None) -> tuple[int, list[int]]:
+        env = coordinator.env if coordinator is not None else Environment(EnvironmentConfig(), 1, Quiet())
+        made: list[int] = []
+        world_state = env.world_state
+        env.world_state = lambda now=None: made.append(now) or world_state(now)  # type: ignore[method-assign]
+        env.receive("n-1", wire.Attach(ext_addr=1, position=[0.0, 0.0], kind="robot", n=1), 0)
+        for tick in range(1, 11):
+            env.advance(tick * 20_000)
+        return len(made), made
+
+    quiet = Coordinator(EnvironmentConfig(), 1, wall_epoch_us=0, in_memory=True)
+    assert states_made(quiet) == (0, [])
+    watched = Coordinator(EnvironmentConfig(), 1, wall_epoch_us=0, in_memory=True)
+    seen: list[dict[str, Any]] = []
+    watched.on_world = seen.append
+    count, _ = states_made(watched)
+    assert count == 2 and len(seen) == 2
+    assert states_made(None)[0] == 2
