@@ -41,6 +41,8 @@ else:
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
 DEFAULT_SCENARIOS = [str(SCENARIOS / "surround-cylinder.toml"), str(SCENARIOS / "surround-corridor.toml")]
+INTERRUPTED = 130
+"""A run's exit code when Ctrl-C or SIGTERM stopped it."""
 CLOCKS = ("model", "lockstep")
 """The clocks a bench run can take: both repeat exactly from a seed (wall-clock runs do not)."""
 RECORD_EVERY = 5
@@ -81,7 +83,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def bench_surround(args: argparse.Namespace) -> int:
-    """Run every scenario for ``--seeds`` seeds in model time; print, save JSON and the plot."""
+    """Run every scenario for ``--seeds`` seeds on ``--clock``; print, save JSON and the plot. Exit code 1 when a
+    run was not ok (its row says why), 2 for a bad scenario file."""
     # imported here, not at load: building the CLI's parser imports this module in every process,
     # robots too, and these bring the hub's side and numpy (issue 13)
     from petswarm.bench.surround_sim import surround_figures
@@ -104,7 +107,7 @@ def bench_surround(args: argparse.Namespace) -> int:
             for seed in range(args.seed, args.seed + args.seeds):
                 print(f"[bench surround] {scenario.name} law {law} seed {seed} ({args.clock})", file=sys.stderr)
                 world, run = scenario_run(with_law(scenario, law), seed, args.clock)
-                runs.append({"seed": seed, **run, **summarise(world)})
+                runs.append({"seed": seed, **run, **(summarise(world) if world else {})})
             results["runs"][scenario.name][law] = runs
     if args.paper:
         print("[bench surround] the paper's setups, pure simulation", file=sys.stderr)
@@ -113,7 +116,10 @@ def bench_surround(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     save(results, out, "bench_surround", plot)
     emit(table(results), results, args.json)
-    return 0
+    failed = [run for laws in results["runs"].values() for runs in laws.values() for run in runs if not run["ok"]]
+    if failed:
+        print(f"petswarm bench surround: {len(failed)} run(s) not ok (the table says why)", file=sys.stderr)
+    return 1 if failed else 0
 
 
 def _laws(choice: str) -> list[str]:
@@ -154,7 +160,8 @@ def scenario_run(
         )
         summary = _execute(opts, scenario, record)
         run = {"digest": summary.get("digest"), "ok": summary.get("ok", False), "problems": summary.get("problems")}
-        return read_world(record / "world.jsonl"), run
+        world = record / "world.jsonl"  # none when a process run failed before its hub wrote a tick
+        return (read_world(world) if world.exists() else []), run
 
 
 def _execute(opts: RunOptions, scenario: Scenario, record: Path) -> dict[str, Any]:
@@ -167,7 +174,9 @@ def _execute(opts: RunOptions, scenario: Scenario, record: Path) -> dict[str, An
     from petswarm.lab.lockstep_run import run_lockstep
 
     with contextlib.redirect_stdout(sys.stderr):
-        run_lockstep(opts, scenario)
+        code = run_lockstep(opts, scenario)
+    if code == INTERRUPTED:  # Ctrl-C or SIGTERM stopped the run: it stops the bench too, as in model time
+        raise KeyboardInterrupt
     summary = record / "summary.json"
     return json.loads(summary.read_text()) if summary.exists() else {"ok": False, "problems": ["no summary"]}
 
@@ -214,6 +223,8 @@ def table(results: dict[str, Any]) -> list[str]:
 
 
 def _row(name: str, law: str, run: dict[str, Any]) -> str:
+    if "contacts" not in run:  # the run recorded no world: nothing to measure
+        return f"{name:26s} {law:8s} {run['seed']:4d}  no world recorded  not ok: {'; '.join(run['problems'] or [])}"
     c = run["contacts"]
     kinds = f"{c['robot_robot']}/{c['robot_obstacle']}/{c['robot_human']}" + (
         f"+{c['unattributed']}" if c["unattributed"] else ""
@@ -246,7 +257,7 @@ def plot(results: dict[str, Any], path: Path) -> None:
     fig, axes = plt.subplots(len(names), 2, figsize=(13, 3.2 * len(names)), squeeze=False)
     for (ax_r, ax_c), name in zip(axes, names, strict=True):
         for law, runs in results["runs"][name].items():
-            for k, run in enumerate(runs):
+            for k, run in enumerate(r for r in runs if "extent_series" in r):
                 label = f"{law} ({len(runs)} seeds)" if k == 0 else None
                 colour = LAW_COLOURS.get(law)
                 t, r = np.array(run["extent_series"], dtype=float).T
@@ -262,7 +273,8 @@ def plot(results: dict[str, Any], path: Path) -> None:
         for ax in (ax_r, ax_c):
             ax.set_xlabel("time (s)")
             ax.grid(alpha=0.3)
-            ax.legend(fontsize=8)
+            if ax.get_legend_handles_labels()[0]:  # no runs drawn (none recorded a world): no empty legend
+                ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)

@@ -242,7 +242,7 @@ array) a batch stays within what the hub takes from a node."""
 def put_batches(pub: zenoh.Publisher | None, parts: list[bytes], max_bytes: int) -> int:
     """``parts`` on ``pub`` in as few puts as ``_batches`` allows (a lone message as it is); the number of puts.
     Raises HubUnavailable as ``put_up`` does."""
-    runs = _batches(parts, max_bytes)
+    runs = _batches(parts, max_bytes) if parts else []
     for run in runs:
         put_up(pub, run[0] if len(run) == 1 else wire.encode_batch(run))
     return len(runs)

@@ -143,6 +143,8 @@ class LockstepLink(ZenohLink):
 
     def _send_outbox(self) -> None:
         outbox, self._outbox = self._outbox, []
+        if not outbox:  # a close with nothing held (a connect that failed): an empty batch is malformed
+            return
         with contextlib.suppress(HubUnavailable):
             put_batches(self._pub, outbox, UP_BATCH_BYTES)
 
@@ -238,10 +240,10 @@ class LockstepHub:
         self.dead: list[dict[str, Any]] = []
         self.rounds = 0
         self.stale_idles = 0
+        """Idles of nodes already taken as gone, that were only slow (counted and dropped)."""
         self.up_puts = 0
         """Transport messages nodes put to the hub (a batch counts once)."""
         self.grants = 0
-        """Idles of nodes already taken as gone, that were only slow (counted and dropped)."""
         self.now_s = 0.0
         self._looked_at = 0.0
         """Wall time the hub last looked for nodes that are silent too long."""

@@ -57,3 +57,28 @@ def test_a_scenario_without_the_surround_formation_is_refused(tmp_path: Path, ca
 def test_a_missing_scenario_file_is_a_clear_error(tmp_path: Path, capsys) -> None:
     assert main(["bench", "surround", str(tmp_path / "nosuch.toml"), "--out", str(tmp_path)]) == 2
     assert "no scenario file" in capsys.readouterr().err
+
+
+def test_a_run_that_recorded_no_world_is_a_row_that_says_why_and_the_bench_exits_1(
+    tmp_path: Path, capsys, monkeypatch
+) -> None:
+    """A process run can fail before its hub writes a tick (the hub did not start): the bench keeps the other rows,
+    says why for that one, and its exit code tells a script that a run failed."""
+    import petswarm.bench.surround as bench
+
+    monkeypatch.setattr(bench, "scenario_run", lambda *_: ([], {"digest": None, "ok": False, "problems": ["no hub"]}))
+    argv = ["bench", "surround", str(CYLINDER), "--seeds", "1", "--clock", "lockstep", "--out", str(tmp_path)]
+    assert main(argv) == 1
+    out, err = capsys.readouterr()
+    assert "no world recorded  not ok: no hub" in out and "1 run(s) not ok" in err
+
+
+def test_an_interrupted_process_run_stops_the_bench(tmp_path: Path, monkeypatch) -> None:
+    """Ctrl-C or SIGTERM ends a lockstep run with exit code 130: the bench stops there, as in model time, rather
+    than start the next of its many runs."""
+    import petswarm.bench.surround as bench
+    import petswarm.lab.lockstep_run as lockstep_run
+
+    monkeypatch.setattr(lockstep_run, "run_lockstep", lambda *_: bench.INTERRUPTED)
+    with pytest.raises(KeyboardInterrupt):
+        bench.scenario_run(replace(load(CYLINDER), duration_s=1.0), 1, "lockstep", tmp_path)

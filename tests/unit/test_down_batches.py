@@ -11,7 +11,7 @@ import pytest
 from radio_hub.air.mac import Frame, FrameType, TxStatus
 from radio_hub.link import wire
 from radio_hub.link.port import RadioClient, RadioIdentity, RxFrame, TxResult
-from radio_hub.link.zenoh_link import DOWN_BATCH_BYTES, _batches
+from radio_hub.link.zenoh_link import DOWN_BATCH_BYTES, UP_BATCH_BYTES, _batches, put_batches
 from tests.unit.test_port_transmit import RecordingLink
 
 
@@ -80,3 +80,24 @@ def test_a_long_run_of_messages_is_cut_into_batches_within_bounds():
     big = [bytes(DOWN_BATCH_BYTES // 2 + 1)] * 3
     assert [len(b) for b in _batches(big)] == [1, 1, 1]
     assert [part for batch in _batches(parts) for part in batch] == parts
+
+
+def test_a_lockstep_node_batch_stays_within_what_the_hub_takes_from_a_node() -> None:
+    """``UP_BATCH_BYTES`` leaves room for msgpack's headers: every batch of parts up to the limit encodes within
+    ``wire.MAX_UP_BYTES``; a lone longer part goes alone (and the hub drops it as it always did)."""
+    import random
+
+    rng = random.Random(3)
+    for _ in range(40):
+        parts = [bytes(rng.choice((1, 30, 200, 4000, 30_000))) for _ in range(rng.randrange(1, 600))]
+        runs = _batches(parts, UP_BATCH_BYTES)
+        assert [part for run in runs for part in run] == parts
+        for run in runs:
+            assert len(run) <= wire.BATCH_MAX_PARTS
+            assert len(run) == 1 or len(wire.encode_batch(run)) <= wire.MAX_UP_BYTES
+    assert _batches([bytes(70_000), b"x"], UP_BATCH_BYTES) == [[bytes(70_000)], [b"x"]]
+
+
+def test_nothing_to_put_is_no_put() -> None:
+    """A lockstep link closing with nothing held puts nothing (an empty batch would be malformed)."""
+    assert put_batches(None, [], UP_BATCH_BYTES) == 0  # no publisher: any put would raise HubUnavailable
