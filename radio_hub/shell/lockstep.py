@@ -73,6 +73,8 @@ class LockstepLink(ZenohLink):
         super().__init__(session, keys, owns_session)
         self._held: deque[tuple[int, bytes]] = deque()
         self._release: list[bytes] = []
+        self._release_grant: int | None = None
+        """The number of the grant that closes ``_release``."""
         self._seen = 0
         self._loop: Any = None
         self._on_down: Callable[[bytes], None] | None = None
@@ -113,6 +115,7 @@ class LockstepLink(ZenohLink):
             grant_n, data = self._held.popleft()
             self._release.append(data)
             if grant_n == n:
+                self._release_grant = n
                 break
 
     def _release_held(self) -> bool:
@@ -121,9 +124,8 @@ class LockstepLink(ZenohLink):
             return False
         for data in self._release:
             self._loop.call_soon(self._on_down, data)
-        last = _grant_of(self._release[-1])
-        if last is not None:
-            self._seen = last.n
+        if self._release_grant is not None:  # known from zenoh's thread: a batch is not unpacked again for it
+            self._seen, self._release_grant = self._release_grant, None
         self._release = []
         return True
 
