@@ -174,11 +174,8 @@ class HubDownlink:
 
     def _put_all(self, pending: dict[str, list[bytes]]) -> None:
         for node_id, parts in pending.items():
-            if len(parts) == 1:
-                self._put(node_id, parts[0], 1)
-                continue
-            for batch in _batches(parts):
-                self._put(node_id, batch[0] if len(batch) == 1 else wire.encode_batch(batch), len(batch))
+            for data, count in transport_messages(parts, DOWN_BATCH_BYTES):
+                self._put(node_id, data, count)
 
     def _put(self, node_id: str, data: bytes, count: int) -> None:
         if self.session is None:
@@ -240,12 +237,22 @@ array) a batch stays within what the hub takes from a node."""
 
 
 def put_batches(pub: zenoh.Publisher | None, parts: list[bytes], max_bytes: int) -> int:
-    """``parts`` on ``pub`` in as few puts as ``_batches`` allows (a lone message as it is); the number of puts.
-    Raises HubUnavailable as ``put_up`` does."""
+    """``parts`` on ``pub`` in as few puts as ``transport_messages`` allows; the number of puts. Raises
+    HubUnavailable as ``put_up`` does."""
+    puts = 0
+    for data, _ in transport_messages(parts, max_bytes):
+        put_up(pub, data)
+        puts += 1
+    return puts
+
+
+def transport_messages(parts: list[bytes], max_bytes: int) -> list[tuple[bytes, int]]:
+    """``parts`` in order as transport messages and how many each carries: runs of ``_batches``, a run of one
+    message as it is, a longer one as ``wire.encode_batch``; nothing for no parts."""
+    if len(parts) == 1:
+        return [(parts[0], 1)]
     runs = _batches(parts, max_bytes) if parts else []
-    for run in runs:
-        put_up(pub, run[0] if len(run) == 1 else wire.encode_batch(run))
-    return len(runs)
+    return [(run[0], 1) if len(run) == 1 else (wire.encode_batch(run), len(run)) for run in runs]
 
 
 def _batches(parts: list[bytes], max_bytes: int = DOWN_BATCH_BYTES) -> list[list[bytes]]:
