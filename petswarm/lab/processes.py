@@ -12,9 +12,26 @@ import sys
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, Any, Protocol
+
+from petswarm.lab.forking import ForkServer, ForkServerGone, can_fork_server
 
 _PR_SET_PDEATHSIG = 1
+FORKED_COMMANDS = ("robot",)
+"""The ``petswarm`` commands a Supervisor forks from its fork server (``petswarm.lab.forking``) rather than
+starting anew: robots, the processes a run starts by the dozen."""
+
+
+class ChildProcess(Protocol):
+    """What the Supervisor needs of a child: ``subprocess.Popen`` or a forked ``ForkedProcess``."""
+
+    pid: int
+    returncode: int | None
+
+    def poll(self) -> int | None: ...
+    def wait(self, timeout: float | None = None) -> int: ...
+    def send_signal(self, signum: int) -> None: ...
+    def kill(self) -> None: ...
 
 
 def _die_with_parent(signum: int) -> Callable[[], None]:
@@ -45,20 +62,44 @@ def free_tcp_port() -> int:
 class Supervisor:
     """Owns child processes running ``petswarm`` subcommands; ``stop_all`` ends every one of them."""
 
-    def __init__(self, log_dir: Path) -> None:
+    def __init__(self, log_dir: Path, fork: bool = True) -> None:
         self.log_dir = log_dir
         log_dir.mkdir(parents=True, exist_ok=True)
-        self.children: dict[str, subprocess.Popen[bytes]] = {}
+        self.children: dict[str, ChildProcess] = {}
+        self._fork = fork and can_fork_server()
+        """Whether robots come from a fork server (started at the first robot)."""
+        self._server: ForkServer | None = None
         self._logs: dict[str, IO[bytes]] = {}
         self._accounted: set[str] = set()
         """Children whose end is known: stopped here, or already reported by ``unexpected_deaths``."""
 
-    def spawn(self, name: str, args: list[str], wrapper: Sequence[str] = ()) -> subprocess.Popen[bytes]:
+    def spawn(self, name: str, args: list[str], wrapper: Sequence[str] = ()) -> ChildProcess:
         """Start ``petswarm <args>`` as a child; its stdout and stderr go to ``<log_dir>/<name>.log``.
 
         ``wrapper`` runs it inside another command that execs it, e.g. ``ip netns exec NS`` (another host).
+        A robot is forked from the fork server when it can be, else started as any other command.
         """
+        if not wrapper and args[:1] and args[0] in FORKED_COMMANDS and self._fork:
+            forked = self._spawn_forked(name, args)
+            if forked is not None:
+                return forked
         return self.spawn_module(name, "cli", args, wrapper)
+
+    def _spawn_forked(self, name: str, args: list[str]) -> ChildProcess | None:
+        env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+        if self._server is None:
+            log = open(self.log_dir / "forkserver.log", "wb")  # noqa: SIM115 - closed in stop_all
+            self._logs["forkserver"] = log
+            self._server = ForkServer(log, _die_with_parent(signal.SIGKILL))
+        if not self._server.fits(args, env):
+            return None
+        try:
+            child = self._server.spawn(args, self.log_dir / f"{name}.log", env, parent_death_signal(name))
+        except ForkServerGone as err:
+            print(f"petswarm: starting {name} without the fork server: {err}", file=sys.stderr)
+            return None
+        self.children[name] = child
+        return child
 
     def spawn_module(
         self, name: str, module: str, args: list[str], wrapper: Sequence[str] = ()
@@ -125,6 +166,10 @@ class Supervisor:
         robots = [n for n in order if n != "hub"]
         codes.update(self.stop(robots, timeout))
         codes.update(self.stop([n for n in order if n == "hub"], timeout))
+        if self._server is not None:
+            self._server.close(timeout)
+            self._server = None
+            self._logs.pop("forkserver").close()
         return codes
 
 

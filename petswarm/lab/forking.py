@@ -1,0 +1,299 @@
+"""A fork server for robot processes: import a robot's code once per run, fork every robot from it.
+
+Why: a robot process spends about 0.3 CPU-s importing its middleware before it does anything (half of it
+Python 3.11 making dataclasses), and a run or the test suite starts robots by the dozen. The fork server is one
+``python -m cli.forkserver`` process per ``Supervisor`` that imports what a robot imports (lean, as
+``cli.lean`` says), then forks a robot for each request; the child is that robot's ``petswarm robot``
+command from then on.
+
+What the child keeps of a robot started with exec (so nothing else has to know):
+- its own pid, log file (stdout and stderr), working directory, environment and stdin from /dev/null;
+- its command line as ``ps`` and ``petswarm chaos`` read it (``/proc/<pid>/cmdline``): the server starts with
+  room after its own arguments and the child writes its ``python -m cli robot ...`` there;
+- its parent-death signal: the server dies with its supervisor (SIGKILL), and each child with the server.
+
+The supervisor's side keeps a Popen-like handle per child (``ForkedProcess``); the server reaps its children
+and reports each exit code over the socket, negative for a signal as ``subprocess`` does.
+
+Protocol (a SOCK_SEQPACKET socket pair, one JSON object per packet): the supervisor sends
+``{"argv", "log", "env", "cwd", "deathsig"}``; the server answers ``{"spawned": pid}`` or ``{"refused": why}``
+and, whenever a child ends, ``{"exited": pid, "code": n}``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import json
+import os
+import selectors
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import IO, Any
+
+TITLE_ROOM = 4096
+"""Bytes of command line the server reserves for a child's own (a scenario robot's is under 600)."""
+PACKET_BYTES = 1 << 20
+"""The largest request or answer (a request carries the child's environment)."""
+STARTUP_VARIABLES = ("PYTHONHASHSEED", "PYTHONPATH", "PYTHONHOME", "PYTHONDONTWRITEBYTECODE", "PYTHONSAFEPATH")
+"""Environment an interpreter reads only at its start: a child whose own differs from the server's is not
+forked (it would not get them)."""
+_PR_SET_PDEATHSIG = 1
+
+
+class ForkServerGone(Exception):
+    """The fork server ended or refused: the caller starts the process another way."""
+
+
+def can_fork_server() -> bool:
+    """Whether this platform has what the server needs (Linux: pidfds, /proc, prctl)."""
+    return sys.platform == "linux" and hasattr(os, "pidfd_open")
+
+
+def title(argv: list[str]) -> bytes:
+    """The command line a forked child shows: ``<python> -m cli <argv>``, NUL-separated as the kernel keeps it."""
+    return b"".join(os.fsencode(arg) + b"\0" for arg in [sys.executable, "-m", "cli", *argv])
+
+
+class ForkedProcess:
+    """A child of the fork server, seen from the supervisor as a ``subprocess.Popen`` is."""
+
+    def __init__(self, server: ForkServer, pid: int, args: list[str]) -> None:
+        self._server = server
+        self.pid = pid
+        self.args = args
+        self.returncode: int | None = None
+
+    def poll(self) -> int | None:
+        """The exit code once the child has ended, else None."""
+        if self.returncode is None:
+            self.returncode = self._server.exit_code(self.pid, timeout=0.0)
+        return self.returncode
+
+    def wait(self, timeout: float | None = None) -> int:
+        """Wait for the child's end; subprocess.TimeoutExpired after ``timeout`` seconds."""
+        if self.returncode is None:
+            self.returncode = self._server.exit_code(self.pid, timeout)
+        if self.returncode is None:
+            raise subprocess.TimeoutExpired(self.args, timeout or 0.0)
+        return self.returncode
+
+    def send_signal(self, signum: int) -> None:
+        """Signal the child unless it is known to have ended (its pid may be someone else's by now)."""
+        if self.poll() is None:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(self.pid, signum)
+
+    def terminate(self) -> None:
+        """SIGTERM, as Popen.terminate."""
+        self.send_signal(signal.SIGTERM)
+
+    def kill(self) -> None:
+        """SIGKILL, as Popen.kill."""
+        self.send_signal(signal.SIGKILL)
+
+
+class ForkServer:
+    """The supervisor's end of one fork server process; ``close`` ends it (after its children)."""
+
+    def __init__(self, log: IO[bytes], die_with_parent: Callable[[], None]) -> None:
+        ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+        self._env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+        with theirs:
+            self._proc = subprocess.Popen(
+                [sys.executable, "-m", "cli.forkserver", str(theirs.fileno()), " " * TITLE_ROOM],
+                stdin=subprocess.DEVNULL,
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                pass_fds=(theirs.fileno(),),
+                preexec_fn=die_with_parent,
+                env=self._env,
+            )
+        self._sock = ours
+        self._exits: dict[int, int] = {}
+        self._gone = False
+
+    def fits(self, argv: list[str], env: dict[str, str]) -> bool:
+        """Whether a child with this command line and environment can be forked rather than started anew."""
+        same_start = all(env.get(k) == self._env.get(k) for k in STARTUP_VARIABLES)
+        return not self._gone and same_start and len(title(argv)) <= TITLE_ROOM
+
+    def spawn(self, argv: list[str], log: Path, env: dict[str, str], deathsig: int) -> ForkedProcess:
+        """Fork ``petswarm <argv>``; ForkServerGone if the server is not there or refuses."""
+        request = {"argv": argv, "log": str(log), "env": env, "cwd": os.getcwd(), "deathsig": int(deathsig)}
+        try:
+            self._sock.send(json.dumps(request).encode())
+        except OSError as err:
+            self._gone = True
+            raise ForkServerGone(f"the fork server is gone: {err}") from None
+        while True:
+            answer = self._receive(timeout=None)
+            if "spawned" in answer:
+                return ForkedProcess(self, int(answer["spawned"]), argv)
+            if "refused" in answer:
+                raise ForkServerGone(f"the fork server refused: {answer['refused']}")
+
+    def exit_code(self, pid: int, timeout: float | None) -> int | None:
+        """The exit code of child ``pid`` once the server has reported it, waiting up to ``timeout``."""
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while pid not in self._exits:
+            left = None if deadline is None else max(deadline - time.monotonic(), 0.0)
+            if self._gone:
+                if self._lost(pid) is None and left == 0.0:
+                    return None
+                time.sleep(0.01)
+                continue
+            if not self._poll_socket(left):
+                return None
+            with contextlib.suppress(ForkServerGone):  # then _lost says what became of the child
+                self._receive(timeout=0.0)
+        return self._exits[pid]
+
+    def close(self, timeout: float = 5.0) -> None:
+        """End the server: it exits once the socket closes (any child left dies with it)."""
+        self._sock.close()
+        self._gone = True
+        try:
+            self._proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            self._proc.kill()
+            self._proc.wait()
+
+    def _poll_socket(self, timeout: float | None) -> bool:
+        with selectors.DefaultSelector() as sel:
+            sel.register(self._sock, selectors.EVENT_READ)
+            return bool(sel.select(timeout))
+
+    def _receive(self, timeout: float | None) -> dict[str, Any]:
+        """One answer of the server (an exit report is filed as it comes); {} when there is none in time."""
+        if timeout is not None and not self._poll_socket(timeout):
+            return {}
+        try:
+            data = self._sock.recv(PACKET_BYTES)
+        except OSError:
+            data = b""
+        if not data:
+            self._gone = True
+            raise ForkServerGone("the fork server ended")
+        answer: dict[str, Any] = json.loads(data)
+        if "exited" in answer:
+            self._exits[int(answer["exited"])] = int(answer["code"])
+        return answer
+
+    def _lost(self, pid: int) -> int | None:
+        """A child whose server is gone: it dies with the server (parent-death signal); None while it runs."""
+        try:
+            state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+        except (OSError, IndexError):
+            state = "gone"
+        if state not in ("gone", "Z", "X"):
+            return None
+        self._exits[pid] = -signal.SIGKILL
+        return self._exits[pid]
+
+
+# --- the server's side (runs in ``python -m cli.forkserver``) ---
+
+
+def serve(sock: socket.socket) -> dict[str, Any] | None:
+    """Answer requests until the supervisor closes the socket (returns None); in a forked child, return its
+    request, with the child set up to run it (``become``)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the supervisor's to handle: keep reporting exits
+    children: dict[int, int] = {}
+    with selectors.DefaultSelector() as sel:
+        sel.register(sock, selectors.EVENT_READ, None)
+        while True:
+            for key, _ in sel.select():
+                if key.data is not None:
+                    _report_exit(sock, sel, children, key.data)
+                    continue
+                data = sock.recv(PACKET_BYTES)
+                if not data:
+                    return None
+                request = _request(data)
+                if isinstance(request, str):
+                    _answer(sock, {"refused": request})
+                    continue
+                pid = os.fork()
+                if pid == 0:  # the child: nothing of the server's stays open in it
+                    for fd in children.values():
+                        os.close(fd)
+                    sock.close()
+                    return request
+                children[pid] = os.pidfd_open(pid)
+                sel.register(children[pid], selectors.EVENT_READ, pid)
+                _answer(sock, {"spawned": pid})
+
+
+def become(request: dict[str, Any], server_pid: int) -> list[str]:
+    """In a freshly forked child: take on the robot's log, environment, directory, signals and command line;
+    returns the argv to run. Exits at once if the server died before the parent-death signal was armed."""
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, int(request["deathsig"]))
+    if os.getppid() != server_pid:
+        os._exit(1)
+    for signum in (signal.SIGTERM, signal.SIGCHLD):
+        signal.signal(signum, signal.SIG_DFL)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    log = os.open(request["log"], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+    null = os.open(os.devnull, os.O_RDONLY)
+    os.dup2(null, 0)
+    os.dup2(log, 1)
+    os.dup2(log, 2)
+    os.close(log)
+    os.close(null)
+    os.chdir(request["cwd"])
+    os.environ.clear()
+    os.environ.update(request["env"])
+    argv: list[str] = request["argv"]
+    retitle(title(argv))
+    sys.argv = [sys.argv[0], *argv]
+    return argv
+
+
+def retitle(cmdline: bytes) -> bool:
+    """Write ``cmdline`` over this process's own command line, NUL-padded to its end (what /proc/<pid>/cmdline
+    and ps show); False if it does not fit or /proc does not say where it is."""
+    try:
+        fields = Path("/proc/self/stat").read_text().rsplit(")", 1)[1].split()
+        start, end = int(fields[45]), int(fields[46])  # arg_start, arg_end: fields 48 and 49 of proc(5)
+    except (OSError, ValueError, IndexError):
+        return False
+    if len(cmdline) > end - start:
+        return False
+    ctypes.memmove(start, cmdline.ljust(end - start, b"\0"), end - start)
+    return True
+
+
+def _request(data: bytes) -> dict[str, Any] | str:
+    """A request checked for shape, or why it is refused."""
+    try:
+        request = json.loads(data)
+    except ValueError as err:
+        return f"not JSON: {err}"
+    fields = {"argv": list, "log": str, "env": dict, "cwd": str, "deathsig": int}
+    if not isinstance(request, dict) or any(not isinstance(request.get(k), t) for k, t in fields.items()):
+        return f"a request needs {sorted(fields)}"
+    if not all(isinstance(a, str) for a in request["argv"]) or not request["argv"]:
+        return "argv must be a non-empty list of strings"
+    if not all(isinstance(k, str) and isinstance(v, str) for k, v in request["env"].items()):
+        return "env must map strings to strings"
+    return request
+
+
+def _report_exit(sock: socket.socket, sel: selectors.BaseSelector, children: dict[int, int], pid: int) -> None:
+    fd = children.pop(pid)
+    sel.unregister(fd)
+    os.close(fd)
+    _, status = os.waitpid(pid, 0)
+    _answer(sock, {"exited": pid, "code": os.waitstatus_to_exitcode(status)})
+
+
+def _answer(sock: socket.socket, answer: dict[str, Any]) -> None:
+    with contextlib.suppress(OSError):  # the supervisor left: the next recv sees it
+        sock.send(json.dumps(answer).encode())
