@@ -43,6 +43,8 @@ PACKET_BYTES = 1 << 20
 STARTUP_VARIABLES = ("PYTHONHASHSEED", "PYTHONPATH", "PYTHONHOME", "PYTHONDONTWRITEBYTECODE", "PYTHONSAFEPATH")
 """Environment an interpreter reads only at its start: a child whose own differs from the server's is not
 forked (it would not get them)."""
+SPAWN_WITHIN_S = 60.0
+"""How long a supervisor waits for the server's answer (its first one comes after the server's imports)."""
 _PR_SET_PDEATHSIG = 1
 
 
@@ -131,8 +133,13 @@ class ForkServer:
         except OSError as err:
             self._gone = True
             raise ForkServerGone(f"the fork server is gone: {err}") from None
+        deadline = time.monotonic() + SPAWN_WITHIN_S
         while True:
-            answer = self._receive(timeout=None)
+            answer = self._receive(timeout=max(deadline - time.monotonic(), 0.0))
+            if not answer:  # a server that does not answer is ended with anything it forked since
+                self._gone = True
+                self._proc.kill()
+                raise ForkServerGone(f"the fork server did not answer within {SPAWN_WITHIN_S:.0f} s")
             if "spawned" in answer:
                 return ForkedProcess(self, int(answer["spawned"]), argv)
             if "refused" in answer:
@@ -169,9 +176,9 @@ class ForkServer:
             sel.register(self._sock, selectors.EVENT_READ)
             return bool(sel.select(timeout))
 
-    def _receive(self, timeout: float | None) -> dict[str, Any]:
+    def _receive(self, timeout: float) -> dict[str, Any]:
         """One answer of the server (an exit report is filed as it comes); {} when there is none in time."""
-        if timeout is not None and not self._poll_socket(timeout):
+        if not self._poll_socket(timeout):
             return {}
         try:
             data = self._sock.recv(PACKET_BYTES)
@@ -219,12 +226,18 @@ def serve(sock: socket.socket) -> dict[str, Any] | None:
                 if isinstance(request, str):
                     _answer(sock, {"refused": request})
                     continue
+                try:
+                    log = os.open(request["log"], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+                except OSError as err:
+                    _answer(sock, {"refused": f"cannot open its log: {err}"})
+                    continue
                 pid = os.fork()
                 if pid == 0:  # the child: nothing of the server's stays open in it
                     for fd in children.values():
                         os.close(fd)
                     sock.close()
-                    return request
+                    return {**request, "log_fd": log}
+                os.close(log)
                 children[pid] = os.pidfd_open(pid)
                 sel.register(children[pid], selectors.EVENT_READ, pid)
                 _answer(sock, {"spawned": pid})
@@ -240,7 +253,7 @@ def become(request: dict[str, Any], server_pid: int) -> list[str]:
     for signum in (signal.SIGTERM, signal.SIGCHLD):
         signal.signal(signum, signal.SIG_DFL)
     signal.signal(signal.SIGINT, signal.default_int_handler)
-    log = os.open(request["log"], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+    log = int(request["log_fd"])
     null = os.open(os.devnull, os.O_RDONLY)
     os.dup2(null, 0)
     os.dup2(log, 1)
@@ -283,6 +296,8 @@ def _request(data: bytes) -> dict[str, Any] | str:
         return "argv must be a non-empty list of strings"
     if not all(isinstance(k, str) and isinstance(v, str) for k, v in request["env"].items()):
         return "env must map strings to strings"
+    if request["deathsig"] not in signal.valid_signals():
+        return f"no such signal: {request['deathsig']}"
     return request
 
 

@@ -103,7 +103,15 @@ def test_the_server_refuses_malformed_requests_and_keeps_serving(tmp_path: Path)
     theirs.close()
     try:
         ours.settimeout(30)
-        for bad in (b"\xff\x00", b"[]", b'{"argv": "robot"}', json.dumps({"argv": [1], "log": "", "env": {}}).encode()):
+        fine = {"argv": ["robot", "--help"], "log": str(tmp_path / "x.log"), "env": {}, "cwd": "/", "deathsig": 9}
+        for bad in (
+            b"\xff\x00",
+            b"[]",
+            b'{"argv": "robot"}',
+            json.dumps({**fine, "argv": [1]}).encode(),
+            json.dumps({**fine, "log": str(tmp_path / "no" / "such" / "dir.log")}).encode(),
+            json.dumps({**fine, "deathsig": 999}).encode(),
+        ):
             ours.send(bad)
             assert "refused" in json.loads(ours.recv(1 << 20)), bad
         good = {"argv": ["robot", "--help"], "log": str(tmp_path / "help.log"), "env": dict(os.environ)}
