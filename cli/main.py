@@ -333,6 +333,11 @@ def build_parser() -> argparse.ArgumentParser:
     add_bench_scale_arguments(
         bench_sub.add_parser("scale", help="wall time per model second, memory and digests vs robots, per clock")
     )
+    from petswarm.bench.start import add_arguments as add_bench_start_arguments
+
+    add_bench_start_arguments(
+        bench_sub.add_parser("start", help="CPU, time and memory of starting robot processes, forked vs exec'd")
+    )
     return parser
 
 
@@ -645,6 +650,10 @@ def _bench(args: argparse.Namespace) -> int:
         from petswarm.bench.scale import bench_scale
 
         return bench_scale(args)
+    if args.bench == "start":
+        from petswarm.bench.start import bench_start
+
+        return bench_start(args)
     if args.bench == "organize" and args.clock == "model":
         from petswarm.bench.organize_model import bench_organize as bench_organize_model
 
