@@ -25,6 +25,11 @@ from petswarm.lab.forking import become, serve  # noqa: E402
 def main() -> int:
     """Serve until the supervisor leaves (0); in a child, run its ``petswarm`` command and return its code."""
     server_pid = os.getpid()
+    try:  # the server learns of its children's ends through pidfds; without them, robots start the ordinary way
+        os.close(os.pidfd_open(server_pid))
+    except OSError as err:
+        print(f"fork server: no pidfds here ({err}); the supervisor starts robots the ordinary way", file=sys.stderr)
+        return 3
     gc.freeze()  # what is imported stays shared with the children: the collector never touches it
     request = serve(socket.socket(fileno=int(sys.argv[1])))
     if request is None:
