@@ -70,11 +70,21 @@ class ForkedProcess:
         self.pid = pid
         self.args = args
         self.returncode: int | None = None
+        # the server reaps the child before we hear of it, so its pid alone could be someone else's by then: a
+        # pidfd names this very process (signals to it fail once it has ended, it reads ready when it ends)
+        try:
+            self._pidfd: int | None = os.pidfd_open(pid)
+        except OSError:  # already ended and reaped: the server's report will say how
+            self._pidfd = None
+        server.pidfds[pid] = self._pidfd
 
     def poll(self) -> int | None:
         """The exit code once the child has ended, else None."""
         if self.returncode is None:
             self.returncode = self._server.exit_code(self.pid, timeout=0.0)
+            if self.returncode is not None and self._pidfd is not None:
+                os.close(self._pidfd)
+                self._pidfd = self._server.pidfds[self.pid] = None
         return self.returncode
 
     def wait(self, timeout: float | None = None) -> int:
@@ -87,9 +97,9 @@ class ForkedProcess:
 
     def send_signal(self, signum: int) -> None:
         """Signal the child unless it is known to have ended (its pid may be someone else's by now)."""
-        if self.poll() is None:
+        if self.poll() is None and self._pidfd is not None:
             with contextlib.suppress(ProcessLookupError):
-                os.kill(self.pid, signum)
+                signal.pidfd_send_signal(self._pidfd, signum)
 
     def terminate(self) -> None:
         """SIGTERM, as Popen.terminate."""
@@ -118,6 +128,8 @@ class ForkServer:
             )
         self._sock = ours
         self._exits: dict[int, int] = {}
+        self.pidfds: dict[int, int | None] = {}
+        """Each child's pidfd, held by its ForkedProcess (None once closed or never had)."""
         self._gone = False
 
     def fits(self, argv: list[str], env: dict[str, str]) -> bool:
@@ -165,6 +177,10 @@ class ForkServer:
         """End the server: it exits once the socket closes (any child left dies with it)."""
         self._sock.close()
         self._gone = True
+        for pid, pidfd in self.pidfds.items():
+            if pidfd is not None:
+                os.close(pidfd)
+                self.pidfds[pid] = None
         try:
             self._proc.wait(timeout)
         except subprocess.TimeoutExpired:
@@ -193,13 +209,14 @@ class ForkServer:
         return answer
 
     def _lost(self, pid: int) -> int | None:
-        """A child whose server is gone: it dies with the server (parent-death signal); None while it runs."""
-        try:
-            state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-        except (OSError, IndexError):
-            state = "gone"
-        if state not in ("gone", "Z", "X"):
-            return None
+        """A child whose server is gone: it dies with the server (parent-death signal); None while it runs.
+        (Its exit code went with the server.)"""
+        pidfd = self.pidfds.get(pid)
+        if pidfd is not None:
+            with selectors.DefaultSelector() as sel:
+                sel.register(pidfd, selectors.EVENT_READ)
+                if not sel.select(0):
+                    return None
         self._exits[pid] = -signal.SIGKILL
         return self._exits[pid]
 
@@ -210,7 +227,10 @@ class ForkServer:
 def serve(sock: socket.socket) -> dict[str, Any] | None:
     """Answer requests until the supervisor closes the socket (returns None); in a forked child, return its
     request, with the child set up to run it (``become``)."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the supervisor's to handle: keep reporting exits
+    # Ctrl-C or a SIGTERM to the whole process group is the supervisor's to handle: the server keeps reporting
+    # exits while the robots end their own way (it ends when the socket closes, or with its supervisor)
+    for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(signum, signal.SIG_IGN)
     children: dict[int, int] = {}
     with selectors.DefaultSelector() as sel:
         sel.register(sock, selectors.EVENT_READ, None)
@@ -231,16 +251,19 @@ def serve(sock: socket.socket) -> dict[str, Any] | None:
                 except OSError as err:
                     _answer(sock, {"refused": f"cannot open its log: {err}"})
                     continue
-                pid = os.fork()
+                try:
+                    pid = os.fork()
+                except OSError as err:  # out of processes or memory: this robot, not the others
+                    os.close(log)
+                    _answer(sock, {"refused": f"cannot fork: {err}"})
+                    continue
                 if pid == 0:  # the child: nothing of the server's stays open in it
                     for fd in children.values():
                         os.close(fd)
                     sock.close()
                     return {**request, "log_fd": log}
                 os.close(log)
-                children[pid] = os.pidfd_open(pid)
-                sel.register(children[pid], selectors.EVENT_READ, pid)
-                _answer(sock, {"spawned": pid})
+                _watch(sock, sel, children, pid)
 
 
 def become(request: dict[str, Any], server_pid: int) -> list[str]:
@@ -250,7 +273,7 @@ def become(request: dict[str, Any], server_pid: int) -> list[str]:
         ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, int(request["deathsig"]))
     if os.getppid() != server_pid:
         os._exit(1)
-    for signum in (signal.SIGTERM, signal.SIGCHLD):
+    for signum in (signal.SIGTERM, signal.SIGHUP, signal.SIGCHLD):
         signal.signal(signum, signal.SIG_DFL)
     signal.signal(signal.SIGINT, signal.default_int_handler)
     log = int(request["log_fd"])
@@ -264,7 +287,8 @@ def become(request: dict[str, Any], server_pid: int) -> list[str]:
     os.environ.clear()
     os.environ.update(request["env"])
     argv: list[str] = request["argv"]
-    retitle(title(argv))
+    if not retitle(title(argv)):
+        print("fork server: could not write this robot's command line; petswarm chaos will not know it", flush=True)
     sys.argv = [sys.argv[0], *argv]
     return argv
 
@@ -287,7 +311,7 @@ def _request(data: bytes) -> dict[str, Any] | str:
     """A request checked for shape, or why it is refused."""
     try:
         request = json.loads(data)
-    except ValueError as err:
+    except (ValueError, RecursionError) as err:
         return f"not JSON: {err}"
     fields = {"argv": list, "log": str, "env": dict, "cwd": str, "deathsig": int}
     if not isinstance(request, dict) or any(not isinstance(request.get(k), t) for k, t in fields.items()):
@@ -296,9 +320,24 @@ def _request(data: bytes) -> dict[str, Any] | str:
         return "argv must be a non-empty list of strings"
     if not all(isinstance(k, str) and isinstance(v, str) for k, v in request["env"].items()):
         return "env must map strings to strings"
+    if "\0" in request["log"] or "\0" in request["cwd"]:
+        return "a path with a NUL in it"
     if request["deathsig"] not in signal.valid_signals():
         return f"no such signal: {request['deathsig']}"
     return request
+
+
+def _watch(sock: socket.socket, sel: selectors.BaseSelector, children: dict[int, int], pid: int) -> None:
+    """Learn of a new child's end through its pidfd; one that cannot be watched is ended, not left unseen."""
+    try:
+        children[pid] = os.pidfd_open(pid)
+    except OSError as err:
+        os.kill(pid, signal.SIGKILL)
+        os.waitpid(pid, 0)
+        _answer(sock, {"refused": f"cannot watch it: {err}"})
+        return
+    sel.register(children[pid], selectors.EVENT_READ, pid)
+    _answer(sock, {"spawned": pid})
 
 
 def _report_exit(sock: socket.socket, sel: selectors.BaseSelector, children: dict[int, int], pid: int) -> None:

@@ -83,6 +83,24 @@ def test_robots_die_with_their_fork_server(tmp_path: Path) -> None:
         sup.stop_all()
 
 
+def test_a_sigterm_to_the_whole_process_group_is_the_robots_to_handle_not_the_servers(tmp_path: Path) -> None:
+    """``kill -TERM -PGID`` (a terminal, timeout, a CI runner) reaches the server too: it must stay, so that each
+    robot ends its own way (its code, not the SIGKILL of a dead server) and is still reported."""
+    sup = Supervisor(tmp_path / "logs")
+    try:
+        robot = sup.spawn("robot-8", _waiting_robot(8))
+        assert _log_says(sup, "robot-8", "waiting for a hub")
+        server = _server_pid(robot)
+        os.kill(server, signal.SIGTERM)
+        os.kill(robot.pid, signal.SIGTERM)
+        code = robot.wait(10)
+        assert code != -signal.SIGKILL, code
+        assert _state(server) in ("S", "R")  # still serving
+        assert isinstance(sup.spawn("robot-9", _waiting_robot(9)), ForkedProcess)
+    finally:
+        sup.stop_all()
+
+
 def test_a_command_line_too_long_for_the_room_or_no_fork_starts_the_ordinary_way(tmp_path: Path) -> None:
     sup = Supervisor(tmp_path / "logs")
     plain = Supervisor(tmp_path / "plain", fork=False)
@@ -111,6 +129,8 @@ def test_the_server_refuses_malformed_requests_and_keeps_serving(tmp_path: Path)
             json.dumps({**fine, "argv": [1]}).encode(),
             json.dumps({**fine, "log": str(tmp_path / "no" / "such" / "dir.log")}).encode(),
             json.dumps({**fine, "deathsig": 999}).encode(),
+            b"[" * 100_000,  # nested past Python's recursion limit
+            json.dumps({**fine, "cwd": "/tmp\u0000x"}).encode(),
         ):
             ours.send(bad)
             assert "refused" in json.loads(ours.recv(1 << 20)), bad
