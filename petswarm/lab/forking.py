@@ -40,9 +40,9 @@ TITLE_ROOM = 4096
 """Bytes of command line the server reserves for a child's own (a scenario robot's is under 600)."""
 PACKET_BYTES = 1 << 20
 """The largest request or answer (a request carries the child's environment)."""
-STARTUP_VARIABLES = ("PYTHONHASHSEED", "PYTHONPATH", "PYTHONHOME", "PYTHONDONTWRITEBYTECODE", "PYTHONSAFEPATH")
-"""Environment an interpreter reads only at its start: a child whose own differs from the server's is not
-forked (it would not get them)."""
+STARTUP_PREFIXES = ("PYTHON", "LC_", "LANG")
+"""Environment an interpreter reads only at its start (hash seed, path, warnings, encodings, locale): a child
+whose own differs from the server's in any of it is not forked (it would not get it)."""
 SPAWN_WITHIN_S = 60.0
 """How long a supervisor waits for the server's answer (its first one comes after the server's imports)."""
 _PR_SET_PDEATHSIG = 1
@@ -134,7 +134,8 @@ class ForkServer:
 
     def fits(self, argv: list[str], env: dict[str, str]) -> bool:
         """Whether a child with this command line and environment can be forked rather than started anew."""
-        same_start = all(env.get(k) == self._env.get(k) for k in STARTUP_VARIABLES)
+        startup = {k for k in (*env, *self._env) if k.startswith(STARTUP_PREFIXES)}
+        same_start = all(env.get(k) == self._env.get(k) for k in startup)
         return not self._gone and same_start and len(title(argv)) <= TITLE_ROOM
 
     def spawn(self, argv: list[str], log: Path, env: dict[str, str], deathsig: int) -> ForkedProcess:

@@ -101,10 +101,16 @@ def test_a_sigterm_to_the_whole_process_group_is_the_robots_to_handle_not_the_se
         sup.stop_all()
 
 
-def test_a_command_line_too_long_for_the_room_or_no_fork_starts_the_ordinary_way(tmp_path: Path) -> None:
+def test_a_command_line_too_long_for_the_room_or_no_fork_starts_the_ordinary_way(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     sup = Supervisor(tmp_path / "logs")
     plain = Supervisor(tmp_path / "plain", fork=False)
     try:
+        assert isinstance(sup.spawn("robot-5", _waiting_robot(5)), ForkedProcess)
+        monkeypatch.setenv("PYTHONWARNINGS", "error")  # read at an interpreter's start: the server has not it
+        assert isinstance(sup.spawn("robot-4", _waiting_robot(4)), subprocess.Popen)
+        monkeypatch.delenv("PYTHONWARNINGS")
         long_world = "w" * 60
         argv = [*_waiting_robot(6, long_world), "--record", str(tmp_path / ("x" * TITLE_ROOM) / "e.jsonl")]
         assert isinstance(sup.spawn("robot-6", argv), subprocess.Popen)
