@@ -108,7 +108,7 @@ def test_a_command_line_too_long_for_the_room_or_no_fork_starts_the_ordinary_way
     plain = Supervisor(tmp_path / "plain", fork=False)
     try:
         assert isinstance(sup.spawn("robot-5", _waiting_robot(5)), ForkedProcess)
-        monkeypatch.setenv("PYTHONWARNINGS", "error")  # read at an interpreter's start: the server has not it
+        monkeypatch.setenv("PYTHONWARNINGS", "error")  # read at an interpreter's start: the server started without it
         assert isinstance(sup.spawn("robot-4", _waiting_robot(4)), subprocess.Popen)
         monkeypatch.delenv("PYTHONWARNINGS")
         long_world = "w" * 60
