@@ -147,7 +147,7 @@ class LockstepLink(ZenohLink):
             return False
         for data in self._release:
             self._loop.call_soon(self._on_down, data)
-        if self._release_grant is not None:  # known from zenoh's thread: a batch is not unpacked again for it
+        if self._release_grant is not None:  # known from the wait: a batch is not unpacked again for it
             self._seen, self._release_grant = self._release_grant, None
         self._release = []
         return True
