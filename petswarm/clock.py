@@ -18,6 +18,7 @@ import asyncio
 import heapq
 import itertools
 import selectors
+import signal
 import time
 from collections.abc import Callable
 from typing import Any, Protocol
@@ -43,8 +44,6 @@ class _ModelSelector(selectors.DefaultSelector):
             return ready
         loop = self.loop
         assert loop is not None
-        if loop.timers_first():
-            return []
         # nothing is ready: the instant is over for every task on this loop
         if loop.on_quiescent is not None and loop.on_quiescent():
             return []
@@ -108,10 +107,6 @@ class ModelClockLoop(asyncio.SelectorEventLoop):
             heapq.heappop(scheduled)._scheduled = False
         return scheduled[0]._when if scheduled else None
 
-    def timers_first(self) -> bool:
-        """True when the timers due now must run before anything else is released (see ``LockstepLoop``)."""
-        return False
-
     def wait_quiet(self, real_select: Callable[[float | None], Any]) -> Any:
         """Every task waits: move model time exactly to the earliest timer (now + timeout would round)."""
         when = self.next_timer()
@@ -131,21 +126,35 @@ class LockstepSync(Protocol):
     def idle(self, next_timer: float | None) -> None:
         """Report: all handled, nothing ready, the next timer due at ``next_timer`` (model seconds)."""
 
+    def wait_grant(self) -> None:
+        """Block until the hub's grant arrives (and ``grant`` the loop its instant), or until ``wake``."""
+
+    def wake(self) -> None:
+        """End a ``wait_grant`` under way (from any thread or a signal handler)."""
+
 
 class LockstepLoop(ModelClockLoop):
     """A process's loop on model time that the hub owns (``--clock lockstep``).
 
-    When every task waits, it reports idle to the hub (``sync.idle``) and blocks until the hub's grant arrives
-    (through the loop's self-pipe); the grant moves ``time()`` with ``grant``. Until a link syncs it there is
-    no model time to wait for; once the link has left (``sync`` back to None) the process is out of the
-    world and its loop waits on timers and threads as it needs to shut down.
+    When every task waits, it reports idle to the hub (``sync.idle``) and blocks in ``sync.wait_grant`` until the
+    hub's grant arrives, which moves ``time()`` with ``grant`` before asyncio looks at its timers: the timers due
+    at the granted instant run in that same pass, before the instant's messages are released, as a model-time
+    loop that jumps to an instant takes them. A thread's ``call_soon_threadsafe`` or a signal ends the wait
+    early (``sync.wake``). Until a link syncs it there is no model time to wait for; once the link has left
+    (``sync`` back to None) the process is out of the world and its loop waits on timers and threads as it
+    needs to shut down.
     """
 
     def __init__(self) -> None:
         super().__init__()
         self.sync: LockstepSync | None = None
         self._synced = False
-        self._granted = False
+        self._waiting = False
+        """In ``sync.wait_grant``: a wake-up for the loop must end that wait, not only write the self-pipe."""
+        self._pokes = 0
+        """Wake-ups asked for (threads, signals); ``_pokes_seen``: as many as the loop had when it last waited.
+        A wake-up that came just before ``_waiting`` was set is seen this way, and the wait skipped."""
+        self._pokes_seen = 0
 
     def attach_sync(self, sync: LockstepSync | None) -> None:
         """Start (or, with None, end) reporting to the hub."""
@@ -155,26 +164,44 @@ class LockstepLoop(ModelClockLoop):
     def grant(self, at_s: float) -> None:
         """The hub's grant: model time is now ``at_s`` (it never goes back)."""
         self._model.now = max(self._model.now, at_s)
-        self._granted = True
-
-    def timers_first(self) -> bool:
-        """Right after a grant, let asyncio take the timers due at the granted instant (within its clock
-        resolution) before the instant's messages are released: a model-time loop that jumps to an instant
-        takes them in that same pass, and the grant arrives as a callback, after asyncio has looked at its
-        timers for this pass."""
-        granted, self._granted = self._granted, False
-        return granted
 
     def wait_quiet(self, real_select: Callable[[float | None], Any]) -> Any:
         """Report idle and block until the hub answers; before or after the world, wait as needed."""
-        if self.sync is not None:
-            self.sync.idle(self.next_timer())
-            return real_select(None)
+        sync = self.sync
+        if sync is not None:
+            sync.idle(self.next_timer())
+            self._waiting = True
+            try:
+                if self._pokes == self._pokes_seen:
+                    sync.wait_grant()
+            finally:
+                self._waiting = False
+                self._pokes_seen = self._pokes
+            return real_select(0)  # what a thread or a signal wrote to the self-pipe meanwhile
         if not self._synced:
             raise RuntimeError("a lockstep loop waited before its link to the hub was open")
         if self.next_timer() is None:
             return real_select(None)  # a thread (the session closing) will wake us
         return super().wait_quiet(real_select)
+
+    def _write_to_self(self) -> None:
+        super()._write_to_self()  # type: ignore[misc]
+        self._wake_waiting()
+
+    def add_signal_handler(self, sig: int, callback: Callable[..., Any], *args: Any) -> None:
+        """As asyncio's, and a signal that comes while the loop waits for its grant ends that wait (asyncio's
+        own wake-up goes to the self-pipe, which nobody watches then)."""
+        super().add_signal_handler(sig, callback, *args)
+        signal.signal(sig, self._on_signal)
+
+    def _on_signal(self, signum: int, frame: Any) -> None:
+        self._wake_waiting()
+
+    def _wake_waiting(self) -> None:
+        self._pokes += 1  # first: a loop about to wait sees it (see ``_pokes``)
+        sync = self.sync
+        if self._waiting and sync is not None:
+            sync.wake()
 
 
 async def sleep_until(when: float) -> None:

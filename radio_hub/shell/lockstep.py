@@ -61,6 +61,9 @@ START_WITHIN_PER_NODE_S = 1.0
 after START_WITHIN_BASE_S + START_WITHIN_PER_NODE_S x expected nodes of wall time, without them (recorded)."""
 LOOK_EVERY_S = 0.05
 """How often (wall seconds) the hub looks for silent or leaving nodes: a round takes about a millisecond."""
+DOWN_CHANNEL_CAPACITY = 4096
+"""Transport messages from the hub a lockstep node's channel holds (the hub sends one a round, a batch): more
+block zenoh's receiving thread until the node takes them, so a flood costs it no unbounded memory."""
 LEAVING_GRACE_S = 1.0
 """Wall seconds a busy node whose liveliness ended has for its last messages (and Detach) to arrive: zenoh
 orders a node's messages but not its liveliness against them."""
@@ -78,6 +81,8 @@ class LockstepLink(ZenohLink):
         self._seen = 0
         self._loop: Any = None
         self._on_down: Callable[[bytes], None] | None = None
+        self._down: Any = None
+        self._down_key = ""
         self._outbox: list[bytes] = []
         """The node's messages of the round so far: they go to the hub with its idle, in one put."""
         self.session_key = 0
@@ -92,22 +97,40 @@ class LockstepLink(ZenohLink):
             raise RuntimeError("a lockstep link needs a lockstep loop (petswarm.clock.LockstepLoop)")
         self._loop, self._on_down = loop, on_down
         keys = self.keys
-        self._decls = [
-            self.session.liveliness().declare_token(keys.alive(node_id, instance)),
-            self.session.declare_subscriber(keys.down(node_id), self._from_zenoh),
-        ]
+        self._down_key = keys.down(node_id)
+        # a channel, not a callback: the loop takes the hub's messages itself while it waits for its grant
+        # (``wait_grant``), blocked in the channel with the GIL released; a callback would cost a Python thread's
+        # wake-up, the loop's self-pipe and one more pass of the loop per round
+        self._down = self.session.declare_subscriber(self._down_key, zenoh.handlers.FifoChannel(DOWN_CHANNEL_CAPACITY))
+        self._decls = [self.session.liveliness().declare_token(keys.alive(node_id, instance)), self._down]
         self._pub = reliable_publisher(self.session, keys.up(node_id))
         self._decls.append(self._pub)
         loop.on_quiescent = self._release_held
         loop.attach_sync(self)
 
-    def _from_zenoh(self, sample: zenoh.Sample) -> None:
-        # zenoh's thread: hold everything; a grant wakes the loop, which takes what came before it
-        data = sample.payload.to_bytes()
-        grant = _grant_of(data)
-        self._held.append((0 if grant is None else grant.n, data))
-        if grant is not None:
-            self._loop.call_soon_threadsafe(self._granted, grant.at_s, grant.n)
+    def wait_grant(self) -> None:
+        """Block until the hub's next grant (the loop's thread, between its idle and the next pass): hold what
+        comes before it, and move the loop to the granted instant. Returns early on ``wake`` (a signal or another
+        thread has work for the loop)."""
+        down = self._down
+        while True:
+            try:
+                data = down.recv().payload.to_bytes()
+            except zenoh.ZError:  # the subscriber is gone (the session closed): nothing more will come
+                return
+            if not data:  # a wake (an empty message is no message: nothing to hold)
+                return
+            grant = _grant_of(data)
+            self._held.append((0 if grant is None else grant.n, data))
+            if grant is not None:
+                self._granted(grant.at_s, grant.n)
+                return
+
+    def wake(self) -> None:
+        """End a ``wait_grant`` under way (any thread, or a signal handler): an empty message to the node's
+        own down key, which this session delivers to its own channel."""
+        with contextlib.suppress(zenoh.ZError):
+            self.session.put(self._down_key, b"")
 
     def _granted(self, at_s: float, n: int) -> None:
         self._loop.grant(at_s)
@@ -124,7 +147,7 @@ class LockstepLink(ZenohLink):
             return False
         for data in self._release:
             self._loop.call_soon(self._on_down, data)
-        if self._release_grant is not None:  # known from zenoh's thread: a batch is not unpacked again for it
+        if self._release_grant is not None:  # known from the wait: a batch is not unpacked again for it
             self._seen, self._release_grant = self._release_grant, None
         self._release = []
         return True
