@@ -36,6 +36,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any
 
+from petswarm.lab.runtime import stat_fields
+
 TITLE_ROOM = 4096
 """Bytes of command line the server reserves for a child's own (a scenario robot's is under 600)."""
 PACKET_BYTES = 1 << 20
@@ -298,7 +300,7 @@ def retitle(cmdline: bytes) -> bool:
     """Write ``cmdline`` over this process's own command line, NUL-padded to its end (what /proc/<pid>/cmdline
     and ps show); False if it does not fit or /proc does not say where it is."""
     try:
-        fields = Path("/proc/self/stat").read_text().rsplit(")", 1)[1].split()
+        fields = stat_fields()
         start, end = int(fields[45]), int(fields[46])  # arg_start, arg_end: fields 48 and 49 of proc(5)
     except (OSError, ValueError, IndexError):
         return False

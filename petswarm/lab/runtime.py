@@ -39,11 +39,16 @@ def _entry(world: str, robot: int) -> Path:
     return runtime_dir() / f"{check_name('world', world)}.robot-{int(robot)}.json"
 
 
+def stat_fields(pid: int | str = "self") -> list[str]:
+    """The fields of /proc/<pid>/stat after the command name (which may hold spaces): index k is field k + 3
+    of proc(5). OSError when there is no such process."""
+    return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+
+
 def start_time(pid: int) -> int:
     """The process's start time in clock ticks since boot (/proc/<pid>/stat field 22): a pid, once reused,
     has another."""
-    text = Path(f"/proc/{pid}/stat").read_text()
-    return int(text.rsplit(")", 1)[1].split()[19])  # fields after the command name, which may hold spaces
+    return int(stat_fields(pid)[19])
 
 
 def register(world: str, robot: int) -> Path | None:
