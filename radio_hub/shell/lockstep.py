@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import os
 import queue
 import sys
 import threading
@@ -83,6 +84,10 @@ class LockstepLink(ZenohLink):
         self._on_down: Callable[[bytes], None] | None = None
         self._down: Any = None
         self._down_key = ""
+        self._wake_mark = os.urandom(8)
+        """Carried by this link's own wake-ups: an empty message from anyone else is a message, held as any."""
+        self._wakes: queue.SimpleQueue[bool] = queue.SimpleQueue()
+        self._waker: threading.Thread | None = None
         self._outbox: list[bytes] = []
         """The node's messages of the round so far: they go to the hub with its idle, in one put."""
         self.session_key = 0
@@ -103,6 +108,8 @@ class LockstepLink(ZenohLink):
         # wake-up, the loop's self-pipe and one more pass of the loop per round
         self._down = self.session.declare_subscriber(self._down_key, zenoh.handlers.FifoChannel(DOWN_CHANNEL_CAPACITY))
         self._decls = [self.session.liveliness().declare_token(keys.alive(node_id, instance)), self._down]
+        self._waker = threading.Thread(target=self._put_wakes, name="lockstep-waker", daemon=True)
+        self._waker.start()
         self._pub = reliable_publisher(self.session, keys.up(node_id))
         self._decls.append(self._pub)
         loop.on_quiescent = self._release_held
@@ -115,10 +122,12 @@ class LockstepLink(ZenohLink):
         down = self._down
         while True:
             try:
-                data = down.recv().payload.to_bytes()
-            except zenoh.ZError:  # the subscriber is gone (the session closed): nothing more will come
+                sample = down.recv()
+            except zenoh.ZError:  # the subscriber is gone (the session closed): out of the world, not a spin
+                self._loop.attach_sync(None)
                 return
-            if not data:  # a wake (an empty message is no message: nothing to hold)
+            data = sample.payload.to_bytes()
+            if not data and _attachment(sample) == self._wake_mark:  # our own wake-up: nothing to hold
                 return
             grant = _grant_of(data)
             self._held.append((0 if grant is None else grant.n, data))
@@ -127,10 +136,20 @@ class LockstepLink(ZenohLink):
                 return
 
     def wake(self) -> None:
-        """End a ``wait_grant`` under way (any thread, or a signal handler): an empty message to the node's
-        own down key, which this session delivers to its own channel."""
-        with contextlib.suppress(zenoh.ZError):
-            self.session.put(self._down_key, b"")
+        """End a ``wait_grant`` under way (any thread, or a signal handler): the waker thread puts a marked
+        empty message on the node's own down key, for this session only. Never put from here: a signal handler
+        runs on the loop's thread, which is the one that empties the channel a put may wait for."""
+        self._wakes.put(True)
+
+    def _put_wakes(self) -> None:
+        while self._wakes.get():
+            with contextlib.suppress(zenoh.ZError):
+                self.session.put(
+                    self._down_key,
+                    b"",
+                    attachment=self._wake_mark,
+                    allowed_destination=zenoh.Locality.SESSION_LOCAL,
+                )
 
     def _granted(self, at_s: float, n: int) -> None:
         self._loop.grant(at_s)
@@ -179,6 +198,7 @@ class LockstepLink(ZenohLink):
         if self._loop is not None:
             self._loop.attach_sync(None)
             self._loop.on_quiescent = None
+        self._wakes.put(False)  # the waker ends
         await super().close()
 
 
@@ -186,10 +206,15 @@ _GRANT_TYPE = b"\xa1t\xa5grant"
 """The msgpack bytes of a grant's type field (``"t": "grant"``): a message without them is not a grant."""
 
 
+def _attachment(sample: zenoh.Sample) -> bytes | None:
+    attachment = sample.attachment
+    return None if attachment is None else attachment.to_bytes()
+
+
 def _grant_of(data: bytes) -> wire.Grant | None:
     """The grant that ``data`` is or that closes it (a batch's last message), else None.
 
-    Runs on zenoh's thread for every message a node is sent: most are frames and sensor readings, which are
+    Runs on the node's loop thread, in its wait, for every message it is sent: most are frames and sensor readings, which are
     decoded (and checked) once, later, on the node's loop; only a message that may hold a grant is decoded here."""
     if _GRANT_TYPE not in data:
         return None

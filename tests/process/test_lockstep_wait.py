@@ -99,3 +99,28 @@ def test_a_signal_ends_the_wait() -> None:
 
     _, seen = _run(main)
     assert seen == ["stopped at 0.0"]
+
+
+def test_an_empty_message_from_anyone_else_is_held_as_a_message_not_taken_as_a_wake_up() -> None:
+    """Only the link's own wake-ups (marked, for its session only) end the wait; anyone who can put on the node's
+    down key with an empty message is a sender of a malformed message, handed on with the round for its counters."""
+
+    async def main(link: LockstepLink, loop: LockstepLoop, seen: list[str]) -> None:
+        granted = loop.create_future()
+
+        def on_down(data: bytes) -> None:
+            if not data:
+                seen.append(f"empty at {loop.time()}")
+                return
+            for part in wire.split_batch(data):
+                seen.append(f"down {type(wire.decode(part)).__name__} at {loop.time()}")
+            granted.set_result(None)
+
+        link.open(NODE, "i1", on_down, lambda _: None)
+        threading.Timer(0.1, lambda: link.session.put(link.keys.down(NODE), b"")).start()  # as a stranger would
+        _hub_sends(link, [wire.Configure(n=1), wire.Grant(at_s=0.7, n=2)], after_s=0.5)
+        await granted
+        await link.close()
+
+    _, seen = _run(main)
+    assert seen == ["empty at 0.7", "down Configure at 0.7", "down Grant at 0.7"]
