@@ -59,6 +59,12 @@ def can_fork_server() -> bool:
     return sys.platform == "linux" and hasattr(os, "pidfd_open")
 
 
+def child_environment() -> dict[str, str]:
+    """The environment of every child a supervisor starts, forked or not: its own, unbuffered (a log line is
+    written as it is printed, so a child killed outright loses none)."""
+    return {**os.environ, "PYTHONUNBUFFERED": "1"}
+
+
 def title(argv: list[str]) -> bytes:
     """The command line a forked child shows: ``<python> -m cli <argv>``, NUL-separated as the kernel keeps it."""
     return b"".join(os.fsencode(arg) + b"\0" for arg in [sys.executable, "-m", "cli", *argv])
@@ -72,21 +78,11 @@ class ForkedProcess:
         self.pid = pid
         self.args = args
         self.returncode: int | None = None
-        # the server reaps the child before we hear of it, so its pid alone could be someone else's by then: a
-        # pidfd names this very process (signals to it fail once it has ended, it reads ready when it ends)
-        try:
-            self._pidfd: int | None = os.pidfd_open(pid)
-        except OSError:  # already ended and reaped: the server's report will say how
-            self._pidfd = None
-        server.pidfds[pid] = self._pidfd
 
     def poll(self) -> int | None:
         """The exit code once the child has ended, else None."""
         if self.returncode is None:
             self.returncode = self._server.exit_code(self.pid, timeout=0.0)
-            if self.returncode is not None and self._pidfd is not None:
-                os.close(self._pidfd)
-                self._pidfd = self._server.pidfds[self.pid] = None
         return self.returncode
 
     def wait(self, timeout: float | None = None) -> int:
@@ -99,9 +95,8 @@ class ForkedProcess:
 
     def send_signal(self, signum: int) -> None:
         """Signal the child unless it is known to have ended (its pid may be someone else's by now)."""
-        if self.poll() is None and self._pidfd is not None:
-            with contextlib.suppress(ProcessLookupError):
-                signal.pidfd_send_signal(self._pidfd, signum)
+        if self.poll() is None:
+            self._server.send_signal(self.pid, signum)
 
     def terminate(self) -> None:
         """SIGTERM, as Popen.terminate."""
@@ -117,7 +112,7 @@ class ForkServer:
 
     def __init__(self, log: IO[bytes], die_with_parent: Callable[[], None]) -> None:
         ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
-        self._env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+        self._env = child_environment()
         with theirs:
             self._proc = subprocess.Popen(
                 [sys.executable, "-m", "cli.forkserver", str(theirs.fileno()), " " * TITLE_ROOM],
@@ -130,8 +125,10 @@ class ForkServer:
             )
         self._sock = ours
         self._exits: dict[int, int] = {}
-        self.pidfds: dict[int, int | None] = {}
-        """Each child's pidfd, held by its ForkedProcess (None once closed or never had)."""
+        self._pidfds: dict[int, int] = {}
+        """Each live child's pidfd. The server reaps a child before we hear of it, so its pid alone could be
+        someone else's by then: a pidfd names this very process (a signal to it fails once it has ended, and it
+        reads ready when it ends). Closed once the child's exit is known."""
         self._gone = False
 
     def fits(self, argv: list[str], env: dict[str, str]) -> bool:
@@ -156,7 +153,10 @@ class ForkServer:
                 self._proc.kill()
                 raise ForkServerGone(f"the fork server did not answer within {SPAWN_WITHIN_S:.0f} s")
             if "spawned" in answer:
-                return ForkedProcess(self, int(answer["spawned"]), argv)
+                pid = int(answer["spawned"])
+                with contextlib.suppress(OSError):  # else already ended and reaped: its report will say how
+                    self._pidfds[pid] = os.pidfd_open(pid)
+                return ForkedProcess(self, pid, argv)
             if "refused" in answer:
                 raise ForkServerGone(f"the fork server refused: {answer['refused']}")
 
@@ -174,16 +174,25 @@ class ForkServer:
                 return None
             with contextlib.suppress(ForkServerGone):  # then _lost says what became of the child
                 self._receive(timeout=0.0)
+        pidfd = self._pidfds.pop(pid, None)
+        if pidfd is not None:
+            os.close(pidfd)
         return self._exits[pid]
+
+    def send_signal(self, pid: int, signum: int) -> None:
+        """Signal child ``pid`` through its pidfd; nothing if it has ended."""
+        pidfd = self._pidfds.get(pid)
+        if pidfd is not None:
+            with contextlib.suppress(ProcessLookupError):
+                signal.pidfd_send_signal(pidfd, signum)
 
     def close(self, timeout: float = 5.0) -> None:
         """End the server: it exits once the socket closes (any child left dies with it)."""
         self._sock.close()
         self._gone = True
-        for pid, pidfd in self.pidfds.items():
-            if pidfd is not None:
-                os.close(pidfd)
-                self.pidfds[pid] = None
+        for pidfd in self._pidfds.values():
+            os.close(pidfd)
+        self._pidfds.clear()
         try:
             self._proc.wait(timeout)
         except subprocess.TimeoutExpired:
@@ -191,9 +200,7 @@ class ForkServer:
             self._proc.wait()
 
     def _poll_socket(self, timeout: float | None) -> bool:
-        with selectors.DefaultSelector() as sel:
-            sel.register(self._sock, selectors.EVENT_READ)
-            return bool(sel.select(timeout))
+        return _readable(self._sock, timeout)
 
     def _receive(self, timeout: float) -> dict[str, Any]:
         """One answer of the server (an exit report is filed as it comes); {} when there is none in time."""
@@ -214,14 +221,17 @@ class ForkServer:
     def _lost(self, pid: int) -> int | None:
         """A child whose server is gone: it dies with the server (parent-death signal); None while it runs.
         (Its exit code went with the server.)"""
-        pidfd = self.pidfds.get(pid)
-        if pidfd is not None:
-            with selectors.DefaultSelector() as sel:
-                sel.register(pidfd, selectors.EVENT_READ)
-                if not sel.select(0):
-                    return None
+        pidfd = self._pidfds.get(pid)
+        if pidfd is not None and not _readable(pidfd, 0.0):
+            return None
         self._exits[pid] = -signal.SIGKILL
         return self._exits[pid]
+
+
+def _readable(fd: int | socket.socket, timeout: float | None) -> bool:
+    with selectors.DefaultSelector() as sel:
+        sel.register(fd, selectors.EVENT_READ)
+        return bool(sel.select(timeout))
 
 
 # --- the server's side (runs in ``python -m cli.forkserver``) ---

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
-import os
 import signal
 import socket
 import subprocess
@@ -14,7 +13,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import IO, Any, Protocol
 
-from petswarm.lab.forking import ForkServer, ForkServerGone, can_fork_server
+from petswarm.lab.forking import ForkServer, ForkServerGone, can_fork_server, child_environment
 
 _PR_SET_PDEATHSIG = 1
 FORKED_COMMANDS = ("robot",)
@@ -86,7 +85,7 @@ class Supervisor:
         return self.spawn_module(name, "cli", args, wrapper)
 
     def _spawn_forked(self, name: str, args: list[str]) -> ChildProcess | None:
-        env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+        env = child_environment()
         if self._server is None:
             log = open(self.log_dir / "forkserver.log", "wb")  # noqa: SIM115 - closed in stop_all
             self._logs["forkserver"] = log
@@ -112,7 +111,7 @@ class Supervisor:
             stdout=log,
             stderr=subprocess.STDOUT,
             preexec_fn=_die_with_parent(parent_death_signal(name)),
-            env={**os.environ, "PYTHONUNBUFFERED": "1"},
+            env=child_environment(),
         )
         self.children[name] = proc
         self._logs[name] = log

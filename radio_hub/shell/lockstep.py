@@ -214,8 +214,9 @@ def _attachment(sample: zenoh.Sample) -> bytes | None:
 def _grant_of(data: bytes) -> wire.Grant | None:
     """The grant that ``data`` is or that closes it (a batch's last message), else None.
 
-    Runs on the node's loop thread, in its wait, for every message it is sent: most are frames and sensor readings, which are
-    decoded (and checked) once, later, on the node's loop; only a message that may hold a grant is decoded here."""
+    Runs on the node's loop thread, in its wait, for every message it is sent: most are frames and sensor
+    readings, which are decoded (and checked) once, later, in the loop's pass; only a message that may hold a
+    grant is decoded here."""
     if _GRANT_TYPE not in data:
         return None
     try:
