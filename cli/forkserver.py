@@ -18,8 +18,10 @@ import gc  # noqa: E402
 import cli.main  # noqa: E402
 import petswarm.lab.lockstep_node  # noqa: E402 - imported once here instead of in every robot
 import petswarm.lab.runtime  # noqa: E402
-import petswarm.robot  # noqa: E402, F401
+import petswarm.robot  # noqa: E402
 from petswarm.lab.forking import become, serve  # noqa: E402
+
+petswarm.robot.load_numpy()  # once here, shared with every child, instead of in each robot at its start
 
 
 def main() -> int:

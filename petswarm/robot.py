@@ -7,6 +7,7 @@ exercised end to end; the swarm managers build on the same RF communication mana
 from __future__ import annotations
 
 import asyncio
+import importlib
 import math
 import os
 import resource
@@ -568,9 +569,21 @@ async def _attach_once(config: RobotConfig) -> tuple[RobotConfig, RadioClient]:
     raise RadioError("every robot id is taken")
 
 
+def load_numpy() -> None:
+    """Import numpy now, before the robot attaches (the middleware's modules take it lazily, ``radio_hub.lazy``).
+
+    Left to its first use, numpy came with a slave's first IR sweep, inside the join handshake: its import
+    (about 0.1 CPU-s, a second of wall time on a loaded machine) held the loop while the master waited for
+    the answer to its joining notice, and the master gave the robot up as missing. Every robot that joins a
+    swarm needs numpy; a robot process pays its memory (about 11 MB, shared by robots forked from the fork
+    server, which loads it too) rather than a stall at the moment its timing matters most."""
+    importlib.import_module("numpy")
+
+
 async def run_robot(config: RobotConfig, link: HubLink | None = None) -> int:
     """The robot process's main coroutine; returns the exit code. ``link``: the port to the hub (default:
     zenoh to ``config.endpoint``, waiting for a hub that is still starting; a lockstep link is already open)."""
+    load_numpy()
     try:
         if link is None:
             config, radio = await attach(config)

@@ -5,6 +5,10 @@ middleware's modules (IR estimation, LF location, surround, driving) and the rad
 when a robot starts. Those modules hold ``np = lazy_numpy(__name__)`` in place of ``import numpy as np``:
 the first read of an attribute imports numpy and puts the real module in the owner's globals, so later
 reads there cost nothing, and what numpy computes is unchanged.
+
+A robot process itself loads numpy as it starts (``petswarm.robot.load_numpy``): at its first use, inside a
+swarm's join handshake, the import stalled the loop. What stays lazy spares the commands and tools that
+import the middleware without computing (``petswarm swarm``, ``chaos``, the CLI's parser).
 """
 
 from __future__ import annotations

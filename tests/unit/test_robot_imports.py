@@ -8,8 +8,11 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
 
 NOT_ON_A_ROBOT = (
     "matplotlib",  # plots: reports and benches
@@ -131,3 +134,28 @@ def test_numpy_comes_in_when_a_robot_estimates_or_reads_its_echoes() -> None:
         + "assert [r for _, r in ranges.readings] == [0.0] * 8, ranges\n"
     )
     assert "numpy" in loaded_after(code)
+
+
+def test_a_robot_process_has_numpy_before_it_looks_for_its_hub() -> None:
+    """numpy comes in as a robot process starts, not with its first IR sweep: loaded there it held the loop
+    inside the join handshake (a second on a loaded machine) and the master gave the robot up as missing.
+    A real robot process with no hub to find: every import it made is on record before it says it waits."""
+    from petswarm.lab.processes import free_tcp_port
+
+    argv = ["robot", "--id", "3", "--hub", f"tcp/127.0.0.1:{free_tcp_port()}", "--world", "no-hub-here"]
+    proc = subprocess.Popen(
+        [sys.executable, "-X", "importtime", "-m", "cli", *argv], stderr=subprocess.PIPE, text=True, cwd=ROOT
+    )
+    lines: list[str] = []
+    try:
+        assert proc.stderr is not None
+        for line in proc.stderr:
+            if "waiting for a hub" in line:
+                break
+            lines.append(line)
+    finally:
+        proc.kill()
+        proc.wait(timeout=30)
+    imported = {line.rsplit("|", 1)[-1].strip() for line in lines if line.startswith("import time:")}
+    assert "zenoh" in imported, lines[-5:]  # the record is the robot's own imports
+    assert "numpy._core.multiarray" in imported, sorted(m for m in imported if m.startswith("numpy"))[:5]
