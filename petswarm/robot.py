@@ -575,8 +575,8 @@ def load_numpy() -> None:
     Left to its first use, numpy came with a slave's first IR sweep, inside the join handshake: its import
     (about 0.1 CPU-s, a second of wall time on a loaded machine) held the loop while the master waited for
     the answer to its joining notice, and the master gave the robot up as missing. Every robot that joins a
-    swarm needs numpy; a robot process pays its memory (about 11 MB, shared by robots forked from the fork
-    server, which loads it too) rather than a stall at the moment its timing matters most."""
+    swarm needs numpy; a robot process pays its memory (7 MB more peak RSS in ``petswarm bench scale``, shared by
+    robots forked from the fork server, which loads it too) rather than a stall when its timing matters most."""
     importlib.import_module("numpy")
 
 

@@ -111,8 +111,9 @@ PLAIN_ROBOT = (
 
 
 def test_a_plain_robot_imports_no_numpy_until_it_needs_it() -> None:
-    """A robot that only pings (no swarm, no user) reads its command line, builds its middleware and steps
-    its driver through 3 s of own-body sensors without numpy (issue 13: about 13 MB of its RSS)."""
+    """The middleware's modules take numpy lazily: read its command line, build its middleware and step its
+    driver through 3 s of own-body sensors, and numpy is still not loaded (so the CLI's other commands go
+    without it; a robot process itself loads it as it starts, the test at the end of this file)."""
     loaded = loaded_after(PLAIN_ROBOT)
     assert {"petswarm.robot", "petswarm.controllers.driving_core", "radio_hub.link.port"} <= loaded
     assert sorted(m for m in loaded if m == "numpy" or m.startswith("numpy.")) == []
