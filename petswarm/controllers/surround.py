@@ -133,6 +133,23 @@ class SurroundConfig:
     track_lag_s: float = 0.1
     """Improved law: how far a tracked body's IR velocity lags its own (a 20 Hz sweep, the track's filter): in that
     time a neighbour ahead may have braked, so the robot counts on its being that much slower."""
+    free_space_brake_mps2: float = 0.0
+    """Improved law: the free-space rule (``surround_free``, an experiment; docs/SURROUND.md, item 10): a robot's
+    speed along its command is held to what stops, braking at this, within the space it has evidence is free. 0
+    (the default): off. 3.0 took the corridor's seeds 1-10 from 1 to 3 of 10 meeting all four bounds but its
+    seeds 11-20 did not follow (docs/RESULTS.md); 1.5 (the robot's real braking is 2) held the swarm back."""
+    free_space_memory_s: float = 0.5
+    """Improved law: how long a ring reading's free beams count as evidence for the free-space rule."""
+    free_space_near_m: float = 1.0
+    """Improved law: the free-space rule acts only on a robot that heard an echo no tracked body explains (a wall)
+    this near in the last ``free_space_memory_s`` (0: always)."""
+    free_space_gap_share: float = 0.0
+    """Improved law: for the free-space rule a point in a blind gap between two cones counts as free nearer than
+    the nearer of their echoes over this (0: any point in a gap counts as free; 1.5 held the swarm back)."""
+    free_space_band_m: float = 0.3
+    """Improved law: the free-space rule acts only on a robot further than this across the walking human's line
+    (his track's position and velocity): those in his lane follow where he and the robots ahead of them went
+    (0: on every robot; on every robot the swarm fell behind him, its centre 0.84-1.15 m off at the median)."""
 
     def __post_init__(self) -> None:
         if self.law not in LAWS:

@@ -44,6 +44,7 @@ import math
 from collections.abc import Sequence
 
 from petswarm.controllers.surround import MIN_RANGE_M, SurroundConfig, SurroundController
+from petswarm.controllers.surround_free import FreeSpace
 
 WALL_MARGIN_M = 0.07
 """The wall rule's gap kept in hand beyond touching: a remembered point is an arc's, up to its chord off the
@@ -77,12 +78,14 @@ class ImprovedSurroundController(SurroundController):
         human_velocity: Sequence[float] | None = None,
         neighbour_velocities: Sequence[Sequence[float]] | None = None,
         walls: Sequence[Sequence[float]] = (),
+        free: FreeSpace | None = None,
     ) -> tuple[float, float]:
         """The velocity command; as the paper's ``step_plain``, with the human's own velocity ``human_velocity``
         (his tracked beacon's, in this robot's frame; None when unknown), the neighbours' own velocities
         ``neighbour_velocities`` (their tracks', in the order of ``neighbours``; None: taken to be still) and the
         obstacle points the robot must pass or stop short of, ``walls`` (``surround_memory.EchoMemory``'s:
-        heard earlier, now in a blind gap or behind a neighbour)."""
+        heard earlier, now in a blind gap or behind a neighbour); ``free``, what the robot knows is free
+        (``surround_free.FreeSpace``; None: the free-space rule is off)."""
         distances, near, g, f_r = self._centring(neighbours, dt)
         c = self.config
         moving = neighbour_velocities if neighbour_velocities is not None else [(0.0, 0.0)] * len(neighbours)
@@ -96,7 +99,7 @@ class ImprovedSurroundController(SurroundController):
         self._forces = (f_r, f_o, f_p)
         force = (f_r[0] + f_o[0] + f_p[0], f_r[1] + f_o[1] + f_p[1])
         command = self._matched_command(force, velocity, human if human is None else human_velocity, dt)
-        return self._stoppable(command, neighbours, moving, human, human_velocity, walls)
+        return self._stoppable(command, neighbours, moving, human, human_velocity, walls, free)
 
     def _stoppable(
         self,
@@ -106,6 +109,7 @@ class ImprovedSurroundController(SurroundController):
         human: Sequence[float] | None,
         human_velocity: Sequence[float] | None,
         walls: Sequence[Sequence[float]] = (),
+        free: FreeSpace | None = None,
     ) -> tuple[float, float]:
         """The command with its speed toward each tracked body and wall point cut to what still stops short of it.
 
@@ -127,6 +131,11 @@ class ImprovedSurroundController(SurroundController):
                 human[0], human[1], hvx, hvy, c.human_clearance_m + c.robot_radius_m, c.human_margin_m
             )
         fixed = self._wall_rules(walls, command)
+        unknown = None
+        if free is not None and self._off_his_lane(human, human_velocity):
+            unknown = free.rule(command, c.robot_radius_m)
+        if unknown is not None:
+            fixed.append(unknown)
         kept = [rule for rule in (*rules, *fixed, his) if rule is not None]
         vx, vy = _nearest_allowed(command, kept)
         if his is not None and _excess((vx, vy), [his]) > 1e-9:
@@ -136,6 +145,18 @@ class ImprovedSurroundController(SurroundController):
             if _excess((vx, vy), [his]) > 1e-9:
                 vx, vy = _nearest_allowed(command, [his])
         return _clip(vx, vy, c.max_speed_mps)
+
+    def _off_his_lane(self, human: Sequence[float] | None, human_velocity: Sequence[float] | None) -> bool:
+        """Whether the free-space rule acts on this robot: further than ``free_space_band_m`` across the line of the
+        walking human (or always, with a band of 0, or when he is not seen walking)."""
+        band = self.config.free_space_band_m
+        if band <= 0 or human is None or human_velocity is None:
+            return True
+        speed = math.sqrt(human_velocity[0] ** 2 + human_velocity[1] ** 2)
+        if speed < 0.3:
+            return True
+        across = abs(human[0] * human_velocity[1] - human[1] * human_velocity[0]) / speed
+        return across > band
 
     def _wall_rules(
         self, walls: Sequence[Sequence[float]], command: tuple[float, float]

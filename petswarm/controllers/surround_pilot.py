@@ -38,6 +38,7 @@ from petswarm.controllers.driving import EchoRanges
 from petswarm.controllers.motion import DriveLimits
 from petswarm.controllers.pet_controller import PetControllerConfig, SafetyStage
 from petswarm.controllers.surround import SurroundConfig, SurroundController
+from petswarm.controllers.surround_free import FreeSpace
 from petswarm.controllers.surround_improved import ImprovedSurroundController
 from petswarm.controllers.surround_memory import EchoMemory
 from petswarm.controllers.surround_sensing import (
@@ -106,6 +107,12 @@ class SurroundPilot:
         self.counters = {"steps": 0, "stale_steps": 0, "human_seen": 0, "echoes_dropped": 0, "beacons": 0}
         self._echoes = EchoRanges()
         self._memory = EchoMemory()
+        law = config.law
+        self._free = None
+        if improved:
+            self._free = FreeSpace(
+                law.free_space_memory_s, law.free_space_brake_mps2, law.free_space_near_m, law.free_space_gap_share
+            )
         self._safety = SafetyStage(SAFETY_IMPROVED if improved else SAFETY)
         self._sensing = config.sensing
         self._last_us: int | None = None
@@ -182,8 +189,9 @@ class SurroundPilot:
             # the improved law keeps off the human's body itself (his centre and velocity): his surface point,
             # which sensing put last among the obstacles, is left out
             echoes = obstacles if human is None else obstacles[:-1]
-            walls = self._remember(sensors, tracker.names, tracker.positions, velocity, dt)
-            vx, vy = controller.step_plain(neighbours, echoes, human, velocity, dt, own, others, walls)
+            walls, explained = self._remember(sensors, tracker.names, tracker.positions, velocity, dt)
+            free = self._free_space(sensors, names, tracker.positions.tolist(), moving, velocity, dt, explained)
+            vx, vy = controller.step_plain(neighbours, echoes, human, velocity, dt, own, others, walls, free)
         else:
             vx, vy = controller.step_plain(neighbours, obstacles, human, velocity, dt)
         # the law's repulsion acts on IR estimates up to a sweep old; the ultrasonic ring is the last word
@@ -197,14 +205,39 @@ class SurroundPilot:
 
     def _remember(
         self, sensors: OwnSensors, names: list[str], positions: np.ndarray, velocity: tuple[float, float], dt: float
-    ) -> list[tuple[float, float]]:
-        """The echo memory's step (``surround_memory``): the wall points the law must stop short of."""
+    ) -> tuple[list[tuple[float, float]], list[bool]]:
+        """The echo memory's step (``surround_memory``): the wall points the law must stop short of, and per echo
+        whether a tracked body explains it."""
         ranges = sensors.ranges_list()
         cos, sin = self._ring(sensors.angles_rad)
         radius = self.config.law.robot_radius_m
         points = [(c * (radius + r), s * (radius + r)) for r, c, s in zip(ranges, cos, sin, strict=True)]
         explained = explained_echoes(points, names, positions, self.config.human_id, self._sensing)
-        return self._memory.step(ranges, cos, sin, explained, velocity, dt, radius)
+        return self._memory.step(ranges, cos, sin, explained, velocity, dt, radius), explained
+
+    def _free_space(
+        self,
+        sensors: OwnSensors,
+        names: list[str],
+        positions: list[list[float]],
+        moving: list[list[float]],
+        velocity: tuple[float, float],
+        dt: float,
+        explained: list[bool],
+    ) -> FreeSpace | None:
+        """The free-space rule's step (``surround_free``), None when the rule is off."""
+        free = self._free
+        if free is None or not free.brake_mps2 > 0:
+            return None
+        radius = self.config.law.robot_radius_m
+        person = self.config.person_radius_m
+        human_id = self.config.human_id
+        bodies = [
+            (x, y, vx, vy, person if name == human_id else radius)
+            for name, (x, y), (vx, vy) in zip(names, positions, moving, strict=True)
+        ]
+        free.step(sensors.ranges_list(), *self._ring(sensors.angles_rad), velocity, dt, radius, bodies, explained)
+        return free
 
     def _ring(self, angles_rad: np.ndarray) -> tuple[list[float], list[float]]:
         """The cosines and sines of the ultrasonic sensors' angles, worked out again only when the ring changes."""

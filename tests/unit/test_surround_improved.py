@@ -333,3 +333,61 @@ def test_a_wall_beside_a_robot_leaves_no_remembered_point_nearer_than_itself() -
     assert points and all(y <= -0.2 + 0.01 for _, y in points)  # none off the wall, toward the robot's path
     law = ImprovedSurroundController(IMPROVED)
     assert law.step_plain([], [], None, (1.0, 0.0), DT, walls=points)[0] > 0.95
+
+
+def test_the_free_space_rule_holds_a_robot_to_the_space_it_knows_is_free() -> None:
+    """Free-space reasoning (beyond the paper): in the open nothing holds a robot; a neighbour's echo 0.1 m ahead
+    hides what lies beyond it, so the robot may go only as fast as stops short of the first point past it that no
+    beam has heard free and no tracked body has swept; a beam that heard the way ahead empty a moment earlier
+    counts as evidence."""
+    from petswarm.controllers.surround_free import LATE_S, MARGIN_M, FreeSpace
+
+    cos, sin = _cones()
+    nothing = [math.nan] * 8
+    open_field = FreeSpace(memory_s=0.5, brake_mps2=1.5, gap_share=1.5)
+    open_field.step(nothing, cos, sin, (1.0, 0.0), DT, 0.1, [])
+    assert open_field.rule((1.0, 0.0), 0.1) is None
+    # a neighbour standing 0.3 m ahead (its surface 0.1 m off the skin), first heard now
+    neighbour = [(0.3, 0.0, 0.0, 0.0, 0.1)]
+    hidden = [0.1, *[math.nan] * 7]
+    masked = FreeSpace(memory_s=0.5, brake_mps2=1.5, gap_share=1.5)
+    masked.step(hidden, cos, sin, (1.0, 0.0), DT, 0.1, neighbour)
+    rule = masked.rule((1.0, 0.0), 0.1)
+    assert rule is not None and rule[:2] == (1.0, 0.0)
+    u = rule[2]
+    # it stops within the 0.1 m it knows of on its centre line (the first unknown point: 0.2 m, its radius on)
+    assert u > 0 and u * LATE_S + u * u / (2 * 1.5) <= 0.1 - MARGIN_M + 1e-9
+    # the same, but its ring heard the way ahead empty a step earlier (and the blind gaps count as free)
+    seen = FreeSpace(memory_s=0.5, brake_mps2=1.5, gap_share=0.0)
+    seen.step(nothing, cos, sin, (1.0, 0.0), DT, 0.1, [])
+    seen.step(hidden, cos, sin, (1.0, 0.0), DT, 0.1, neighbour)
+    assert seen.rule((1.0, 0.0), 0.1) is None
+    # without that earlier reading the same blind-gap setting still holds it
+    unseen = FreeSpace(memory_s=0.5, brake_mps2=1.5, gap_share=0.0)
+    unseen.step(hidden, cos, sin, (1.0, 0.0), DT, 0.1, neighbour)
+    assert unseen.rule((1.0, 0.0), 0.1) is not None
+
+
+def test_the_free_space_rule_acts_near_a_wall_heard_and_off_the_walking_humans_lane() -> None:
+    from petswarm.controllers.surround_free import FreeSpace
+
+    cos, sin = _cones()
+    hidden = [0.1, *[math.nan] * 7]
+    neighbour = [(0.3, 0.0, 0.0, 0.0, 0.1)]
+    # no echo but the neighbour's (explained) within near_m: the rule does not act
+    calm = FreeSpace(memory_s=0.5, brake_mps2=1.5, near_m=1.0)
+    calm.step(hidden, cos, sin, (1.0, 0.0), DT, 0.1, neighbour, [True, *[False] * 7])
+    assert calm.rule((1.0, 0.0), 0.1) is None
+    # a wall heard 0.5 m off to the side: it does
+    wall = [0.1, *[math.nan] * 5, 0.4, math.nan]
+    near = FreeSpace(memory_s=0.5, brake_mps2=1.5, near_m=1.0)
+    near.step(wall, cos, sin, (1.0, 0.0), DT, 0.1, neighbour, [True, *[False] * 7])
+    assert near.rule((1.0, 0.0), 0.1) is not None
+    law = ImprovedSurroundController(SurroundConfig(law="improved", free_space_band_m=0.3))
+    walking = (1.0, 0.0)
+    assert not law._off_his_lane((0.5, 0.2), walking)  # 0.2 m across his line: in his lane
+    assert law._off_his_lane((0.5, 0.45), walking)
+    assert law._off_his_lane((0.5, 0.2), (0.1, 0.0))  # he is not walking: every robot
+    assert ImprovedSurroundController(SurroundConfig(law="improved", free_space_band_m=0.0))._off_his_lane(
+        (0.5, 0.2), walking
+    )
