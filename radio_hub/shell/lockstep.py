@@ -39,6 +39,8 @@ from radio_hub.link import wire
 from radio_hub.link.keys import Keys
 from radio_hub.link.port import HubUnavailable
 from radio_hub.link.zenoh_link import (
+    DOWN_PENDING_BYTES,
+    DOWN_PENDING_LIMIT,
     UP_BATCH_BYTES,
     HubDownlink,
     ZenohLink,
@@ -76,6 +78,8 @@ class LockstepLink(ZenohLink):
     def __init__(self, session: zenoh.Session, keys: Keys, owns_session: bool) -> None:
         super().__init__(session, keys, owns_session)
         self._held: deque[tuple[int, bytes]] = deque()
+        self._held_bytes = 0
+        """Bytes in ``_held``: with its length, bounded as a wall-clock link bounds what waits for its loop."""
         self._release: list[bytes] = []
         self._release_grant: int | None = None
         """The number of the grant that closes ``_release``."""
@@ -130,10 +134,25 @@ class LockstepLink(ZenohLink):
             if not data and _attachment(sample) == self._wake_mark:  # our own wake-up: nothing to hold
                 return
             grant = _grant_of(data)
+            if grant is None and self._over_bounds(len(data)):
+                self.dropped += 1
+                continue
             self._held.append((0 if grant is None else grant.n, data))
+            self._held_bytes += len(data)
             if grant is not None:
                 self._granted(grant.at_s, grant.n)
                 return
+
+    def _over_bounds(self, size: int) -> bool:
+        """Whether a message that is not a grant, held until the next one, would pass a wall-clock link's bounds
+        (``wire.MAX_MESSAGE_BYTES`` each; ``DOWN_PENDING_LIMIT`` messages, ``DOWN_PENDING_BYTES`` in all). A round's
+        messages from the hub are far inside them; a flood on the node's down key while the hub withholds its
+        grant (waiting on a slow node, or gone) is dropped and counted, not held without end."""
+        return (
+            size > wire.MAX_MESSAGE_BYTES
+            or len(self._held) >= DOWN_PENDING_LIMIT
+            or self._held_bytes + size > DOWN_PENDING_BYTES
+        )
 
     def wake(self) -> None:
         """End a ``wait_grant`` under way (any thread, or a signal handler): the waker thread puts a marked
@@ -155,6 +174,7 @@ class LockstepLink(ZenohLink):
         self._loop.grant(at_s)
         while self._held:
             grant_n, data = self._held.popleft()
+            self._held_bytes -= len(data)
             self._release.append(data)
             if grant_n == n:
                 self._release_grant = n

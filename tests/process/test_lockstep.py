@@ -2,16 +2,23 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
+import os
+import signal
 import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 
+from petswarm import control
 from petswarm.lab.processes import Supervisor, free_tcp_port
 from radio_hub.interface import HubUnavailable, Keys, open_session, query_hub
+from radio_hub.link import wire
+from radio_hub.link.zenoh_link import reliable_publisher
 
 pytestmark = [pytest.mark.process, pytest.mark.long]
 ROOT = Path(__file__).resolve().parents[2]
@@ -133,3 +140,85 @@ def test_a_node_that_never_comes_does_not_stall_the_start_forever(tmp_path: Path
         if session is not None:
             session.close()
         sup.stop_all()
+
+
+ROBOT_RSS_BOUND_MB = 60
+"""What 2,000 x 100 kB messages on a lockstep robot's down key may add to its peak resident memory (as
+tests/process/test_hostile.py allows a wall-clock robot): held without a bound, they add about 200 MB."""
+
+
+@pytest.mark.timeout(120)
+def test_a_flood_on_a_lockstep_robots_down_key_while_the_hub_withholds_its_grant_is_dropped_not_held(
+    tmp_path: Path,
+) -> None:
+    """A lockstep robot holds the hub's messages until its next grant. With robot 2 stopped (SIGSTOP), the hub
+    waits for its idle and grants nobody; a rogue session then puts 2,000 x 100 kB messages on robot 1's down
+    key. Robot 1 drops and counts what passes a wall-clock link's bounds instead of holding it all, and once
+    robot 2 goes on, model time goes on for both."""
+    endpoint, world = f"tcp/127.0.0.1:{free_tcp_port()}", "held-flood"
+    keys = Keys(world)
+    sup = Supervisor(tmp_path / "logs")
+    sup.spawn("hub", ["hub", "--listen", endpoint, "--world", world, "--clock", "lockstep", "--expect", "2"])
+    for rid in (1, 2):
+        where = ["--hub", endpoint, "--world", world, "--clock", "lockstep", "--ping-interval", "0.1"]
+        sup.spawn(f"robot-{rid}", ["robot", "--id", str(rid), "--pos", f"{2.0 * rid},0", *where])
+    session = rogue = None
+    try:
+        session = _session_when_up(endpoint)
+        _model_time_past(session, keys, 1.0)
+        robot_2 = sup.children["robot-2"].pid
+        os.kill(robot_2, signal.SIGSTOP)
+        time.sleep(0.5)  # robot 2's grant, if one was on its way, is out: the hub now waits on its idle
+        stopped_at = query_hub(session, keys.stats)["lockstep"]["model_time_s"]
+        robot_1 = sup.children["robot-1"].pid
+        before = _peak_rss_mb(robot_1)
+        rogue = open_session("client", endpoint)
+        down = reliable_publisher(rogue, keys.down("robot-1"))  # blocks rather than drops: every one arrives
+        heavy = wire.LfHeard(data=b"\xaa" * 100_000, n=1).encode()
+        for _ in range(2000):
+            down.put(heavy)
+        down.undeclare()
+        time.sleep(1.0)
+        grown = _peak_rss_mb(robot_1) - before
+        assert query_hub(session, keys.stats)["lockstep"]["model_time_s"] == stopped_at  # no grant meanwhile
+        os.kill(robot_2, signal.SIGCONT)
+        _model_time_past(session, keys, stopped_at + 1.0)
+        assert grown <= ROBOT_RSS_BOUND_MB, f"robot 1's peak RSS grew {grown:.0f} MB under the flood"
+        dropped = control.command(session, keys, 1, "status", 10.0)["radio_dropped"]
+        assert dropped["link"] > 0, dropped  # refused, and counted
+        assert not sup.dead(), {name: sup.log_tail(name) for name in sup.dead()}
+    finally:
+        with contextlib.suppress(ProcessLookupError, KeyError):
+            os.kill(sup.children["robot-2"].pid, signal.SIGCONT)
+        for s in (rogue, session):
+            if s is not None:
+                s.close()
+        sup.stop_all()
+
+
+def _session_when_up(endpoint: str) -> Any:
+    deadline = time.monotonic() + 30
+    while True:
+        try:
+            return open_session("client", endpoint)
+        except HubUnavailable:
+            assert time.monotonic() < deadline, f"no hub at {endpoint} within 30 s"
+            time.sleep(0.2)
+
+
+def _model_time_past(session: Any, keys: Keys, seconds: float) -> None:
+    """Wait (wall time, 30 s at most) until the lockstep hub's model time is past ``seconds``."""
+    deadline = time.monotonic() + 30
+    model_time = 0.0
+    while model_time <= seconds:
+        assert time.monotonic() < deadline, f"model time {model_time} s, not past {seconds} s within 30 s"
+        time.sleep(0.2)
+        with contextlib.suppress(HubUnavailable):
+            model_time = query_hub(session, keys.stats, timeout=2.0)["lockstep"]["model_time_s"]
+
+
+def _peak_rss_mb(pid: int) -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024
+    raise AssertionError(f"no VmHWM for {pid}")
