@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import random
 import signal
 import socket
 import subprocess
@@ -51,11 +52,37 @@ def parent_death_signal(name: str) -> int:
     return signal.SIGTERM if name == "hub" else signal.SIGKILL
 
 
+EPHEMERAL_RANGE_FILE = Path("/proc/sys/net/ipv4/ip_local_port_range")
+LISTEN_PORTS_SPAN = 16384
+"""How many ports below the kernel's ephemeral range ``free_tcp_port`` draws from."""
+
+
 def free_tcp_port() -> int:
-    """A port on 127.0.0.1 nobody listens on right now."""
-    with socket.socket() as sock:
+    """A port on 127.0.0.1 nobody listens on right now, for a hub to listen on a moment later.
+
+    Drawn below the kernel's ephemeral range: a port the kernel hands out for ``bind(0)`` is one it also hands
+    out as the source port of any outgoing connection, so between our check and the hub's listen another
+    process's zenoh client could take it ("Address already in use": 1 of 6 runs started at once, measured).
+    The draw is not from the run's seed: which port a hub listens on is no part of what a run does."""
+    low = _ephemeral_low()
+    start = max(1024, low - LISTEN_PORTS_SPAN)
+    draw = random.SystemRandom()
+    for _ in range(64 if start < low else 0):
+        port = draw.randrange(start, low)
+        with socket.socket() as sock, contextlib.suppress(OSError):
+            sock.bind(("127.0.0.1", port))
+            return port
+    with socket.socket() as sock:  # that span is full (or the range starts low): any port the kernel gives
         sock.bind(("127.0.0.1", 0))
         return int(sock.getsockname()[1])
+
+
+def _ephemeral_low() -> int:
+    """The first port of the kernel's ephemeral range (Linux's default 32768 where it cannot be read)."""
+    try:
+        return int(EPHEMERAL_RANGE_FILE.read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        return 32768
 
 
 class Supervisor:
