@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import threading
 import time
-from pathlib import Path
 from typing import Any
 
 import msgpack
@@ -22,6 +21,8 @@ from radio_hub.air.mac import Frame, FrameType
 from radio_hub.link import wire
 from radio_hub.link.zenoh_link import reliable_publisher, session_config
 
+from .procfs import peak_rss_mb
+
 ROBOTS = (1, 2, 3)
 FAKE_ATTACHES = 2000
 HUB_RSS_BOUND_MB = 100
@@ -29,13 +30,6 @@ HUB_RSS_BOUND_MB = 100
 ROBOT_RSS_BOUND_MB = 60
 """What 2,000 x 100 kB messages on its downlink may add to a robot's peak resident memory (about 42 MB now;
 263 MB, never freed, before the bounds)."""
-
-
-def _rss_mb(pid: int, field: str = "VmHWM") -> float:
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith(field + ":"):
-            return int(line.split()[1]) / 1024
-    raise AssertionError(f"no {field} for {pid}")
 
 
 def _pongs(air: Any) -> int:
@@ -118,7 +112,7 @@ def test_a_rogue_client_cannot_take_the_hub_or_its_robots_down(make_air: Any) ->
     rogue = zenoh.open(session_config("client", air.endpoint))
     keys = air.keys
     try:
-        hub_rss0 = _rss_mb(hub_pid)
+        hub_rss0 = peak_rss_mb(hub_pid)
         quiet = _pong_rate(air, 2.5)
         assert quiet > 10, quiet
 
@@ -159,7 +153,7 @@ def test_a_rogue_client_cannot_take_the_hub_or_its_robots_down(make_air: Any) ->
 
         # 2,000 x 100 kB messages straight into robot 2's downlink: its memory stays bounded
         robot_pid = air.sup.children["robot-2"].pid
-        robot_rss0 = _rss_mb(robot_pid)
+        robot_rss0 = peak_rss_mb(robot_pid)
         heavy = wire.LfHeard(data=b"\xaa" * 100_000, n=1).encode()
         down = reliable_publisher(rogue, keys.down("robot-2"))  # blocks rather than drops: every one arrives
         for _ in range(2000):
@@ -167,7 +161,7 @@ def test_a_rogue_client_cannot_take_the_hub_or_its_robots_down(make_air: Any) ->
         down.undeclare()
         time.sleep(1.0)
         status = air.cmd(2, "status")
-        robot_rss = _rss_mb(robot_pid)
+        robot_rss = peak_rss_mb(robot_pid)
         print(f"robot 2 peak RSS {robot_rss0:.0f} -> {robot_rss:.0f} MB; dropped {status['radio_dropped']}")
         assert robot_rss - robot_rss0 <= ROBOT_RSS_BOUND_MB
         assert status["radio_dropped"]["link"] + status["radio_malformed"] > 0  # refused, and counted
@@ -209,7 +203,7 @@ def test_a_rogue_client_cannot_take_the_hub_or_its_robots_down(make_air: Any) ->
         alive.undeclare()
 
         final = air.stats()
-        hub_rss = _rss_mb(hub_pid)
+        hub_rss = peak_rss_mb(hub_pid)
         print(f"hub peak RSS {hub_rss0:.0f} -> {hub_rss:.0f} MB; faults {final['hub']['faults']}")
         assert hub_rss - hub_rss0 <= HUB_RSS_BOUND_MB
         assert final["hub"]["faults"] == {}

@@ -20,6 +20,9 @@ from radio_hub.interface import HubUnavailable, Keys, open_session, query_hub
 from radio_hub.link import wire
 from radio_hub.link.zenoh_link import reliable_publisher
 
+from ..waiting import wait_for
+from .procfs import peak_rss_mb
+
 pytestmark = [pytest.mark.process, pytest.mark.long]
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -164,14 +167,14 @@ def test_a_flood_on_a_lockstep_robots_down_key_while_the_hub_withholds_its_grant
         sup.spawn(f"robot-{rid}", ["robot", "--id", str(rid), "--pos", f"{2.0 * rid},0", *where])
     session = rogue = None
     try:
-        session = _session_when_up(endpoint)
+        session = wait_for(f"a hub at {endpoint}", lambda: open_session("client", endpoint), 30, every=0.2)
         _model_time_past(session, keys, 1.0)
         robot_2 = sup.children["robot-2"].pid
         os.kill(robot_2, signal.SIGSTOP)
         time.sleep(0.5)  # robot 2's grant, if one was on its way, is out: the hub now waits on its idle
         stopped_at = query_hub(session, keys.stats)["lockstep"]["model_time_s"]
         robot_1 = sup.children["robot-1"].pid
-        before = _peak_rss_mb(robot_1)
+        before = peak_rss_mb(robot_1)
         rogue = open_session("client", endpoint)
         down = reliable_publisher(rogue, keys.down("robot-1"))  # blocks rather than drops: every one arrives
         heavy = wire.LfHeard(data=b"\xaa" * 100_000, n=1).encode()
@@ -179,7 +182,7 @@ def test_a_flood_on_a_lockstep_robots_down_key_while_the_hub_withholds_its_grant
             down.put(heavy)
         down.undeclare()
         time.sleep(1.0)
-        grown = _peak_rss_mb(robot_1) - before
+        grown = peak_rss_mb(robot_1) - before
         assert query_hub(session, keys.stats)["lockstep"]["model_time_s"] == stopped_at  # no grant meanwhile
         os.kill(robot_2, signal.SIGCONT)
         _model_time_past(session, keys, stopped_at + 1.0)
@@ -196,29 +199,12 @@ def test_a_flood_on_a_lockstep_robots_down_key_while_the_hub_withholds_its_grant
         sup.stop_all()
 
 
-def _session_when_up(endpoint: str) -> Any:
-    deadline = time.monotonic() + 30
-    while True:
-        try:
-            return open_session("client", endpoint)
-        except HubUnavailable:
-            assert time.monotonic() < deadline, f"no hub at {endpoint} within 30 s"
-            time.sleep(0.2)
-
-
 def _model_time_past(session: Any, keys: Keys, seconds: float) -> None:
-    """Wait (wall time, 30 s at most) until the lockstep hub's model time is past ``seconds``."""
-    deadline = time.monotonic() + 30
-    model_time = 0.0
-    while model_time <= seconds:
-        assert time.monotonic() < deadline, f"model time {model_time} s, not past {seconds} s within 30 s"
-        time.sleep(0.2)
-        with contextlib.suppress(HubUnavailable):
-            model_time = query_hub(session, keys.stats, timeout=2.0)["lockstep"]["model_time_s"]
-
-
-def _peak_rss_mb(pid: int) -> float:
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("VmHWM:"):
-            return int(line.split()[1]) / 1024
-    raise AssertionError(f"no VmHWM for {pid}")
+    """Wait (30 s of wall time at most) until the lockstep hub's model time is past ``seconds``."""
+    stats = keys.stats
+    wait_for(
+        f"model time past {seconds} s",
+        lambda: query_hub(session, stats, timeout=2.0)["lockstep"]["model_time_s"] > seconds,
+        30,
+        every=0.2,
+    )
