@@ -109,7 +109,7 @@ class SurroundPilot:
         self._memory = EchoMemory()
         law = config.law
         self._free = None
-        if improved:
+        if improved and law.free_space_brake_mps2 > 0:  # off by default: no work on the hot path then
             self._free = FreeSpace(
                 law.free_space_memory_s, law.free_space_brake_mps2, law.free_space_near_m, law.free_space_gap_share
             )
@@ -190,7 +190,9 @@ class SurroundPilot:
             # which sensing put last among the obstacles, is left out
             echoes = obstacles if human is None else obstacles[:-1]
             walls, explained = self._remember(sensors, tracker.names, tracker.positions, velocity, dt)
-            free = self._free_space(sensors, names, tracker.positions.tolist(), moving, velocity, dt, explained)
+            free = None
+            if self._free is not None:
+                free = self._free_space(sensors, names, tracker.positions.tolist(), moving, velocity, dt, explained)
             vx, vy = controller.step_plain(neighbours, echoes, human, velocity, dt, own, others, walls, free)
         else:
             vx, vy = controller.step_plain(neighbours, obstacles, human, velocity, dt)
@@ -224,11 +226,10 @@ class SurroundPilot:
         velocity: tuple[float, float],
         dt: float,
         explained: list[bool],
-    ) -> FreeSpace | None:
-        """The free-space rule's step (``surround_free``), None when the rule is off."""
+    ) -> FreeSpace:
+        """The free-space rule's step (``surround_free``), with the rule on."""
         free = self._free
-        if free is None or not free.brake_mps2 > 0:
-            return None
+        assert free is not None
         radius = self.config.law.robot_radius_m
         person = self.config.person_radius_m
         human_id = self.config.human_id
