@@ -29,12 +29,19 @@ def _started_run(robots: int, *args: str) -> subprocess.Popen[str]:
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        # Ctrl-C as a terminal delivers it: where this test runs in a background job of a shell, SIGINT comes
+        # ignored (bash's rule for background jobs), Python keeps it so, and the run would never see it
+        preexec_fn=_sigint_as_at_a_terminal,
     )
     seen = read_until(proc.stderr, f"{robots}/{robots} robots attached", timeout=60)
     if f"{robots}/{robots} robots attached" not in seen:
         proc.kill()
         raise AssertionError(seen)
     return proc
+
+
+def _sigint_as_at_a_terminal() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def _processes_mentioning(tag: str) -> list[int]:
