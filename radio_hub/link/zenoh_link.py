@@ -79,6 +79,14 @@ def reliable_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
     )
 
 
+def over_down_bounds(size: int, waiting: int, waiting_bytes: int) -> bool:
+    """Whether a node drops (and counts) a message from the hub of ``size`` bytes, with ``waiting`` messages of
+    ``waiting_bytes`` already waiting for it: longer than ``wire.MAX_MESSAGE_BYTES``, or past
+    ``DOWN_PENDING_LIMIT`` messages or ``DOWN_PENDING_BYTES`` in all (what waits for a wall-clock node's loop,
+    what a lockstep node holds for its next grant)."""
+    return size > wire.MAX_MESSAGE_BYTES or waiting >= DOWN_PENDING_LIMIT or waiting_bytes + size > DOWN_PENDING_BYTES
+
+
 def put_up(pub: zenoh.Publisher | None, data: bytes) -> None:
     """One message of a node to the hub on its up publisher; HubUnavailable when it is not open or the session
     is gone (every node link puts this way)."""
@@ -357,11 +365,7 @@ class ZenohLink:
 
         def down(sample: zenoh.Sample) -> None:  # zenoh's thread (one per subscriber): hand over, return at once
             size = len(sample.payload)
-            if (
-                size > wire.MAX_MESSAGE_BYTES
-                or len(waiting) >= DOWN_PENDING_LIMIT
-                or self._bytes_in - self._bytes_out + size > DOWN_PENDING_BYTES
-            ):
+            if over_down_bounds(size, len(waiting), self._bytes_in - self._bytes_out):
                 self.dropped += 1
                 return
             waiting.append(sample.payload.to_bytes())

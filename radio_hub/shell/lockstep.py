@@ -39,12 +39,11 @@ from radio_hub.link import wire
 from radio_hub.link.keys import Keys
 from radio_hub.link.port import HubUnavailable
 from radio_hub.link.zenoh_link import (
-    DOWN_PENDING_BYTES,
-    DOWN_PENDING_LIMIT,
     UP_BATCH_BYTES,
     HubDownlink,
     ZenohLink,
     declare_hub_keys,
+    over_down_bounds,
     put_batches,
     reliable_publisher,
     reply,
@@ -134,7 +133,9 @@ class LockstepLink(ZenohLink):
             if not data and _attachment(sample) == self._wake_mark:  # our own wake-up: nothing to hold
                 return
             grant = _grant_of(data)
-            if grant is None and self._over_bounds(len(data)):
+            # a grant is always held; anything else within a wall-clock link's bounds: a round's messages are far
+            # inside them, a flood while the hub withholds the grant (waiting on a slow node, or gone) is not
+            if grant is None and over_down_bounds(len(data), len(self._held), self._held_bytes):
                 self.dropped += 1
                 continue
             self._held.append((0 if grant is None else grant.n, data))
@@ -142,17 +143,6 @@ class LockstepLink(ZenohLink):
             if grant is not None:
                 self._granted(grant.at_s, grant.n)
                 return
-
-    def _over_bounds(self, size: int) -> bool:
-        """Whether a message that is not a grant, held until the next one, would pass a wall-clock link's bounds
-        (``wire.MAX_MESSAGE_BYTES`` each; ``DOWN_PENDING_LIMIT`` messages, ``DOWN_PENDING_BYTES`` in all). A round's
-        messages from the hub are far inside them; a flood on the node's down key while the hub withholds its
-        grant (waiting on a slow node, or gone) is dropped and counted, not held without end."""
-        return (
-            size > wire.MAX_MESSAGE_BYTES
-            or len(self._held) >= DOWN_PENDING_LIMIT
-            or self._held_bytes + size > DOWN_PENDING_BYTES
-        )
 
     def wake(self) -> None:
         """End a ``wait_grant`` under way (any thread, or a signal handler): the waker thread puts a marked
