@@ -6,7 +6,6 @@ import argparse
 import asyncio
 import json
 import os
-import signal
 import sys
 from typing import TYPE_CHECKING, Any
 
@@ -390,6 +389,7 @@ def main(argv: list[str] | None = None) -> int:
 def _hub(args: argparse.Namespace) -> int:
     from petswarm.scenario import ScenarioError, load
     from radio_hub.shell.hub import RadioHub, environment_from_dict, load_config, ready_line
+    from radio_hub.shell.stopping import stop_on_signals
 
     try:
         environment = load_config(args.config) if args.config else None
@@ -446,8 +446,7 @@ def _hub(args: argparse.Namespace) -> int:
         hub.close()
         print(f"petswarm hub: cannot listen on {args.listen}: {err}", file=sys.stderr)
         return 2
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: hub.stop())
+    stop_on_signals(hub)
     print(ready_line(hub), flush=True)
     print(
         f"hub: serving world {args.world!r} on {args.listen}, seed {args.seed}, {args.clock} clock",
