@@ -4,6 +4,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
+FLOOD_RSS_BOUND_MB = 60
+"""What 2,000 x 100 kB messages on a robot's downlink may add to its peak resident memory, wall-clock
+(tests/process/test_hostile.py) or lockstep (tests/process/test_lockstep.py): about 42 MB with the link's bounds;
+without them 200-275 MB, never freed."""
+
 
 def peak_rss_mb(pid: int) -> float:
     """The process's peak resident memory (VmHWM) in MB."""

@@ -21,15 +21,12 @@ from radio_hub.air.mac import Frame, FrameType
 from radio_hub.link import wire
 from radio_hub.link.zenoh_link import reliable_publisher, session_config
 
-from .procfs import peak_rss_mb
+from .procfs import FLOOD_RSS_BOUND_MB, peak_rss_mb
 
 ROBOTS = (1, 2, 3)
 FAKE_ATTACHES = 2000
 HUB_RSS_BOUND_MB = 100
 """What the attacks may add to the hub's peak resident memory (it starts near 65 MB; they add about 55)."""
-ROBOT_RSS_BOUND_MB = 60
-"""What 2,000 x 100 kB messages on its downlink may add to a robot's peak resident memory (about 42 MB now;
-263 MB, never freed, before the bounds)."""
 
 
 def _pongs(air: Any) -> int:
@@ -163,7 +160,7 @@ def test_a_rogue_client_cannot_take_the_hub_or_its_robots_down(make_air: Any) ->
         status = air.cmd(2, "status")
         robot_rss = peak_rss_mb(robot_pid)
         print(f"robot 2 peak RSS {robot_rss0:.0f} -> {robot_rss:.0f} MB; dropped {status['radio_dropped']}")
-        assert robot_rss - robot_rss0 <= ROBOT_RSS_BOUND_MB
+        assert robot_rss - robot_rss0 <= FLOOD_RSS_BOUND_MB
         assert status["radio_dropped"]["link"] + status["radio_malformed"] > 0  # refused, and counted
 
         # speaking for robot 1 from another session: refused and counted, robot 1 stays attached

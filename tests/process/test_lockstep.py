@@ -22,7 +22,7 @@ from radio_hub.link import wire
 from radio_hub.link.zenoh_link import reliable_publisher
 
 from ..waiting import wait_for
-from .procfs import peak_rss_mb
+from .procfs import FLOOD_RSS_BOUND_MB, peak_rss_mb
 
 pytestmark = [pytest.mark.process, pytest.mark.long]
 ROOT = Path(__file__).resolve().parents[2]
@@ -173,11 +173,6 @@ def test_a_node_that_never_comes_does_not_stall_the_start_forever(tmp_path: Path
         sup.stop_all()
 
 
-ROBOT_RSS_BOUND_MB = 60
-"""What 2,000 x 100 kB messages on a lockstep robot's down key may add to its peak resident memory (as
-tests/process/test_hostile.py allows a wall-clock robot): held without a bound, they add about 200 MB."""
-
-
 @pytest.mark.timeout(120)
 def test_a_flood_on_a_lockstep_robots_down_key_while_the_hub_withholds_its_grant_is_dropped_not_held(
     tmp_path: Path,
@@ -214,7 +209,7 @@ def test_a_flood_on_a_lockstep_robots_down_key_while_the_hub_withholds_its_grant
         assert query_hub(session, keys.stats)["lockstep"]["model_time_s"] == stopped_at  # no grant meanwhile
         os.kill(robot_2, signal.SIGCONT)
         _model_time_past(session, keys, stopped_at + 1.0)
-        assert grown <= ROBOT_RSS_BOUND_MB, f"robot 1's peak RSS grew {grown:.0f} MB under the flood"
+        assert grown <= FLOOD_RSS_BOUND_MB, f"robot 1's peak RSS grew {grown:.0f} MB under the flood"
         dropped = control.command(session, keys, 1, "status", 10.0)["radio_dropped"]
         assert dropped["link"] > 0, dropped  # refused, and counted
         assert not sup.dead(), {name: sup.log_tail(name) for name in sup.dead()}
