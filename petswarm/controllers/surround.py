@@ -166,6 +166,12 @@ class SurroundConfig:
     commit_follow_mps: float = 0.0
     """Improved law: with > 0, a flank robot whose way ahead a neighbour hides commits to the side that neighbour
     swerves to across the human's walk, faster than this (m/s) relative to him (0: off)."""
+    commit_lateral_mps: float = 0.0
+    """Improved law: with > 0, a committed robot not yet on its side moves across toward it at least this fast
+    (a rule with the neighbours' stop rules, which it gives way to; 0: the spring alone)."""
+    commit_room: float = 0.0
+    """Improved law: with > 0, a flank robot whose chosen side a neighbour blocks (level with it, across on that
+    side) takes the other side."""
     commit_hold_s: float = 1.5
     """Improved law: a commitment lapses this long after the wall was last heard (or once the robot is past it)."""
     commit_brake_mps2: float = 0.0

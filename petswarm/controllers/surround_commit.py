@@ -52,6 +52,8 @@ class Commitment:
         brake_mps2: float,
         from_m: float = 0.0,
         follow_mps: float = 0.0,
+        lateral_mps: float = 0.0,
+        room: bool = False,
     ) -> None:
         self.gain = gain
         self.reach_m = reach_m
@@ -61,6 +63,8 @@ class Commitment:
         self.brake_mps2 = brake_mps2
         self.from_m = from_m
         self.follow_mps = follow_mps
+        self.lateral_mps = lateral_mps
+        self.room = room
         self.mode = 0
         """OUT, IN, or 0: no commitment."""
         self.point = (0.0, 0.0)
@@ -104,7 +108,7 @@ class Commitment:
         if walk is not None and human is not None:
             found = self._heard(points, explained, human, walk)
             if found is not None:
-                self._take(found, human, walk)
+                self._take(found, human, walk, neighbours)
             elif not self.mode and self.follow_mps > 0:
                 self._follow(neighbours, neighbour_velocities, human, human_velocity, walk)
         if self.mode:
@@ -142,7 +146,13 @@ class Commitment:
                 best = (x, y, across, d)
         return None if best is None else best[:3]
 
-    def _take(self, found: tuple[float, float, float], human: Sequence[float], walk: tuple[float, float]) -> None:
+    def _take(
+        self,
+        found: tuple[float, float, float],
+        human: Sequence[float],
+        walk: tuple[float, float],
+        neighbours: Sequence[Sequence[float]] = (),
+    ) -> None:
         """Commit to a side of the wall point ``found``, or refine the point already committed to."""
         x, y, across = found
         side = 1.0 if across > 0 else -1.0
@@ -164,6 +174,8 @@ class Commitment:
             self.mode = last_mode
         else:
             self.mode = OUT if abs(mine) > abs(across) else IN
+            if self.room and self._blocked(self.mode, side, neighbours, walk):
+                self.mode = -self.mode
         self.point, self.walk, self.side, self.quiet_s = (x, y), walk, side, 0.0
         self.decisions += 1
 
@@ -200,6 +212,31 @@ class Commitment:
             self.point = (reach * ex, reach * ey)
             self.decisions += 1
             return
+
+    def _blocked(
+        self, mode: int, side: float, neighbours: Sequence[Sequence[float]], walk: tuple[float, float]
+    ) -> bool:
+        """Whether a neighbour stands in the way the robot would move across to take ``mode`` (level with it along
+        his walk, within two diameters across on that side): the other side has the room then."""
+        ex, ey = walk
+        nx, ny = -ey, ex
+        way = side * mode  # across his line: + away from it
+        for x, y in neighbours:
+            along, across = x * ex + y * ey, (x * nx + y * ny) * way
+            if abs(along) < 2 * self.radius_m + 0.1 and 0 < across < 4 * self.radius_m:
+                return True
+        return False
+
+    def lateral_rule(self) -> tuple[float, float, float] | None:
+        """``(nx, ny, limit)``: while the robot is not on its side, it moves across toward it at least
+        ``lateral_mps`` (less as it nears it): ``-dir . v <= -u`` (None: no such rule)."""
+        short = self.shortfall()
+        if self.lateral_mps <= 0 or short <= 0:
+            return None
+        ex, ey = self.walk
+        sign = self.side * self.mode
+        u = min(self.lateral_mps, short / 0.3)
+        return ey * sign, -ex * sign, -u
 
     def shortfall(self) -> float:
         """How far (m) the robot still has to move across to be on its committed side; <= 0 once it is."""

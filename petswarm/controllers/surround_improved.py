@@ -131,6 +131,8 @@ class ImprovedSurroundController(SurroundController):
         c = self.config
         touching = 2 * c.robot_radius_m
         rules = [self._stop_rule(x, y, ux, uy, touching) for (x, y), (ux, uy) in zip(neighbours, moving, strict=True)]
+        if commit is not None:  # with the neighbours' rules: dropped with them when no velocity keeps all
+            rules.append(commit.lateral_rule())
         his = None
         if human is not None:
             hvx, hvy = human_velocity if human_velocity is not None else (0.0, 0.0)

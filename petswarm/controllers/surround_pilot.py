@@ -125,6 +125,8 @@ class SurroundPilot:
                 law.commit_brake_mps2,
                 law.commit_from_m,
                 law.commit_follow_mps,
+                law.commit_lateral_mps,
+                law.commit_room > 0,
             )
         self._safety = SafetyStage(SAFETY_IMPROVED if improved else SAFETY)
         self._sensing = config.sensing
