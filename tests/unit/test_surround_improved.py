@@ -452,3 +452,16 @@ def test_a_flank_robot_whose_way_a_neighbour_hides_takes_the_side_that_neighbour
     assert following((0.3, 0.35), (1.0, -0.2)).mode == 0
     inside = following((0.3, 0.0), (1.0, -0.2))
     assert inside.force()[1] < 0 and inside.shortfall() == pytest.approx(0.18)
+
+
+def test_a_flank_robot_takes_the_other_side_when_a_neighbour_blocks_the_one_it_would_choose() -> None:
+    """Between the human and the wall's end (IN by position), but a neighbour level with it on the inside: with
+    ``room`` it commits OUT instead; without, IN as ever."""
+    from petswarm.controllers.surround_commit import IN, OUT, Commitment
+
+    nothing = [(math.nan, math.nan)] * 8
+    end = [(1.0, 0.1), *nothing[1:]]  # 0.6 m left of his line; the robot 0.5 m left of it
+    for room, chosen in ((False, IN), (True, OUT)):
+        commitment = Commitment(20.0, 1.2, 0.3, 0.08, 1.5, 0.0, from_m=0.5, room=room)
+        commitment.step(end, [False] * 8, (0.0, -0.5), (1.0, 0.0), (1.0, 0.0), DT, 0.1, [(0.05, -0.25)], [(1.0, 0.0)])
+        assert commitment.mode == chosen
