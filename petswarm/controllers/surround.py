@@ -172,6 +172,9 @@ class SurroundConfig:
     commit_room: float = 0.0
     """Improved law: with > 0, a flank robot whose chosen side a neighbour blocks (level with it, across on that
     side) takes the other side."""
+    commit_arc_share: float = 0.0
+    """Improved law: a committed robot clears its side by this share of the echo's arc besides (its range times
+    sin 15 degrees: the point may lie that far across its cone's axis); 0: the point on the axis alone."""
     commit_hold_s: float = 1.5
     """Improved law: a commitment lapses this long after the wall was last heard (or once the robot is past it)."""
     commit_brake_mps2: float = 0.0

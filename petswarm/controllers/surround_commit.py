@@ -35,6 +35,9 @@ RELEASE_M = 0.15
 LATE_S = 0.06
 """As the wall rule's: a command acts a control step and up to a world tick after the echoes it was made from."""
 
+HALF_BEAM_SINE = math.sin(math.radians(15.0))
+"""An echo's point lies within 15 degrees of its cone's axis: up to its range times this across it."""
+
 OUT = 1
 IN = -1
 
@@ -54,6 +57,7 @@ class Commitment:
         follow_mps: float = 0.0,
         lateral_mps: float = 0.0,
         room: bool = False,
+        arc_share: float = 0.0,
     ) -> None:
         self.gain = gain
         self.reach_m = reach_m
@@ -65,6 +69,10 @@ class Commitment:
         self.follow_mps = follow_mps
         self.lateral_mps = lateral_mps
         self.room = room
+        self.arc_share = arc_share
+        self.spread = 0.0
+        """How far across his walk the wall point may lie off the one kept (the echo's arc: its range times the
+        sine of the half beam, times ``arc_share``): the side is cleared by that much more."""
         self.mode = 0
         """OUT, IN, or 0: no commitment."""
         self.point = (0.0, 0.0)
@@ -160,6 +168,7 @@ class Commitment:
             px, py = self.point
             if x * x + y * y < px * px + py * py:
                 self.point = (x, y)
+                self.spread = self.arc_share * math.sqrt(x * x + y * y) * HALF_BEAM_SINE
             self.quiet_s = 0.0
             return
         if self.mode or x * x + y * y < self.from_m * self.from_m:
@@ -177,6 +186,7 @@ class Commitment:
             if self.room and self._blocked(self.mode, side, neighbours, walk):
                 self.mode = -self.mode
         self.point, self.walk, self.side, self.quiet_s = (x, y), walk, side, 0.0
+        self.spread = self.arc_share * math.sqrt(x * x + y * y) * HALF_BEAM_SINE
         self.decisions += 1
 
     def _follow(
@@ -210,6 +220,7 @@ class Commitment:
             # the point: level with the robot across his walk, a little beyond the neighbour along it
             reach = along + 2 * self.radius_m + RELEASE_M
             self.point = (reach * ex, reach * ey)
+            self.spread = 0.0
             self.decisions += 1
             return
 
@@ -245,7 +256,7 @@ class Commitment:
         ex, ey = self.walk
         nx, ny = -ey, ex
         out = -(self.point[0] * nx + self.point[1] * ny) * self.side  # the robot's offset beyond the point
-        clear = self.radius_m + self.margin_m
+        clear = self.radius_m + self.margin_m + self.spread
         return clear - out if self.mode == OUT else clear + out
 
     def force(self) -> tuple[float, float]:

@@ -127,6 +127,7 @@ class SurroundPilot:
                 law.commit_follow_mps,
                 law.commit_lateral_mps,
                 law.commit_room > 0,
+                law.commit_arc_share,
             )
         self._safety = SafetyStage(SAFETY_IMPROVED if improved else SAFETY)
         self._sensing = config.sensing

@@ -465,3 +465,19 @@ def test_a_flank_robot_takes_the_other_side_when_a_neighbour_blocks_the_one_it_w
         commitment = Commitment(20.0, 1.2, 0.3, 0.08, 1.5, 0.0, from_m=0.5, room=room)
         commitment.step(end, [False] * 8, (0.0, -0.5), (1.0, 0.0), (1.0, 0.0), DT, 0.1, [(0.05, -0.25)], [(1.0, 0.0)])
         assert commitment.mode == chosen
+
+
+def test_a_committed_robot_clears_the_echos_arc_with_arc_share() -> None:
+    """The end heard on the cone's axis may lie up to its range times sin 15 degrees across it: with
+    ``arc_share = 1`` the robot's shortfall grows by that much, and narrows as nearer echoes refine the point."""
+    from petswarm.controllers.surround_commit import Commitment
+
+    nothing = [(math.nan, math.nan)] * 8
+    shortfalls = []
+    for share in (0.0, 1.0):
+        commitment = Commitment(20.0, 1.2, 0.3, 0.08, 1.5, 0.0, from_m=0.5, arc_share=share)
+        commitment.step([(1.0, 0.0), *nothing[1:]], [False] * 8, (0.0, -0.6), (1.0, 0.0), (1.0, 0.0), DT, 0.1)
+        shortfalls.append(commitment.shortfall())
+    assert shortfalls[1] - shortfalls[0] == pytest.approx(math.sin(math.radians(15.0)))
+    commitment.step([(0.6, 0.0), *nothing[1:]], [False] * 8, (0.0, -0.6), (1.0, 0.0), (0.0, 0.0), DT, 0.1)
+    assert commitment.shortfall() - shortfalls[0] == pytest.approx(0.6 * math.sin(math.radians(15.0)))
