@@ -150,6 +150,36 @@ class SurroundConfig:
     """Improved law: the free-space rule acts only on a robot further than this across the walking human's line
     (his track's position and velocity): those in his lane follow where he and the robots ahead of them went
     (0: on every robot; on every robot the swarm fell behind him, its centre 0.84-1.15 m off at the median)."""
+    commit_gain: float = 0.0
+    """Improved law: the flank commitment (``surround_commit``, an experiment; docs/SURROUND.md, item 11): the
+    lateral spring (/s^2) that takes a robot off the walking human's lane to the side of a wall point ahead it
+    committed to (OUT round the wall or IN behind him). 0 (the default): off."""
+    commit_reach_m: float = 1.2
+    """Improved law: a wall echo this near (from the robot's centre) can make a flank robot commit."""
+    commit_band_m: float = 0.3
+    """Improved law: only robots further than this across the walking human's line commit."""
+    commit_margin_m: float = 0.08
+    """Improved law: beyond its radius, how far outside (OUT) or inside (IN) the wall point's line a committed
+    robot keeps its centre."""
+    commit_from_m: float = 0.5
+    """Improved law: a flank robot commits only on a wall echo at least this far off (nearer ones refine it)."""
+    commit_follow_mps: float = 0.0
+    """Improved law: with > 0, a flank robot whose way ahead a neighbour hides commits to the side that neighbour
+    swerves to across the human's walk, faster than this (m/s) relative to him (0: off)."""
+    commit_lateral_mps: float = 0.0
+    """Improved law: with > 0, a committed robot not yet on its side moves across toward it at least this fast
+    (a rule with the neighbours' stop rules, which it gives way to; 0: the spring alone)."""
+    commit_room: float = 0.0
+    """Improved law: with > 0, a flank robot whose chosen side a neighbour blocks (level with it, across on that
+    side) takes the other side."""
+    commit_arc_share: float = 0.0
+    """Improved law: a committed robot clears its side by this share of the echo's arc besides (its range times
+    sin 15 degrees: the point may lie that far across its cone's axis); 0: the point on the axis alone."""
+    commit_hold_s: float = 1.5
+    """Improved law: a commitment lapses this long after the wall was last heard (or once the robot is past it)."""
+    commit_brake_mps2: float = 0.0
+    """Improved law: with > 0, a committed robot not yet on its side has its speed along the human's walk held
+    to what stops, braking at this, short of the wall point's line across his walk (0: the spring alone)."""
 
     def __post_init__(self) -> None:
         if self.law not in LAWS:

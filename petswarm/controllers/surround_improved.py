@@ -44,6 +44,7 @@ import math
 from collections.abc import Sequence
 
 from petswarm.controllers.surround import MIN_RANGE_M, SurroundConfig, SurroundController
+from petswarm.controllers.surround_commit import Commitment
 from petswarm.controllers.surround_free import FreeSpace
 
 WALL_MARGIN_M = 0.07
@@ -79,13 +80,15 @@ class ImprovedSurroundController(SurroundController):
         neighbour_velocities: Sequence[Sequence[float]] | None = None,
         walls: Sequence[Sequence[float]] = (),
         free: FreeSpace | None = None,
+        commit: Commitment | None = None,
     ) -> tuple[float, float]:
         """The velocity command; as the paper's ``step_plain``, with the human's own velocity ``human_velocity``
         (his tracked beacon's, in this robot's frame; None when unknown), the neighbours' own velocities
         ``neighbour_velocities`` (their tracks', in the order of ``neighbours``; None: taken to be still) and the
         obstacle points the robot must pass or stop short of, ``walls`` (``surround_memory.EchoMemory``'s:
         heard earlier, now in a blind gap or behind a neighbour); ``free``, what the robot knows is free
-        (``surround_free.FreeSpace``; None: the free-space rule is off)."""
+        (``surround_free.FreeSpace``; None: the free-space rule is off); ``commit``, the robot's flank commitment
+        (``surround_commit.Commitment``, stepped; None: off)."""
         distances, near, g, f_r = self._centring(neighbours, dt)
         c = self.config
         moving = neighbour_velocities if neighbour_velocities is not None else [(0.0, 0.0)] * len(neighbours)
@@ -96,10 +99,13 @@ class ImprovedSurroundController(SurroundController):
         if c.surround_share > 0:
             f_g = self._surround(g, human, velocity)
             f_p = (f_p[0] + c.surround_share * f_g[0], f_p[1] + c.surround_share * f_g[1])
+        if commit is not None:
+            f_c = commit.force()
+            f_p = (f_p[0] + f_c[0], f_p[1] + f_c[1])
         self._forces = (f_r, f_o, f_p)
         force = (f_r[0] + f_o[0] + f_p[0], f_r[1] + f_o[1] + f_p[1])
         command = self._matched_command(force, velocity, human if human is None else human_velocity, dt)
-        return self._stoppable(command, neighbours, moving, human, human_velocity, walls, free)
+        return self._stoppable(command, neighbours, moving, human, human_velocity, walls, free, commit)
 
     def _stoppable(
         self,
@@ -110,6 +116,7 @@ class ImprovedSurroundController(SurroundController):
         human_velocity: Sequence[float] | None,
         walls: Sequence[Sequence[float]] = (),
         free: FreeSpace | None = None,
+        commit: Commitment | None = None,
     ) -> tuple[float, float]:
         """The command with its speed toward each tracked body and wall point cut to what still stops short of it.
 
@@ -124,6 +131,8 @@ class ImprovedSurroundController(SurroundController):
         c = self.config
         touching = 2 * c.robot_radius_m
         rules = [self._stop_rule(x, y, ux, uy, touching) for (x, y), (ux, uy) in zip(neighbours, moving, strict=True)]
+        if commit is not None:  # with the neighbours' rules: dropped with them when no velocity keeps all
+            rules.append(commit.lateral_rule())
         his = None
         if human is not None:
             hvx, hvy = human_velocity if human_velocity is not None else (0.0, 0.0)
@@ -136,6 +145,9 @@ class ImprovedSurroundController(SurroundController):
             unknown = free.rule(command, c.robot_radius_m)
         if unknown is not None:
             fixed.append(unknown)
+        held = None if commit is None else commit.rule()
+        if held is not None:
+            fixed.append(held)
         kept = [rule for rule in (*rules, *fixed, his) if rule is not None]
         vx, vy = _nearest_allowed(command, kept)
         if his is not None and _excess((vx, vy), [his]) > 1e-9:

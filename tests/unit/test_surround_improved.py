@@ -391,3 +391,93 @@ def test_the_free_space_rule_acts_near_a_wall_heard_and_off_the_walking_humans_l
     assert ImprovedSurroundController(SurroundConfig(law="improved", free_space_band_m=0.0))._off_his_lane(
         (0.5, 0.2), walking
     )
+
+
+def test_a_flank_robot_that_hears_a_wall_ahead_commits_out_or_in_and_holds_it() -> None:
+    """Flank commitment (beyond the paper): the human walks along +x; a wall's end 1 m ahead, 0.6 m to his left.
+    A robot further left than the end commits OUT (pushed further left), one between him and the end IN (pushed
+    toward his line); the choice holds while the end goes unheard (masked, in a blind gap) and lapses past it."""
+    from petswarm.controllers.surround_commit import IN, OUT, Commitment
+
+    nothing = [(math.nan, math.nan)] * 8
+
+    def committed(robot_y: float) -> Commitment:
+        commitment = Commitment(gain=8.0, reach_m=1.2, band_m=0.3, margin_m=0.08, hold_s=1.5, brake_mps2=1.5)
+        human = (0.0, -robot_y)  # in the robot's frame: he walks along y = 0 of the world
+        end = [(1.0, 0.6 - robot_y), *nothing[1:]]
+        commitment.step(end, [False] * 8, human, (1.0, 0.0), (1.0, 0.0), DT, 0.1)
+        return commitment
+
+    out, inside = committed(0.7), committed(0.5)
+    assert (out.mode, inside.mode) == (OUT, IN)
+    assert out.force()[1] > 0 and inside.force()[1] < 0  # away from his line / toward it
+    assert out.force()[0] == pytest.approx(0.0) and inside.force()[0] == pytest.approx(0.0)
+    # not yet on its side: its speed along his walk stops short of the end's line; once there, free
+    rule = out.rule()
+    assert rule is not None and rule[:2] == (1.0, 0.0) and 0 < rule[2] < 1.5
+    law = ImprovedSurroundController(IMPROVED)
+    held = law.step_plain([], [], (0.0, -0.7), (1.0, 0.0), DT, human_velocity=(1.0, 0.0), commit=out)
+    assert held[0] <= rule[2] + 1e-9
+    # the end goes unheard: the choice stands, the robot still carried toward its side
+    for _ in range(10):
+        out.step(nothing, [False] * 8, (0.0, -0.7), (1.0, 0.0), (0.5, 0.0), DT, 0.1)
+    assert out.mode == OUT and out.force()[1] > 0
+    # a robot in his lane, or with no wall heard, does not commit
+    lane = Commitment(gain=8.0, reach_m=1.2, band_m=0.3, margin_m=0.08, hold_s=1.5, brake_mps2=0.0)
+    lane.step([(1.0, 0.4), *nothing[1:]], [False] * 8, (0.0, -0.2), (1.0, 0.0), (1.0, 0.0), DT, 0.1)
+    assert lane.mode == 0 and lane.force() == (0.0, 0.0) and lane.rule() is None
+    # past the end along his walk, the commitment lapses
+    for _ in range(40):
+        out.step(nothing, [False] * 8, (0.0, -0.8), (1.0, 0.0), (1.0, 0.0), DT, 0.1)
+    assert out.mode == 0 and out.force() == (0.0, 0.0)
+
+
+def test_a_flank_robot_whose_way_a_neighbour_hides_takes_the_side_that_neighbour_swerves_to() -> None:
+    """The end hidden from the robot's ring by the neighbour just ahead in its file: that neighbour swerving toward
+    the human's line (it heard the end and went IN) makes the robot commit IN too; swerving away, OUT; a neighbour
+    beside the file, or one keeping its line, makes it commit to nothing."""
+    from petswarm.controllers.surround_commit import IN, OUT, Commitment
+
+    nothing = [(math.nan, math.nan)] * 8
+
+    def following(neighbour: tuple[float, float], its_velocity: tuple[float, float]) -> Commitment:
+        commitment = Commitment(8.0, 1.2, 0.3, 0.08, 1.5, 0.0, from_m=0.5, follow_mps=0.1)
+        human = (0.0, -0.5)  # walking along +x, 0.5 m to the robot's right
+        commitment.step(nothing, [False] * 8, human, (1.0, 0.0), (1.0, 0.0), DT, 0.1, [neighbour], [its_velocity])
+        return commitment
+
+    assert following((0.3, 0.0), (1.0, -0.2)).mode == IN
+    assert following((0.3, 0.0), (1.0, 0.2)).mode == OUT
+    assert following((0.3, 0.0), (1.0, 0.05)).mode == 0
+    assert following((0.3, 0.35), (1.0, -0.2)).mode == 0
+    inside = following((0.3, 0.0), (1.0, -0.2))
+    assert inside.force()[1] < 0 and inside.shortfall() == pytest.approx(0.18)
+
+
+def test_a_flank_robot_takes_the_other_side_when_a_neighbour_blocks_the_one_it_would_choose() -> None:
+    """Between the human and the wall's end (IN by position), but a neighbour level with it on the inside: with
+    ``room`` it commits OUT instead; without, IN as ever."""
+    from petswarm.controllers.surround_commit import IN, OUT, Commitment
+
+    nothing = [(math.nan, math.nan)] * 8
+    end = [(1.0, 0.1), *nothing[1:]]  # 0.6 m left of his line; the robot 0.5 m left of it
+    for room, chosen in ((False, IN), (True, OUT)):
+        commitment = Commitment(20.0, 1.2, 0.3, 0.08, 1.5, 0.0, from_m=0.5, room=room)
+        commitment.step(end, [False] * 8, (0.0, -0.5), (1.0, 0.0), (1.0, 0.0), DT, 0.1, [(0.05, -0.25)], [(1.0, 0.0)])
+        assert commitment.mode == chosen
+
+
+def test_a_committed_robot_clears_the_echos_arc_with_arc_share() -> None:
+    """The end heard on the cone's axis may lie up to its range times sin 15 degrees across it: with
+    ``arc_share = 1`` the robot's shortfall grows by that much, and narrows as nearer echoes refine the point."""
+    from petswarm.controllers.surround_commit import Commitment
+
+    nothing = [(math.nan, math.nan)] * 8
+    shortfalls = []
+    for share in (0.0, 1.0):
+        commitment = Commitment(20.0, 1.2, 0.3, 0.08, 1.5, 0.0, from_m=0.5, arc_share=share)
+        commitment.step([(1.0, 0.0), *nothing[1:]], [False] * 8, (0.0, -0.6), (1.0, 0.0), (1.0, 0.0), DT, 0.1)
+        shortfalls.append(commitment.shortfall())
+    assert shortfalls[1] - shortfalls[0] == pytest.approx(math.sin(math.radians(15.0)))
+    commitment.step([(0.6, 0.0), *nothing[1:]], [False] * 8, (0.0, -0.6), (1.0, 0.0), (0.0, 0.0), DT, 0.1)
+    assert commitment.shortfall() - shortfalls[0] == pytest.approx(0.6 * math.sin(math.radians(15.0)))
