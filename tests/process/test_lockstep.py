@@ -17,6 +17,7 @@ import pytest
 from petswarm import control
 from petswarm.lab.metrics import read_world
 from petswarm.lab.processes import Supervisor, free_tcp_port
+from petswarm.lab.records import read_events
 from radio_hub.interface import HubUnavailable, Keys, open_session, query_hub
 from radio_hub.link import wire
 from radio_hub.link.zenoh_link import reliable_publisher
@@ -110,7 +111,7 @@ def test_a_following_swarm_of_robot_processes_keeps_its_formation_through_the_tu
     assert all(s is not None for s in reaction["slaves_s"].values()), reaction
     record = tmp_path / "lockstep"
     for rid in (2, 3, 4):
-        events = _events(record, f"robot-{rid}")
+        events = read_events(record / "events" / f"robot-{rid}.jsonl")
         assert any(e["kind"] == "user_activity_heard" and e["user_rate"] != 0 for e in events), rid
     # the swarm really moved with the user: the column's tail came along the 6 m walk north and round the turn
     track = [b for tick in read_world(record / "world.jsonl") for b in tick["bodies"] if b["id"] == "robot-4"]
@@ -128,11 +129,6 @@ def _scenario(tmp: Path, scenario: str, clock: str, seed: int) -> dict:
     done = subprocess.run([*argv, "--record", str(tmp / clock)], capture_output=True, text=True, timeout=880, cwd=ROOT)
     assert done.stdout, done.stderr[-2000:]
     return _with_exit_codes(json.loads(done.stdout), tmp / clock)
-
-
-def _events(record: Path, node: str) -> list[dict[str, Any]]:
-    """The events of ``node`` (``robot-2``) in a run record."""
-    return [json.loads(line) for line in (record / "events" / f"{node}.jsonl").read_text().splitlines()]
 
 
 def _with_exit_codes(summary: dict, record: Path) -> dict:
