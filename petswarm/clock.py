@@ -194,6 +194,20 @@ class LockstepLoop(ModelClockLoop):
         super().add_signal_handler(sig, callback, *args)
         signal.signal(sig, self._on_signal)
 
+    def close(self) -> None:
+        """As asyncio's, except that a SIGTERM handler of the loop's is left as "ignore", never at the default
+        action: a node whose loop closes has done its work and written its record, and the SIGTERM a run sends
+        its nodes at the end must not kill it while it closes (it would report death by signal, -15). asyncio's
+        close resets each of the loop's signals to its default first; a SIGTERM in that gap killed a robot in CI
+        right after its stop event. A loop without a SIGTERM handler (the run's own) leaves SIGTERM alone."""
+        # asyncio keeps its handlers in _signal_handlers and resets whatever is left there on close
+        if self._signal_handlers.pop(signal.SIGTERM, None) is not None:  # type: ignore[attr-defined]
+            signal.signal(signal.SIGTERM, signal.SIG_IGN)
+            super().close()
+            signal.set_wakeup_fd(-1)  # the self-pipe is closed; asyncio lets it go with its last handler
+            return
+        super().close()
+
     def _on_signal(self, signum: int, frame: Any) -> None:
         self._wake_waiting()
 

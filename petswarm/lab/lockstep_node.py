@@ -59,7 +59,7 @@ def run_node(name: str, endpoint: str, world: str, main: Callable[[LockstepLink]
     try:
         return loop.run_until_complete(main(link))
     finally:
-        loop.close()  # which puts SIGTERM back to its default action
+        loop.close()  # which leaves a SIGTERM handler of the node's as "ignore"
         # The node's work is done and its record written: the SIGTERM a run sends its nodes at the end must not
         # kill it while the interpreter and the zenoh session close, or it would report death by signal (-15).
         signal.signal(signal.SIGTERM, signal.SIG_IGN)

@@ -33,11 +33,6 @@ class Keys:
         """Node -> hub messages of one node."""
         return f"{self.prefix}/up/{node_id}"
 
-    @property
-    def up_all(self) -> str:
-        """What the hub subscribes to."""
-        return f"{self.prefix}/up/*"
-
     def down(self, node_id: str) -> str:
         """Hub -> node messages of one node."""
         return f"{self.prefix}/down/{node_id}"

@@ -91,8 +91,8 @@ def _common_rules() -> list[dict[str, Any]]:
     return [
         _rule("node-in", "ingress", list(_NODE_IN), shared),
         _rule("node-out", "egress", ["put", "liveliness_token"], shared),
-        # a client's publisher sends only while it knows of a matching subscriber: the hub's on up/* must
-        # be declared to it (what a node learns is who listens, never what anyone says)
+        # a client's publisher sends only while it knows of a matching subscriber: the hub's on each node's
+        # up key (radio_hub.link.up_keys) must be declared to it (a node learns who listens, never what is said)
         _rule("node-matching", "egress", ["declare_subscriber"], [f"{_W}/up/*"]),
     ]
 

@@ -26,6 +26,7 @@ from radio_hub.link import wire
 from radio_hub.link.keys import Keys
 from radio_hub.link.port import HubUnavailable
 from radio_hub.link.trust import TransportSecurity, access_control, tls_settings
+from radio_hub.link.up_keys import UpKeys, wait_for_up_key
 
 DOWN_PENDING_LIMIT = 2000
 """Messages from the hub a node's event loop may have waiting; more are dropped and counted (``dropped``):
@@ -286,9 +287,10 @@ def declare_hub_keys(
     oversized: Callable[[], None] | None = None,
 ) -> list[Any]:
     """What a hub shell serves on its router session, every callback a hand-off to ``put`` (its inbox): nodes'
-    messages (``("up", key, bytes)``), their liveliness (``("alive", key, kind)``), the queryables (``("stats",
-    query)``...; the chaos queryable only with ``chaos``) and the hub's own liveliness token. A node's message
-    longer than ``wire.MAX_UP_BYTES`` is dropped before it is copied out of zenoh (``oversized`` counts it)."""
+    messages (``("up", key, bytes)``) on the up keys of the nodes that are there (``UpKeys``, first in the list),
+    their liveliness (``("alive", key, kind)``), the queryables (``("stats", query)``...; the chaos queryable only
+    with ``chaos``) and the hub's own liveliness token. A node's message longer than ``wire.MAX_UP_BYTES`` is
+    dropped before it is copied out of zenoh (``oversized`` counts it)."""
 
     def up(sample: zenoh.Sample) -> None:
         if len(sample.payload) > wire.MAX_UP_BYTES:
@@ -298,10 +300,7 @@ def declare_hub_keys(
         put(("up", str(sample.key_expr), sample.payload.to_bytes()))
 
     decls = [
-        session.declare_subscriber(keys.up_all, up),
-        session.liveliness().declare_subscriber(
-            keys.alive_all, lambda s: put(("alive", str(s.key_expr), s.kind)), history=True
-        ),
+        UpKeys(session, keys, up, put),
         session.declare_queryable(keys.stats, lambda q: put(("stats", q))),
         session.declare_queryable(keys.air, lambda q: put(("air", q))),
         session.declare_queryable(keys.world_query, lambda q: put(("world", q))),
@@ -403,6 +402,7 @@ class ZenohLink:
         ]
         self._pub = reliable_publisher(session, keys.up(node_id))
         self._decls.append(self._pub)
+        wait_for_up_key(self._pub)  # until the hub has seen our token, what we put goes nowhere
 
     def put(self, data: bytes) -> None:
         """One message to the hub; HubUnavailable when the session is gone."""

@@ -14,10 +14,11 @@ thread needs that lock only for what is not a robot's frame: such an item that f
 with everything that came after it, until the tick is done (arrival order stays), while the medium goes on.
 
 Nothing a client sends can end the job loop or grow the hub without bound (see README, "Bad input and
-bounds"): the inbox holds at most ``INBOX_PER_NODE`` messages per attached node and ``INBOX_STRANGERS`` from
-all other ids together (more are dropped and counted in ``stats()["inbox"]``); an attach whose liveliness
-token does not show within ``ATTACH_TOKEN_TIMEOUT_S`` is detached; at most ``MAX_UNPROVEN`` such attaches
-wait at once; any exception in a handler is counted in ``stats()["hub"]["faults"]`` and the loop goes on.
+bounds"): the hub hears only ids with a liveliness token (``radio_hub.link.up_keys``); the inbox holds at most
+``INBOX_PER_NODE`` messages per attached node and ``INBOX_STRANGERS`` from all other ids together (more are
+dropped and counted in ``stats()["inbox"]``); an attach whose liveliness token does not show within
+``ATTACH_TOKEN_TIMEOUT_S`` is detached; at most ``MAX_UNPROVEN`` such attaches wait at once; any exception in
+a handler is counted in ``stats()["hub"]["faults"]`` and the loop goes on.
 
 With ``pcap_path`` the hub also writes every transmission that leaves the air, data frames and ACKs,
 to a pcap file (``radio_hub.air.pcap``), stamped with the wall-clock time at which it started on the air.
@@ -50,6 +51,7 @@ from radio_hub.environment import (
 )
 from radio_hub.link import wire
 from radio_hub.link.keys import WORLD_THREAD, Keys
+from radio_hub.link.up_keys import UpKeys
 from radio_hub.link.zenoh_link import HubDownlink, declare_hub_keys, reply, session_config
 from radio_hub.physics.light import IrConfig
 
@@ -76,8 +78,9 @@ INBOX_STRANGERS = 1000
 """Messages of every id that is not attached (first attaches included) waiting in the inbox, together."""
 STRANGERS_PER_S = 2000
 """Messages of ids that are not attached taken into the inbox per second, together (attaches included: a
-swarm of 50 attaches in well under a second); the rest are dropped in zenoh's thread at once, so a flood
-of made-up ids costs the job loop almost nothing."""
+swarm of 50 attaches in well under a second); the rest are dropped in zenoh's thread at once. Such ids have a
+liveliness token (the hub hears no other), so this bounds a rogue that declares tokens, not a flood of
+made-up ids, which never reaches the hub."""
 INBOX_OTHER = 1000
 """Queries and liveliness changes waiting in the inbox."""
 INBOX_BUCKET_BYTES = 4 << 20
@@ -139,6 +142,7 @@ class RadioHub:
         """Inbox items taken that wait for the world lock, in arrival order (nothing more is taken meanwhile)."""
         self._session: zenoh.Session | None = None
         self._decls: list[Any] = []
+        self._up_keys: UpKeys | None = None
         self._waiting: dict[str, list[int]] = {}
         """Inbox items and their bytes per bucket: an attached node's id, ``""`` for every other id, ``"?"`` for
         the rest (a bucket that empties goes, so no key per departed node stays behind)."""
@@ -176,6 +180,7 @@ class RadioHub:
         session = zenoh.open(session_config("router", self.endpoint))
         self._session = session
         self._decls = declare_hub_keys(session, self.keys, self._admit, oversized=self._oversized)
+        self._up_keys = self._decls[0]
         self._downlink.world_pub = session.declare_publisher(self.keys.world_state)
         self._decls.append(self._downlink.world_pub)
         self._downlink.session = session
@@ -194,7 +199,7 @@ class RadioHub:
         self._downlink.session = None
         for decl in self._decls:
             decl.undeclare()
-        self._decls = []
+        self._decls, self._up_keys = [], None
         if self._session is not None:
             self._session.close()
             self._session = None
@@ -499,6 +504,8 @@ class RadioHub:
             "refused_unproven": self.refused_unproven,
             "tokens_dropped": self.tokens_dropped,
             "timeout_s": ATTACH_TOKEN_TIMEOUT_S,
+            "up_keys_open": self._up_keys.open_count if self._up_keys is not None else 0,
+            "up_keys_refused": self._up_keys.refused if self._up_keys is not None else 0,
         }
         stats["hub"]["stranger_answers_dropped"] = self._downlink.stranger_answers_dropped
         stats["hub"]["down_messages"] = self._downlink.messages

@@ -38,6 +38,7 @@ import zenoh
 from radio_hub.link import wire
 from radio_hub.link.keys import Keys
 from radio_hub.link.port import HubUnavailable
+from radio_hub.link.up_keys import wait_for_up_key
 from radio_hub.link.zenoh_link import (
     UP_BATCH_BYTES,
     HubDownlink,
@@ -115,6 +116,7 @@ class LockstepLink(ZenohLink):
         self._waker.start()
         self._pub = reliable_publisher(self.session, keys.up(node_id))
         self._decls.append(self._pub)
+        wait_for_up_key(self._pub)  # what the node puts before the hub opens its key is lost: its first idle too
         loop.on_quiescent = self._release_held
         loop.attach_sync(self)
 

@@ -3,9 +3,9 @@
 The rogue has its own zenoh session, as any process that reaches the port would. It sends extreme sequence
 numbers, floods made-up ids, attaches 2,000 nodes without a liveliness token, pushes 2,000 x 100 kB messages
 into a robot's downlink, speaks for robots it is not, spoofs a robot's source address and forges error
-replies. The hub and the robots must stay up, the robots keep at least half their quiet delivery rate under
-the flood, memory stays within the stated bounds, fake attaches are gone within 10 s, and what is refused is
-counted.
+replies. The hub and the robots must stay up; the flood and the fake attaches never reach the hub (it listens
+only on the up keys of ids with a token) and the robots keep at least half their quiet delivery rate under the
+flood; memory stays within the stated bounds, and what is refused is counted.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from radio_hub.air.mac import Frame, FrameType
 from radio_hub.link import wire
 from radio_hub.link.zenoh_link import reliable_publisher, session_config
 
-from .procfs import FLOOD_RSS_BOUND_MB, peak_rss_mb
+from .procfs import FLOOD_RSS_BOUND_MB, cpu_seconds, peak_rss_mb
 
 ROBOTS = (1, 2, 3)
 FAKE_ATTACHES = 2000
@@ -72,7 +72,8 @@ class Flood:
     def __exit__(self, *exc: object) -> None:
         self._stop.set()
         self._thread.join()
-        self.rate = self.sent / (time.monotonic() - self.t0)
+        self.wall_s = time.monotonic() - self.t0
+        self.rate = self.sent / self.wall_s
         for pub in self.pubs:
             pub.undeclare()
 
@@ -81,20 +82,6 @@ def _attempts(stats: dict[str, Any]) -> int:
     """Attaches the hub took, refused for want of a token, or dropped at the inbox (with the flood's)."""
     refused = stats["liveliness"]["refused_unproven"] + stats["inbox"]["dropped"].get("stranger", 0)
     return stats["hub"]["attaches"] + refused
-
-
-def _drained(air: Any, within_s: float = 30.0) -> dict[str, Any]:
-    """The hub's stats once nothing more arrives: the attempts count stands still for half a second. Under load
-    a flood's tail is still reaching the hub seconds after the flood stopped."""
-    deadline = time.monotonic() + within_s
-    last = air.stats()
-    while time.monotonic() < deadline:
-        time.sleep(0.5)
-        now = air.stats()
-        if _attempts(now) == _attempts(last) and now["inbox"]["dropped"] == last["inbox"]["dropped"]:
-            return now
-        last = now
-    raise AssertionError(f"the hub's inbox was still taking the flood after {within_s} s: {last['inbox']}")
 
 
 def _attached(stats: dict[str, Any]) -> set[str]:
@@ -115,38 +102,36 @@ def test_a_rogue_client_cannot_take_the_hub_or_its_robots_down(make_air: Any) ->
 
         # extreme sequence numbers: the hub used to die packing the gap counter into its stats reply
         for n in (-(2**63), 2**64 - 1, 2**63 - 1):
-            for node in ("robot-1", "fake-n"):
-                rogue.put(keys.up(node), msgpack.packb({"v": 1, "t": "drive", "n": n}))
+            rogue.put(keys.up("robot-1"), msgpack.packb({"v": 1, "t": "drive", "n": n}))
         time.sleep(0.3)
         stats = air.stats()
-        assert stats["hub"]["foreign"] >= 1 and stats["hub"]["malformed"] >= 4
+        assert stats["hub"]["foreign"] >= 1 and stats["hub"]["malformed"] >= 2
         assert 0 <= stats["hub"]["transport_gaps"] < 2**63
 
-        # a flood of made-up ids: the robots keep at least half their quiet delivery rate
+        # a flood of made-up ids: none of it reaches the hub (it has no up key open for ids without a liveliness
+        # token), and the robots keep at least half their quiet delivery rate
+        before, hub_cpu0 = air.stats(), cpu_seconds(hub_pid)
         with Flood(rogue, air) as flood:
             time.sleep(0.5)
             flooded = _pong_rate(air, 2.5)
-        print(f"pongs/s quiet {quiet:.1f}, under a {flood.rate:.0f} msg/s flood {flooded:.1f}")
+        hub_share = (cpu_seconds(hub_pid) - hub_cpu0) / flood.wall_s
+        print(
+            f"pongs/s quiet {quiet:.1f}, under a {flood.rate:.0f} msg/s flood {flooded:.1f}; hub {hub_share:.2f} cores"
+        )
         assert flooded >= quiet / 2, (quiet, flooded, flood.rate)
+        assert flood.sent > 10_000, flood.sent
 
-        # 2,000 attaches without a liveliness token: each refused or detached, all gone within 10 s
-        _drained(air)  # the flood's tail counts as strangers: wait it out, not a fixed time
-        time.sleep(1.0)  # the hub's stranger budget is fresh
-        before = air.stats()
+        # 2,000 attaches without a liveliness token: they go nowhere either
         for i in range(FAKE_ATTACHES):
             attach = wire.Attach(short_addr=1000 + i, pan_id=0x1000, instance="none", n=1, s=5)
             rogue.put(keys.up(f"fake-{i}"), attach.encode())
-        sent_at = time.monotonic()
-        robots = {f"robot-{rid}" for rid in ROBOTS}
-        while _attempts(air.stats()) - _attempts(before) < FAKE_ATTACHES or _attached(air.stats()) != robots:
-            assert time.monotonic() - sent_at < 10, (_attempts(air.stats()) - _attempts(before), air.stats()["inbox"])
-            time.sleep(0.25)
-        gone_s = time.monotonic() - sent_at
+        time.sleep(1.0)
         stats = air.stats()
-        live = stats["liveliness"]
-        print(f"fake attaches gone after {gone_s:.1f} s: {live}, inbox {stats['inbox']}")
-        assert live["expired"] > 0  # some did attach, and were detached for want of a token
-        assert len(stats["nodes"]) <= len(ROBOTS) + 256  # departed ids' counters are capped (GONE_KEPT)
+        print(f"after the flood and the fake attaches: {stats['liveliness']}, inbox {stats['inbox']}")
+        assert _attempts(stats) == _attempts(before) and stats["inbox"]["dropped"] == before["inbox"]["dropped"]
+        assert _attached(stats) == {f"robot-{rid}" for rid in ROBOTS}
+        assert stats["nodes"].keys() == before["nodes"].keys()
+        assert stats["liveliness"]["up_keys_open"] == len(ROBOTS)
 
         # 2,000 x 100 kB messages straight into robot 2's downlink: its memory stays bounded
         robot_pid = air.sup.children["robot-2"].pid

@@ -10,6 +10,7 @@ import pytest
 from petswarm import control
 from radio_hub.air.mac import Frame, FrameType
 from radio_hub.link import wire
+from radio_hub.link.up_keys import wait_for_up_key
 
 from .conftest import LOSSLESS
 
@@ -100,17 +101,24 @@ def test_malformed_and_oversize_input_from_a_raw_client_is_counted_and_dropped(m
     sub = session.declare_subscriber(
         keys.down("raw-1"), lambda s: replies.extend(wire.decode_all(s.payload.to_bytes()))
     )
+    # a raw client with a liveliness token, as every node has: the hub listens on the up keys of such ids only
+    alive = session.liveliness().declare_token(keys.alive("raw-1", "r1"))
+    raw = session.declare_publisher(keys.up("raw-1"))
+    assert wait_for_up_key(raw)
     for junk in (b"", b"\xc1\xc1", msgpack.packb({"v": 9, "t": "transmit"}), msgpack.packb([1, 2, 3])):
-        session.put(keys.up("raw-1"), junk)
+        raw.put(junk)
     session.put(keys.up("robot-1"), b"\xff garbage on a robot's own key")
-    session.put(keys.up("raw-1"), wire.Attach(ext_addr=1, short_addr=77, pan_id=0x1000, channel=11, n=1).encode())
+    attach = wire.Attach(ext_addr=1, short_addr=77, pan_id=0x1000, channel=11, instance="r1", n=1)
+    raw.put(attach.encode())
     oversize = Frame(FrameType.DATA, 1, 0x1000, 0xFFFF, 0x1000, 77, bytes(60)).encode() + bytes(70)
-    session.put(keys.up("raw-1"), wire.Transmit(token=5, psdu=oversize, n=2).encode())
-    session.put(keys.up("raw-1"), wire.Transmit(token=6, psdu=b"\x41\x88\x01\x00\x10", n=3).encode())
+    raw.put(wire.Transmit(token=5, psdu=oversize, n=2).encode())
+    raw.put(wire.Transmit(token=6, psdu=b"\x41\x88\x01\x00\x10", n=3).encode())
     session.put(control.robot_key(keys, 2), b"not msgpack")
     session.put(control.all_robots_key(keys), b"\x93\x01")
     time.sleep(0.5)
     sub.undeclare()
+    raw.undeclare()
+    alive.undeclare()
 
     hub = air.stats()["hub"]
     assert hub["malformed"] == 5

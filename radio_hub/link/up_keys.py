@@ -1,0 +1,146 @@
+"""The hub's ears: one subscription per node id that is there, never one on every up key.
+
+A node is there while a liveliness token of its id is (``Keys.alive``). The hub subscribes to that node's up
+key when the first token of the id shows and lets the subscription go ``UP_KEY_GRACE_S`` after the last one
+went. Why not a single subscriber on ``up/*``: zenoh calls the hub's Python back for every message on it, a
+made-up id's too, and a flood of 50,000 messages a second for made-up ids took 0.9 of a core in the hub on its
+own and starved the robots beside it on a two-core machine. A zenoh publisher sends only while it knows of a
+matching subscriber, so a message for an id that has no token now stops in the process that sends it and costs
+the hub nothing. The other side of the bargain: a node waits until its key is open before it says anything
+(``wait_for_up_key``).
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+import zenoh
+
+from radio_hub.link.keys import Keys, check_name
+
+UP_KEY_GRACE_S = 2.0
+"""Wall seconds a node's up key stays open after its last token went: zenoh sends a declaration's end ahead of
+data still queued, so a node's last messages (its Detach) can arrive after its token's end."""
+UP_KEYS_MAX = 4096
+"""Node ids with an open up key at once; a token of a further id opens none (counted in ``refused``)."""
+UP_MATCH_WAIT_S = 5.0
+"""Wall seconds a node waits for the hub to open its up key before it speaks anyway (its attach then goes
+unanswered and the node reports no hub, as before)."""
+
+_STOP = ("stop", None)
+
+
+class UpKeys:
+    """The hub's per-node subscriptions (see the module), kept by a thread of their own that watches tokens.
+
+    ``on_up`` gets each sample on an open up key (zenoh's thread); ``on_alive`` gets ``("alive", key, kind)``
+    for every token that comes or goes, after the key it opens is open; a key closes ``grace_s`` after the last
+    token of its id went. ``undeclare`` ends it all."""
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        keys: Keys,
+        on_up: Callable[[zenoh.Sample], None],
+        on_alive: Callable[[tuple[Any, ...]], None],
+        grace_s: float = UP_KEY_GRACE_S,
+    ) -> None:
+        self._session, self._keys, self._on_up, self._on_alive = session, keys, on_up, on_alive
+        self._grace_s = grace_s
+        self._instances: dict[str, set[str]] = {}
+        """The tokens (instances) present of each node id with an open key."""
+        self._open: dict[str, Any] = {}
+        self._closing: dict[str, float] = {}
+        """Node ids whose last token went, and when (monotonic seconds) their key closes."""
+        self.refused = 0
+        """Tokens that opened no key: a bad node id, or ``UP_KEYS_MAX`` open already."""
+        self._events: queue.SimpleQueue[tuple[Any, Any]] = queue.SimpleQueue()
+        self._thread = threading.Thread(target=self._run, name="hub-up-keys", daemon=True)
+        self._thread.start()
+        self._watch = session.liveliness().declare_subscriber(
+            keys.alive_all, lambda s: self._events.put((str(s.key_expr), s.kind)), history=True
+        )
+
+    @property
+    def open_count(self) -> int:
+        """Node ids whose up key is open now."""
+        return len(self._open)
+
+    def undeclare(self) -> None:
+        """Stop watching, end the thread, let every subscription go."""
+        self._watch.undeclare()
+        self._events.put(_STOP)
+        self._thread.join(timeout=5.0)
+        for sub in list(self._open.values()):
+            sub.undeclare()
+        self._open.clear()
+
+    def _run(self) -> None:
+        while True:
+            try:
+                event = self._events.get(timeout=self._until_next_close())
+            except queue.Empty:
+                event = None
+            if event is _STOP:
+                return
+            if event is not None:
+                self._on_token(*event)
+            self._close_due(time.monotonic())
+
+    def _until_next_close(self) -> float | None:
+        if not self._closing:
+            return None
+        return max(min(self._closing.values()) - time.monotonic(), 0.0)
+
+    def _on_token(self, key: str, kind: zenoh.SampleKind) -> None:
+        node_id, instance = self._keys.alive_of(key)
+        if kind == zenoh.SampleKind.PUT:
+            self._token_came(node_id, instance)
+        else:
+            instances = self._instances.get(node_id)
+            if instances is not None:
+                instances.discard(instance)
+                if not instances:
+                    self._closing[node_id] = time.monotonic() + self._grace_s
+        self._on_alive(("alive", key, kind))
+
+    def _token_came(self, node_id: str, instance: str) -> None:
+        if node_id not in self._open:
+            try:
+                check_name("node", node_id)  # a wildcard in a token's key must not open every node's key
+            except ValueError:
+                self.refused += 1
+                return
+            if len(self._open) >= UP_KEYS_MAX:
+                self.refused += 1
+                return
+            self._open[node_id] = self._session.declare_subscriber(self._keys.up(node_id), self._on_up)
+            self._instances[node_id] = set()
+        self._instances[node_id].add(instance)
+        self._closing.pop(node_id, None)
+
+    def _close_due(self, now: float) -> None:
+        for node_id in [n for n, at in self._closing.items() if at <= now]:
+            del self._closing[node_id]
+            self._instances.pop(node_id, None)
+            sub = self._open.pop(node_id, None)
+            if sub is not None:
+                sub.undeclare()
+
+
+def wait_for_up_key(publisher: zenoh.Publisher, within_s: float = UP_MATCH_WAIT_S) -> bool:
+    """Block until the hub subscribes to ``publisher``'s key (True), or ``within_s`` wall seconds (False).
+
+    A node calls it after declaring its token and its publisher, before its first message: until the hub has
+    seen the token, zenoh drops what the node puts (see the module), its attach with it. Blocking, not async:
+    a lockstep node's model time has not begun, and a wall-clock node has nothing else to do yet."""
+    deadline = time.monotonic() + within_s
+    while not publisher.matching_status.matching:
+        if time.monotonic() >= deadline:
+            return False
+        time.sleep(0.001)
+    return True

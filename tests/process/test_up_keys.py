@@ -1,0 +1,84 @@
+"""The hub listens on a node's up key while the node has a liveliness token, and only then.
+
+A router session stands in for the hub's and a client session for a node's, on loopback: what opens and closes
+the keys is zenoh's liveliness, which a mock could not show.
+"""
+
+from __future__ import annotations
+
+import queue
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+import zenoh
+
+from petswarm.lab.processes import free_tcp_port
+from radio_hub.link.keys import Keys
+from radio_hub.link.up_keys import UpKeys, wait_for_up_key
+from radio_hub.link.zenoh_link import session_config
+
+GRACE_S = 0.3
+
+
+@pytest.fixture
+def hub_and_node() -> Iterator[tuple[UpKeys, zenoh.Session, queue.SimpleQueue[Any], Keys]]:
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    hub = zenoh.open(session_config("router", endpoint))
+    node = zenoh.open(session_config("client", endpoint))
+    keys = Keys("up-keys")
+    heard: queue.SimpleQueue[Any] = queue.SimpleQueue()
+    up_keys = UpKeys(hub, keys, lambda s: heard.put(s.payload.to_bytes()), heard.put, grace_s=GRACE_S)
+    try:
+        yield up_keys, node, heard, keys
+    finally:
+        up_keys.undeclare()
+        node.close()
+        hub.close()
+
+
+def _wait(condition: Any, within_s: float = 5.0) -> None:
+    deadline = time.monotonic() + within_s
+    while not condition():
+        assert time.monotonic() < deadline, "not within the deadline"
+        time.sleep(0.01)
+
+
+def test_a_token_opens_its_node_key_and_the_key_closes_a_grace_after_the_token_went(hub_and_node) -> None:
+    up_keys, node, heard, keys = hub_and_node
+    pub = node.declare_publisher(keys.up("robot-1"))
+    assert not wait_for_up_key(pub, within_s=0.3)  # no token, no key: what the node puts goes nowhere
+    token = node.liveliness().declare_token(keys.alive("robot-1", "i1"))
+    assert wait_for_up_key(pub)
+    assert heard.get(timeout=5)[0] == "alive"  # the token reaches the hub after its key opened
+    pub.put(b"hello")
+    assert heard.get(timeout=5) == b"hello"
+    assert up_keys.open_count == 1
+
+    token.undeclare()
+    assert heard.get(timeout=5)[0] == "alive"
+    pub.put(b"last words")  # inside the grace: a Detach that travels behind the token's end
+    assert heard.get(timeout=5) == b"last words"
+    _wait(lambda: up_keys.open_count == 0)
+    _wait(lambda: not pub.matching_status.matching)
+
+
+def test_a_second_instance_keeps_the_key_open_when_the_first_goes(hub_and_node) -> None:
+    up_keys, node, _heard, keys = hub_and_node
+    first = node.liveliness().declare_token(keys.alive("robot-1", "old"))
+    second = node.liveliness().declare_token(keys.alive("robot-1", "new"))
+    _wait(lambda: up_keys.open_count == 1)
+    first.undeclare()
+    time.sleep(3 * GRACE_S)
+    assert up_keys.open_count == 1
+    second.undeclare()
+    _wait(lambda: up_keys.open_count == 0)
+
+
+def test_a_token_whose_id_is_no_node_name_opens_nothing(hub_and_node) -> None:
+    up_keys, node, heard, keys = hub_and_node
+    token = node.liveliness().declare_token(keys.alive("x" * 65, "i1"))  # a valid key, not a valid node id
+    assert heard.get(timeout=5)[0] == "alive"  # the hub still hears of it, and refuses it as it always did
+    assert up_keys.refused == 1 and up_keys.open_count == 0
+    token.undeclare()
