@@ -389,7 +389,7 @@ def main(argv: list[str] | None = None) -> int:
 def _hub(args: argparse.Namespace) -> int:
     from petswarm.scenario import ScenarioError, load
     from radio_hub.shell.hub import RadioHub, environment_from_dict, load_config, ready_line
-    from radio_hub.shell.stopping import stop_on_signals
+    from radio_hub.shell.stopping import end_closed, stop_on_signals
 
     try:
         environment = load_config(args.config) if args.config else None
@@ -459,7 +459,9 @@ def _hub(args: argparse.Namespace) -> int:
         hub.serve()
     finally:
         hub.close()
-    return 0
+    print("hub: closed", file=sys.stderr)
+    end_closed(0)
+    return 0  # not reached
 
 
 def _user(args: argparse.Namespace) -> int:
