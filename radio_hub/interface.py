@@ -99,6 +99,7 @@ _LAB_ENTRY_POINTS = {
     "receiver_readings": "radio_hub.physics.light",
     "put_up": "radio_hub.link.zenoh_link",
     "reliable_publisher": "radio_hub.link.zenoh_link",
+    "wait_for_up_key": "radio_hub.link.up_keys",
 }
 """What the lab (model-time and lockstep runs, benches) takes from the hub's side, loaded on first use so
 that a robot process, which imports this module too, never loads the hub's models."""

@@ -31,6 +31,7 @@ from radio_hub.interface import (
     open_session,
     put_up,
     reliable_publisher,
+    wait_for_up_key,
 )
 
 PAN_ID = 0x1000
@@ -167,6 +168,7 @@ class SharedLink:
         shared._hub_watchers.append(on_hub)
         self._pub = reliable_publisher(self.session, keys.up(node_id))
         self._decls = [self.session.liveliness().declare_token(keys.alive(node_id, instance)), self._pub]
+        wait_for_up_key(self._pub)  # the hub listens on the node's key once it has seen the token
 
     def put(self, data: bytes) -> None:
         """One message to the hub."""
