@@ -3,10 +3,10 @@
 A node is there while a liveliness token of its id is (``Keys.alive``). The hub subscribes to that node's up
 key when the first token of the id shows and lets the subscription go ``UP_KEY_GRACE_S`` after the last one
 went. Why not a single subscriber on ``up/*``: zenoh calls the hub's Python back for every message on it, a
-made-up id's too, and a flood of 50,000 messages a second for made-up ids took 0.9 of a core in the hub on its
-own and starved the robots beside it on a two-core machine. A zenoh publisher sends only while it knows of a
-matching subscriber, so a message for an id that has no token now stops in the process that sends it and costs
-the hub nothing. The other side of the bargain: a node waits until its key is open before it says anything
+made-up id's too, and a flood of 50,000 messages a second for made-up ids took 0.75-0.9 of a core in the hub
+on its own and starved the robots beside it on a loaded two-core machine. A zenoh publisher sends only while it
+knows of a matching subscriber, so a message for an id that has no token now stops in the process that sends it
+and costs the hub nothing. The other side of the bargain: a node waits until its key is open before it says anything
 (``wait_for_up_key``).
 """
 
@@ -20,6 +20,7 @@ from typing import Any
 
 import zenoh
 
+from radio_hub.guard import Faults
 from radio_hub.link.keys import Keys, check_name
 
 UP_KEY_GRACE_S = 2.0
@@ -39,7 +40,7 @@ class UpKeys:
 
     ``on_up`` gets each sample on an open up key (zenoh's thread); ``on_alive`` gets ``("alive", key, kind)``
     for every token that comes or goes, after the key it opens is open; a key closes ``grace_s`` after the last
-    token of its id went. ``undeclare`` ends it all."""
+    token of its id went. What the thread cannot handle is counted in ``faults``. ``undeclare`` ends it all."""
 
     def __init__(
         self,
@@ -48,9 +49,12 @@ class UpKeys:
         on_up: Callable[[zenoh.Sample], None],
         on_alive: Callable[[tuple[Any, ...]], None],
         grace_s: float = UP_KEY_GRACE_S,
+        faults: Faults | None = None,
     ) -> None:
         self._session, self._keys, self._on_up, self._on_alive = session, keys, on_up, on_alive
         self._grace_s = grace_s
+        self.faults = faults or Faults("hub")
+        """Where an event the thread could not handle is counted (a token is network input): the thread goes on."""
         self._instances: dict[str, set[str]] = {}
         """The tokens (instances) present of each node id with an open key."""
         self._open: dict[str, Any] = {}
@@ -87,9 +91,12 @@ class UpKeys:
                 event = None
             if event is _STOP:
                 return
-            if event is not None:
-                self._on_token(*event)
-            self._close_due(time.monotonic())
+            try:
+                if event is not None:
+                    self._on_token(*event)
+                self._close_due(time.monotonic())
+            except Exception as err:  # an ended thread would leave every later node unheard
+                self.faults.record("up keys", err, repr(event))
 
     def _until_next_close(self) -> float | None:
         if not self._closing:

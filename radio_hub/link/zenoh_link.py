@@ -22,6 +22,7 @@ from typing import Any
 import msgpack
 import zenoh
 
+from radio_hub.guard import Faults
 from radio_hub.link import wire
 from radio_hub.link.keys import Keys
 from radio_hub.link.port import HubUnavailable
@@ -285,12 +286,14 @@ def declare_hub_keys(
     *,
     chaos: bool = True,
     oversized: Callable[[], None] | None = None,
+    faults: Faults | None = None,
 ) -> list[Any]:
     """What a hub shell serves on its router session, every callback a hand-off to ``put`` (its inbox): nodes'
     messages (``("up", key, bytes)``) on the up keys of the nodes that are there (``UpKeys``, first in the list),
     their liveliness (``("alive", key, kind)``), the queryables (``("stats", query)``...; the chaos queryable only
     with ``chaos``) and the hub's own liveliness token. A node's message longer than ``wire.MAX_UP_BYTES`` is
-    dropped before it is copied out of zenoh (``oversized`` counts it)."""
+    dropped before it is copied out of zenoh (``oversized`` counts it). ``faults``: the hub's count of unexpected
+    exceptions, here those of the thread that keeps the up keys."""
 
     def up(sample: zenoh.Sample) -> None:
         if len(sample.payload) > wire.MAX_UP_BYTES:
@@ -300,7 +303,7 @@ def declare_hub_keys(
         put(("up", str(sample.key_expr), sample.payload.to_bytes()))
 
     decls = [
-        UpKeys(session, keys, up, put),
+        UpKeys(session, keys, up, put, faults=faults),
         session.declare_queryable(keys.stats, lambda q: put(("stats", q))),
         session.declare_queryable(keys.air, lambda q: put(("air", q))),
         session.declare_queryable(keys.world_query, lambda q: put(("world", q))),

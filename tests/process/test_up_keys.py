@@ -6,6 +6,7 @@ the keys is zenoh's liveliness, which a mock could not show.
 
 from __future__ import annotations
 
+import io
 import queue
 import time
 from collections.abc import Iterator
@@ -15,6 +16,7 @@ import pytest
 import zenoh
 
 from petswarm.lab.processes import free_tcp_port
+from radio_hub.guard import Faults
 from radio_hub.link.keys import Keys
 from radio_hub.link.up_keys import UpKeys, wait_for_up_key
 from radio_hub.link.zenoh_link import session_config
@@ -82,3 +84,30 @@ def test_a_token_whose_id_is_no_node_name_opens_nothing(hub_and_node) -> None:
     assert heard.get(timeout=5)[0] == "alive"  # the hub still hears of it, and refuses it as it always did
     assert up_keys.refused == 1 and up_keys.open_count == 0
     token.undeclare()
+
+
+def test_an_event_the_thread_cannot_handle_is_counted_and_later_tokens_still_open_keys() -> None:
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    hub = zenoh.open(session_config("router", endpoint))
+    node = zenoh.open(session_config("client", endpoint))
+    keys = Keys("up-keys-faults")
+    told: list[Any] = []
+
+    def on_alive(item: tuple[Any, ...]) -> None:  # the hub's inbox refusing the first event it is handed
+        told.append(item)
+        if len(told) == 1:
+            raise RuntimeError("inbox refused")
+
+    up_keys = UpKeys(hub, keys, lambda s: None, on_alive, faults=Faults("test", io.StringIO()))
+    try:
+        first = node.liveliness().declare_token(keys.alive("robot-1", "i1"))
+        _wait(lambda: up_keys.faults.total == 1)
+        second = node.liveliness().declare_token(keys.alive("robot-2", "i1"))
+        assert wait_for_up_key(node.declare_publisher(keys.up("robot-2")))
+        assert up_keys.open_count == 2 and up_keys.faults.to_dict() == {"up keys:RuntimeError": 1}
+        first.undeclare()
+        second.undeclare()
+    finally:
+        up_keys.undeclare()
+        node.close()
+        hub.close()
