@@ -25,8 +25,11 @@ from radio_hub.link.keys import Keys, check_name
 UP_KEY_GRACE_S = 2.0
 """Wall seconds a node's up key stays open after its last token went: zenoh sends a declaration's end ahead of
 data still queued, so a node's last messages (its Detach) can arrive after its token's end."""
-UP_KEYS_MAX = 4096
-"""Node ids with an open up key at once; a token of a further id opens none (counted in ``refused``)."""
+UP_KEYS_MAX = 1024
+"""Node ids with an open up key at once; a token of a further id opens none (counted in ``refused``). Five times
+the largest swarm a bench runs (200 nodes), and no more: a router's declare_subscriber takes time in proportion
+to the subscriptions it has (0.27 ms of CPU at 512, 4.4 ms at 4,096) and about 19 kB each, so a rogue's tokens
+at a cap of 4,096 added 88-93 MB to the hub (tests/process/test_up_keys_bound.py)."""
 UP_MATCH_WAIT_S = 5.0
 """Wall seconds a node waits for the hub to open its up key before it speaks anyway (its attach then goes
 unanswered and the node reports no hub, as before)."""
