@@ -62,6 +62,8 @@ class UpKeys:
         self.refused = 0
         """Tokens that opened no key: a bad node id, or ``UP_KEYS_MAX`` open already."""
         self._events: queue.SimpleQueue[tuple[Any, Any]] = queue.SimpleQueue()
+        self._ended = False
+        """Set by ``undeclare``: the thread ends before its next event, however many wait (a rogue's tokens)."""
         self._thread = threading.Thread(target=self._run, name="hub-up-keys", daemon=True)
         self._thread.start()
         self._watch = session.liveliness().declare_subscriber(
@@ -76,6 +78,7 @@ class UpKeys:
     def undeclare(self) -> None:
         """Stop watching, end the thread, let every subscription go."""
         self._watch.undeclare()
+        self._ended = True
         self._events.put(_STOP)
         self._thread.join(timeout=5.0)
         for sub in list(self._open.values()):
@@ -88,7 +91,7 @@ class UpKeys:
                 event = self._events.get(timeout=self._until_next_close())
             except queue.Empty:
                 event = None
-            if event is _STOP:
+            if event is _STOP or self._ended:
                 return
             if event is not None:
                 self._on_token(*event)
