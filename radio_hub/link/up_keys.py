@@ -28,8 +28,9 @@ data still queued, so a node's last messages (its Detach) can arrive after its t
 UP_KEYS_MAX = 1024
 """Node ids with an open up key at once; a token of a further id opens none (counted in ``refused``). Five times
 the largest swarm a bench runs (200 nodes), and no more: a router's declare_subscriber takes time in proportion
-to the subscriptions it has (0.27 ms of CPU at 512, 4.4 ms at 4,096) and about 19 kB each, so a rogue's tokens
-at a cap of 4,096 added 88-93 MB to the hub (tests/process/test_up_keys_bound.py)."""
+to the subscriptions it has (0.27 ms of CPU at 512, 4.4 ms at 4,096), and each subscription with a Python
+callback has a Python thread of its own in zenoh-python (about 17 kB resident), so a rogue's tokens at a cap of
+4,096 added 88-93 MB and 4,096 threads to the hub (tests/process/test_up_keys_bound.py)."""
 UP_MATCH_WAIT_S = 5.0
 """Wall seconds a node waits for the hub to open its up key before it speaks anyway (its attach then goes
 unanswered and the node reports no hub, as before)."""
