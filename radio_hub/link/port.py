@@ -380,8 +380,12 @@ class RadioClient:
             link = await ZenohLink.connect(endpoint, world, session)
         client = cls(link, world, identity)
         client.request_timeout = timeout
+        # a zenoh link that gave up waiting for the hub to open its up key has put nothing anywhere yet: its
+        # key may open a moment later (a hub busy with a rogue's tokens), so the attach goes again until answered,
+        # as a re-attach does; not an exclusive one, whose second copy the hub would refuse as ours taking our id
+        resend = RESEND_S if getattr(link, "unheard", False) and not exclusive else None
         try:
-            attached = await client._request(0, client._attach_message(exclusive))
+            attached = await client._request(0, client._attach_message(exclusive), resend_s=resend)
         except (HubUnavailable, RadioError):
             await client.close(detach=False)
             raise

@@ -26,8 +26,12 @@ from radio_hub.link.keys import Keys, check_name
 UP_KEY_GRACE_S = 2.0
 """Wall seconds a node's up key stays open after its last token went: zenoh sends a declaration's end ahead of
 data still queued, so a node's last messages (its Detach) can arrive after its token's end."""
-UP_KEYS_MAX = 4096
-"""Node ids with an open up key at once; a token of a further id opens none (counted in ``refused``)."""
+UP_KEYS_MAX = 1024
+"""Node ids with an open up key at once; a token of a further id opens none (counted in ``refused``). Five times
+the largest swarm a bench runs (200 nodes), and no more: a router's declare_subscriber takes time in proportion
+to the subscriptions it has (0.27 ms of CPU at 512, 4.4 ms at 4,096), and each subscription with a Python
+callback has a Python thread of its own in zenoh-python (about 17 kB resident), so a rogue's tokens at a cap of
+4,096 added 88-93 MB and 4,096 threads to the hub (tests/process/test_up_keys_bound.py)."""
 UP_MATCH_WAIT_S = 5.0
 """Wall seconds a node waits for the hub to open its up key before it speaks anyway (its attach then goes
 unanswered and the node reports no hub, as before)."""
@@ -63,6 +67,8 @@ class UpKeys:
         self.refused = 0
         """Tokens that opened no key: a bad node id, or ``UP_KEYS_MAX`` open already."""
         self._events: queue.SimpleQueue[tuple[Any, Any]] = queue.SimpleQueue()
+        self._ended = False
+        """Set by ``undeclare``: the thread ends before its next event, however many wait (a rogue's tokens)."""
         self._thread = threading.Thread(target=self._run, name="hub-up-keys", daemon=True)
         self._thread.start()
         self._watch = session.liveliness().declare_subscriber(
@@ -77,6 +83,7 @@ class UpKeys:
     def undeclare(self) -> None:
         """Stop watching, end the thread, let every subscription go."""
         self._watch.undeclare()
+        self._ended = True
         self._events.put(_STOP)
         self._thread.join(timeout=5.0)
         for sub in list(self._open.values()):
@@ -89,7 +96,7 @@ class UpKeys:
                 event = self._events.get(timeout=self._until_next_close())
             except queue.Empty:
                 event = None
-            if event is _STOP:
+            if event is _STOP or self._ended:
                 return
             try:
                 if event is not None:

@@ -347,6 +347,9 @@ class ZenohLink:
         """Bytes ever taken from it (written by the node's loop only): waiting = in - out, without a lock."""
         self._drain_due = False
         """A drain of ``_waiting`` is scheduled on the node's loop and has not started yet."""
+        self.unheard = False
+        """The hub had not opened the node's up key when ``open`` stopped waiting for it: the first attach goes
+        again until answered (``RadioClient.connect``)."""
 
     @classmethod
     async def connect(cls, endpoint: str, world: str, session: zenoh.Session | None = None) -> ZenohLink:
@@ -405,7 +408,7 @@ class ZenohLink:
         ]
         self._pub = reliable_publisher(session, keys.up(node_id))
         self._decls.append(self._pub)
-        wait_for_up_key(self._pub)  # until the hub has seen our token, what we put goes nowhere
+        self.unheard = not wait_for_up_key(self._pub)  # until the hub has seen our token, what we put goes nowhere
 
     def put(self, data: bytes) -> None:
         """One message to the hub; HubUnavailable when the session is gone."""
