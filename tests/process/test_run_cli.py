@@ -122,7 +122,7 @@ def test_a_run_leaves_a_record_with_manifest_events_and_summary(tmp_path):
     manifest = json.loads((record / "manifest.json").read_text())
     assert manifest["seed"] == 9 and manifest["options"]["organize"] == 2 and "eclipse-zenoh" in manifest["versions"]
     summary = json.loads((record / "summary.json").read_text())
-    assert summary["ok"] and set(summary["exit_codes"].values()) == {0}
+    assert summary["ok"] and set(summary["exit_codes"].values()) == {0}, summary["exit_codes"]  # names who died
     events = read_events(record / "events" / "robot-2.jsonl")
     kinds = [e["kind"] for e in events]
     assert kinds[0] == "start" and kinds[-1] == "stop" and "state" in kinds
