@@ -38,7 +38,7 @@ import zenoh
 from radio_hub.link import wire
 from radio_hub.link.keys import Keys
 from radio_hub.link.port import HubUnavailable
-from radio_hub.link.up_keys import wait_for_up_key
+from radio_hub.link.up_keys import UP_KEYS_MAX, UP_MATCH_WAIT_S, wait_for_up_key
 from radio_hub.link.zenoh_link import (
     UP_BATCH_BYTES,
     HubDownlink,
@@ -70,6 +70,12 @@ block zenoh's receiving thread until the node takes them, so a flood costs it no
 LEAVING_GRACE_S = 1.0
 """Wall seconds a busy node whose liveliness ended has for its last messages (and Detach) to arrive: zenoh
 orders a node's messages but not its liveliness against them."""
+
+
+UP_KEY_WAIT_S = UP_MATCH_WAIT_S
+"""Wall seconds a lockstep node waits for the hub to open its up key, then gives up with HubUnavailable: what it
+put before would be lost, its first idle too, and the hub would wait for that idle until it took the node as
+gone (a wall-clock node sends its first attach again instead; a lockstep node's first words are a round's)."""
 
 
 class LockstepLink(ZenohLink):
@@ -116,7 +122,11 @@ class LockstepLink(ZenohLink):
         self._waker.start()
         self._pub = reliable_publisher(self.session, keys.up(node_id))
         self._decls.append(self._pub)
-        wait_for_up_key(self._pub)  # what the node puts before the hub opens its key is lost: its first idle too
+        if not wait_for_up_key(self._pub, UP_KEY_WAIT_S):
+            raise HubUnavailable(
+                f"the hub did not open {node_id}'s up key within {UP_KEY_WAIT_S:g} s (it opens one per id with a "
+                f"liveliness token, {UP_KEYS_MAX} at most)"
+            )
         loop.on_quiescent = self._release_held
         loop.attach_sync(self)
 

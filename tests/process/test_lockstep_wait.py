@@ -8,11 +8,14 @@ import os
 import signal
 import threading
 
+import pytest
 import zenoh
 
 from petswarm.clock import LockstepLoop
 from radio_hub.link import wire
 from radio_hub.link.keys import Keys
+from radio_hub.link.port import HubUnavailable
+from radio_hub.shell import lockstep
 from radio_hub.shell.lockstep import LockstepLink
 
 NODE = "robot-1"
@@ -32,6 +35,7 @@ def _run(main_of: object) -> tuple[LockstepLink, list[str]]:
     """Run ``main_of(link, loop, seen)`` on a lockstep loop with a link on a lone session; what it saw."""
     session = _lone_session()
     link = LockstepLink(session, Keys("wait"), owns_session=True)
+    session.declare_subscriber(link.keys.up(NODE), lambda _: None)  # the hub's ear: a node speaks once it is heard
     seen: list[str] = []
     loop = LockstepLoop()
     try:
@@ -124,3 +128,20 @@ def test_an_empty_message_from_anyone_else_is_held_as_a_message_not_taken_as_a_w
 
     _, seen = _run(main)
     assert seen == ["empty at 0.7", "down Configure at 0.7", "down Grant at 0.7"]
+
+
+def test_a_node_the_hub_never_hears_says_so_instead_of_waiting_for_grants(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Its first idle would go nowhere and the hub would wait for it until it took the node as gone."""
+    monkeypatch.setattr(lockstep, "UP_KEY_WAIT_S", 0.2)
+    link = LockstepLink(_lone_session(), Keys("unheard"), owns_session=True)  # nobody subscribes to its up key
+    loop = LockstepLoop()
+
+    async def main() -> None:
+        with pytest.raises(HubUnavailable, match=r"did not open robot-1's up key within 0\.2 s"):
+            link.open(NODE, "i1", lambda _: None, lambda _: None)
+
+    try:
+        loop.run_until_complete(main())
+    finally:
+        loop.close()
+        link.session.close()
