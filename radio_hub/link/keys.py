@@ -12,12 +12,12 @@ DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 DEFAULT_WORLD = "default"
 WORLD_THREAD = "hub-world"
 """The name of the hub's world thread, as the OS sees it too (``/proc/<pid>/task/*/comm``): a bench reads its CPU."""
-_WORLD_RE = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
+_WORLD_RE = re.compile(r"[A-Za-z0-9_.-]{1,64}")
 
 
 def check_name(kind: str, name: str) -> str:
     """World and node names become key chunks: no '/', '*', '$' or spaces."""
-    if not _WORLD_RE.match(name):
+    if not _WORLD_RE.fullmatch(name):  # not match with "$": that lets a trailing newline through
         raise ValueError(f"{kind} {name!r} must be 1-64 letters, digits, '_', '.' or '-'")
     return name
 
