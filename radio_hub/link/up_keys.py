@@ -33,10 +33,11 @@ to the subscriptions it has (0.27 ms of CPU at 512, 4.4 ms at 4,096), and each s
 callback has a Python thread of its own in zenoh-python (about 17 kB resident), so a rogue's tokens at a cap of
 4,096 added 88-93 MB and 4,096 threads to the hub (tests/process/test_up_keys_bound.py)."""
 UP_MATCH_WAIT_S = 5.0
-"""Wall seconds a node waits for the hub to open its up key before it speaks anyway (its attach then goes
-unanswered and the node reports no hub, as before)."""
+"""Wall seconds a node waits for the hub to open its up key. Then a wall-clock node speaks anyway and sends its
+first attach again until answered (``RadioClient.connect``); a lockstep node gives up (``LockstepLink.open``)."""
 
-_STOP = ("stop", None)
+_WAKE = ("wake", None)
+"""Put by ``undeclare`` so that the thread, blocked on an empty queue, sees ``_ended``."""
 
 
 class UpKeys:
@@ -84,7 +85,7 @@ class UpKeys:
         """Stop watching, end the thread, let every subscription go."""
         self._watch.undeclare()
         self._ended = True
-        self._events.put(_STOP)
+        self._events.put(_WAKE)
         self._thread.join(timeout=5.0)
         for sub in list(self._open.values()):
             sub.undeclare()
@@ -96,7 +97,7 @@ class UpKeys:
                 event = self._events.get(timeout=self._until_next_close())
             except queue.Empty:
                 event = None
-            if event is _STOP or self._ended:
+            if self._ended:
                 return
             try:
                 if event is not None:

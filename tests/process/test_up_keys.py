@@ -10,6 +10,7 @@ import io
 import queue
 import time
 from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import pytest
@@ -24,20 +25,29 @@ from radio_hub.link.zenoh_link import session_config
 GRACE_S = 0.3
 
 
-@pytest.fixture
-def hub_and_node() -> Iterator[tuple[UpKeys, zenoh.Session, queue.SimpleQueue[Any], Keys]]:
+@contextmanager
+def _hub_and_node_sessions() -> Iterator[tuple[zenoh.Session, zenoh.Session]]:
+    """A router session (the hub's) and a client session (a node's) on a free loopback port."""
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     hub = zenoh.open(session_config("router", endpoint))
     node = zenoh.open(session_config("client", endpoint))
-    keys = Keys("up-keys")
-    heard: queue.SimpleQueue[Any] = queue.SimpleQueue()
-    up_keys = UpKeys(hub, keys, lambda s: heard.put(s.payload.to_bytes()), heard.put, grace_s=GRACE_S)
     try:
-        yield up_keys, node, heard, keys
+        yield hub, node
     finally:
-        up_keys.undeclare()
         node.close()
         hub.close()
+
+
+@pytest.fixture
+def hub_and_node() -> Iterator[tuple[UpKeys, zenoh.Session, queue.SimpleQueue[Any], Keys]]:
+    keys = Keys("up-keys")
+    heard: queue.SimpleQueue[Any] = queue.SimpleQueue()
+    with _hub_and_node_sessions() as (hub, node):
+        up_keys = UpKeys(hub, keys, lambda s: heard.put(s.payload.to_bytes()), heard.put, grace_s=GRACE_S)
+        try:
+            yield up_keys, node, heard, keys
+        finally:
+            up_keys.undeclare()
 
 
 def _wait(condition: Any, within_s: float = 5.0) -> None:
@@ -87,9 +97,6 @@ def test_a_token_whose_id_is_no_node_name_opens_nothing(hub_and_node) -> None:
 
 
 def test_an_event_the_thread_cannot_handle_is_counted_and_later_tokens_still_open_keys() -> None:
-    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-    hub = zenoh.open(session_config("router", endpoint))
-    node = zenoh.open(session_config("client", endpoint))
     keys = Keys("up-keys-faults")
     told: list[Any] = []
 
@@ -98,16 +105,48 @@ def test_an_event_the_thread_cannot_handle_is_counted_and_later_tokens_still_ope
         if len(told) == 1:
             raise RuntimeError("inbox refused")
 
-    up_keys = UpKeys(hub, keys, lambda s: None, on_alive, faults=Faults("test", io.StringIO()))
-    try:
-        first = node.liveliness().declare_token(keys.alive("robot-1", "i1"))
-        _wait(lambda: up_keys.faults.total == 1)
-        second = node.liveliness().declare_token(keys.alive("robot-2", "i1"))
-        assert wait_for_up_key(node.declare_publisher(keys.up("robot-2")))
-        assert up_keys.open_count == 2 and up_keys.faults.to_dict() == {"up keys:RuntimeError": 1}
-        first.undeclare()
-        second.undeclare()
-    finally:
-        up_keys.undeclare()
-        node.close()
-        hub.close()
+    with _hub_and_node_sessions() as (hub, node):
+        up_keys = UpKeys(hub, keys, lambda s: None, on_alive, faults=Faults("test", io.StringIO()))
+        try:
+            first = node.liveliness().declare_token(keys.alive("robot-1", "i1"))
+            _wait(lambda: up_keys.faults.total == 1)
+            second = node.liveliness().declare_token(keys.alive("robot-2", "i1"))
+            assert wait_for_up_key(node.declare_publisher(keys.up("robot-2")))
+            assert up_keys.open_count == 2 and up_keys.faults.to_dict() == {"up keys:RuntimeError": 1}
+            first.undeclare()
+            second.undeclare()
+        finally:
+            up_keys.undeclare()
+
+
+CLOSE_TOKENS = 100
+
+
+def test_undeclare_ends_the_thread_without_handling_the_tokens_still_waiting(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A hub that got SIGTERM while it opened keys for a rogue's 5,000 tokens (cap 4,096) was ended by its 4 s
+    deadline (exit 3): ``UpKeys.undeclare`` queued its stop behind every token not yet handled and waited 5 s
+    for the thread. Here each key takes 50 ms to open, as thousands of subscriptions made it take, and 100
+    tokens are waiting."""
+    token_came = UpKeys._token_came
+
+    def slow(self: UpKeys, node_id: str, instance: str) -> None:
+        time.sleep(0.05)
+        token_came(self, node_id, instance)
+
+    monkeypatch.setattr(UpKeys, "_token_came", slow)
+    keys = Keys("up-keys-close")
+    seen: list[object] = []
+    with _hub_and_node_sessions() as (hub, node):
+        keeper = UpKeys(hub, keys, lambda s: None, seen.append)
+        tokens = [node.liveliness().declare_token(keys.alive(f"fake-{i}", "x")) for i in range(CLOSE_TOKENS)]
+        try:
+            _wait(lambda: bool(seen))
+            started = time.monotonic()
+            keeper.undeclare()
+            took = time.monotonic() - started
+            assert took < 1.0, took
+            assert not keeper._thread.is_alive() and keeper.open_count == 0
+            assert len(seen) < CLOSE_TOKENS  # what was still waiting was let go, not handled
+        finally:
+            for token in tokens:
+                token.undeclare()

@@ -14,33 +14,25 @@ from typing import Any
 
 from radio_hub.link.up_keys import UP_KEYS_MAX
 
-from .procfs import cpu_seconds
+from .procfs import cpu_seconds, rss_mb
 
 TOKENS_RSS_BOUND_MB = 48
 """What ``UP_KEYS_MAX`` open keys and a few more refused tokens may add to the hub's resident memory (32 MB at
 a cap of 1,024; 93 MB at 4,096)."""
 
 
-def _rss_mb(pid: int) -> float:
-    with open(f"/proc/{pid}/status") as status:
-        for line in status:
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 1024
-    raise AssertionError(f"no VmRSS for {pid}")
-
-
 def test_a_rogue_holding_more_tokens_than_the_cap_costs_the_hub_a_bounded_amount(make_air: Any) -> None:
     air = make_air()
     hub_pid = air.sup.children["hub"].pid
     tokens = UP_KEYS_MAX + 64
-    rss0, cpu0 = _rss_mb(hub_pid), cpu_seconds(hub_pid)
+    rss0, cpu0 = rss_mb(hub_pid), cpu_seconds(hub_pid)
     rogue = [air.session.liveliness().declare_token(air.keys.alive(f"fake-{i}", "x")) for i in range(tokens)]
     try:
         deadline = time.monotonic() + 90
         while (seen := air.stats()["liveliness"])["up_keys_open"] + seen["up_keys_refused"] < tokens:
             assert time.monotonic() < deadline, seen
             time.sleep(0.2)
-        grown, cpu = _rss_mb(hub_pid) - rss0, cpu_seconds(hub_pid) - cpu0
+        grown, cpu = rss_mb(hub_pid) - rss0, cpu_seconds(hub_pid) - cpu0
         print(f"\n{tokens} rogue tokens: hub RSS +{grown:.1f} MB, {cpu:.2f} s of its CPU")
         assert seen["up_keys_open"] == UP_KEYS_MAX and seen["up_keys_refused"] == 64, seen
         assert grown < TOKENS_RSS_BOUND_MB, grown
