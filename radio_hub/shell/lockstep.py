@@ -64,9 +64,12 @@ START_WITHIN_PER_NODE_S = 1.0
 after START_WITHIN_BASE_S + START_WITHIN_PER_NODE_S x expected nodes of wall time, without them (recorded)."""
 LOOK_EVERY_S = 0.05
 """How often (wall seconds) the hub looks for silent or leaving nodes: a round takes about a millisecond."""
-DOWN_CHANNEL_CAPACITY = 4096
-"""Transport messages from the hub a lockstep node's channel holds (the hub sends one a round, a batch): more
-block zenoh's receiving thread until the node takes them, so a flood costs it no unbounded memory."""
+DOWN_CHANNEL_CAPACITY = 16
+"""Transport messages from the hub a lockstep node's channel holds. A round sends a node one (its batch, split
+past ``wire.BATCH_MAX_PARTS`` messages or 256 kB) and waits for its idle, so 16 hold 4,096 messages of one round;
+more block zenoh's receiving thread until the node takes them. A flood thus costs a node at most 16 x
+``wire.MAX_MESSAGE_BYTES`` here whatever its load: at 4,096 a starved node's backlog of 100 kB messages had
+grown its memory 20 MB more than an idle one's (62 against 42 MB, tests/process/test_lockstep.py)."""
 LEAVING_GRACE_S = 1.0
 """Wall seconds a busy node whose liveliness ended has for its last messages (and Detach) to arrive: zenoh
 orders a node's messages but not its liveliness against them."""

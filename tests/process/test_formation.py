@@ -12,6 +12,8 @@ import time
 
 import pytest
 
+from petswarm.managers.formation_core import FormationConfig
+
 from .conftest import LOSSLESS
 
 pytestmark = pytest.mark.process
@@ -36,17 +38,30 @@ def _states(air, rids) -> dict[int, dict]:
 ROSTER_WAIT_S = 3.0
 """A slave learns the swarm's members from the master's roster, an unacknowledged broadcast every 0.25 s that a
 collision can take: twelve rosters' time for one to arrive, instead of a fixed wait that raced the first."""
+SETTLE_WAIT_S = FormationConfig().candidate_timeout_s + 1.0
+"""A robot the master did not choose returns to waiting on its release, a message its radio acknowledges before
+its process has read it, or, were the release lost, on its candidate timeout: the test waits past that."""
 
 
-def _states_once_rostered(air, rids, slaves) -> dict[int, dict]:
-    """``_states`` once every one of ``slaves`` has heard a roster (knows its swarm's members)."""
-    deadline = time.monotonic() + ROSTER_WAIT_S
+def _states_once(air, rids, settled, wait_s: float) -> dict[int, dict]:
+    """``_states`` once ``settled(states)`` holds, or as they are after ``wait_s`` (for the test to say what is
+    wrong): a robot's state follows the messages its radio acknowledged, not the instant the master returns."""
+    deadline = time.monotonic() + wait_s
     while True:
         states = _states(air, rids)
-        heard = all((states[rid].get("swarm") or {}).get("members") for rid in slaves)
-        if heard or time.monotonic() > deadline:
+        if settled(states) or time.monotonic() > deadline:
             return states
         time.sleep(0.05)
+
+
+def _rostered(slaves):
+    """Every one of ``slaves`` has heard a roster (knows its swarm's members)."""
+    return lambda states: all((states[rid].get("swarm") or {}).get("members") for rid in slaves)
+
+
+def _waiting(others):
+    """Every one of ``others`` is back to waiting."""
+    return lambda states: all(states[rid]["state"] == "waiting" for rid in others)
 
 
 def test_the_closest_join_the_others_wait_and_disperse_restores_everyone(make_air):
@@ -59,7 +74,8 @@ def test_the_closest_join_the_others_wait_and_disperse_restores_everyone(make_ai
     assert organized["available"] == [2, 3, 4, 5, 6]
     pan = organized["pan_id"]
     assert pan != WAITING_PAN
-    states = _states_once_rostered(air, range(1, 7), [3, 5, 6])
+    _states_once(air, range(1, 7), _rostered([3, 5, 6]), ROSTER_WAIT_S)
+    states = _states_once(air, range(1, 7), _waiting([2, 4]), SETTLE_WAIT_S)
     assert states[1]["state"] == "master-driving" and states[1]["radio"]["pan_id"] == pan
     for number, rid in enumerate([3, 5, 6], start=1):
         s = states[rid]
@@ -72,8 +88,7 @@ def test_the_closest_join_the_others_wait_and_disperse_restores_everyone(make_ai
 
     dispersed = air.cmd(1, "disperse", timeout=30)
     assert dispersed["unconfirmed"] == [] and dispersed["restored"] == "following"
-    time.sleep(0.2)
-    states = _states(air, range(1, 7))
+    states = _states_once(air, range(1, 7), _waiting(range(2, 7)), SETTLE_WAIT_S)
     assert states[1]["state"] == "following" and states[1]["radio"]["pan_id"] == WAITING_PAN
     for rid in range(2, 7):
         assert states[rid]["state"] == "waiting" and states[rid]["swarm"] is None

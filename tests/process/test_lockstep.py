@@ -202,6 +202,7 @@ def test_a_flood_on_a_lockstep_robots_down_key_while_the_hub_withholds_its_grant
         down.undeclare()
         time.sleep(1.0)
         grown = peak_rss_mb(robot_1) - before
+        print(f"robot 1 peak RSS grew {grown:.1f} MB under the flood")
         assert query_hub(session, keys.stats)["lockstep"]["model_time_s"] == stopped_at  # no grant meanwhile
         os.kill(robot_2, signal.SIGCONT)
         _model_time_past(session, keys, stopped_at + 1.0)
