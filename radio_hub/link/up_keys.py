@@ -32,6 +32,10 @@ the largest swarm a bench runs (200 nodes), and no more: a router's declare_subs
 to the subscriptions it has (0.27 ms of CPU at 512, 4.4 ms at 4,096), and each subscription with a Python
 callback has a Python thread of its own in zenoh-python (about 17 kB resident), so a rogue's tokens at a cap of
 4,096 added 88-93 MB and 4,096 threads to the hub (tests/process/test_up_keys_bound.py)."""
+UP_KEYS_WAITING_MAX = UP_KEYS_MAX
+"""Node ids refused for want of room whose tokens the hub remembers, oldest first, to open their keys as room
+frees (a node whose key the cap withheld while a rogue held it is heard once the rogue goes); ids past this are
+refused for good, as each costs the hub a set of its tokens."""
 UP_MATCH_WAIT_S = 5.0
 """Wall seconds a node waits for the hub to open its up key. Then a wall-clock node speaks anyway and sends its
 first attach again until answered (``RadioClient.connect``); a lockstep node gives up (``LockstepLink.open``)."""
@@ -65,8 +69,11 @@ class UpKeys:
         self._open: dict[str, Any] = {}
         self._closing: dict[str, float] = {}
         """Node ids whose last token went, and when (monotonic seconds) their key closes."""
+        self._waiting: dict[str, set[str]] = {}
+        """The tokens (instances) present of node ids refused for want of room, oldest id first: each gets its
+        key when one closes (``_close_due``), as long as a token of it is there."""
         self.refused = 0
-        """Tokens that opened no key: a bad node id, or ``UP_KEYS_MAX`` open already."""
+        """Tokens that opened no key when they came: a bad node id, or ``UP_KEYS_MAX`` open already."""
         self._events: queue.SimpleQueue[tuple[Any, Any]] = queue.SimpleQueue()
         self._ended = False
         """Set by ``undeclare``: the thread ends before its next event, however many wait (a rogue's tokens)."""
@@ -80,6 +87,11 @@ class UpKeys:
     def open_count(self) -> int:
         """Node ids whose up key is open now."""
         return len(self._open)
+
+    @property
+    def waiting_count(self) -> int:
+        """Node ids with a token that wait for room to open their key."""
+        return len(self._waiting)
 
     def undeclare(self) -> None:
         """Stop watching, end the thread, let every subscription go."""
@@ -116,27 +128,42 @@ class UpKeys:
         if kind == zenoh.SampleKind.PUT:
             self._token_came(node_id, instance)
         else:
-            instances = self._instances.get(node_id)
-            if instances is not None:
-                instances.discard(instance)
-                if not instances:
-                    self._closing[node_id] = time.monotonic() + self._grace_s
+            self._token_went(node_id, instance)
         self._on_alive(("alive", key, kind))
 
     def _token_came(self, node_id: str, instance: str) -> None:
-        if node_id not in self._open:
-            try:
-                check_name("node", node_id)  # a wildcard in a token's key must not open every node's key
-            except ValueError:
-                self.refused += 1
-                return
-            if len(self._open) >= UP_KEYS_MAX:
-                self.refused += 1
-                return
-            self._open[node_id] = self._session.declare_subscriber(self._keys.up(node_id), self._on_up)
-            self._instances[node_id] = set()
-        self._instances[node_id].add(instance)
-        self._closing.pop(node_id, None)
+        if node_id in self._open:
+            self._instances[node_id].add(instance)
+            self._closing.pop(node_id, None)
+            return
+        try:
+            check_name("node", node_id)  # a wildcard in a token's key must not open every node's key
+        except ValueError:
+            self.refused += 1
+            return
+        if len(self._open) < UP_KEYS_MAX:
+            self._open_key(node_id, {instance})
+            return
+        self.refused += 1
+        if node_id in self._waiting or len(self._waiting) < UP_KEYS_WAITING_MAX:
+            self._waiting.setdefault(node_id, set()).add(instance)
+
+    def _token_went(self, node_id: str, instance: str) -> None:
+        waiting = self._waiting.get(node_id)
+        if waiting is not None:
+            waiting.discard(instance)
+            if not waiting:
+                del self._waiting[node_id]
+            return
+        instances = self._instances.get(node_id)
+        if instances is not None:
+            instances.discard(instance)
+            if not instances:
+                self._closing[node_id] = time.monotonic() + self._grace_s
+
+    def _open_key(self, node_id: str, instances: set[str]) -> None:
+        self._open[node_id] = self._session.declare_subscriber(self._keys.up(node_id), self._on_up)
+        self._instances[node_id] = instances
 
     def _close_due(self, now: float) -> None:
         for node_id in [n for n, at in self._closing.items() if at <= now]:
@@ -145,6 +172,9 @@ class UpKeys:
             sub = self._open.pop(node_id, None)
             if sub is not None:
                 sub.undeclare()
+        while self._waiting and len(self._open) < UP_KEYS_MAX:  # room freed: the longest waiting id first
+            node_id = next(iter(self._waiting))
+            self._open_key(node_id, self._waiting.pop(node_id))
 
 
 def wait_for_up_key(publisher: zenoh.Publisher, within_s: float = UP_MATCH_WAIT_S) -> bool:

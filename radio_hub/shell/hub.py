@@ -508,6 +508,7 @@ class RadioHub:
             "timeout_s": ATTACH_TOKEN_TIMEOUT_S,
             "up_keys_open": self._up_keys.open_count if self._up_keys is not None else 0,
             "up_keys_refused": self._up_keys.refused if self._up_keys is not None else 0,
+            "up_keys_waiting": self._up_keys.waiting_count if self._up_keys is not None else 0,
         }
         stats["hub"]["stranger_answers_dropped"] = self._downlink.stranger_answers_dropped
         stats["hub"]["down_messages"] = self._downlink.messages

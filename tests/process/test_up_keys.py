@@ -18,6 +18,7 @@ import zenoh
 
 from petswarm.lab.processes import free_tcp_port
 from radio_hub.guard import Faults
+from radio_hub.link import up_keys as up_keys_module
 from radio_hub.link.keys import Keys
 from radio_hub.link.up_keys import UpKeys, wait_for_up_key
 from radio_hub.link.zenoh_link import session_config
@@ -94,6 +95,31 @@ def test_a_token_whose_id_is_no_node_name_opens_nothing(hub_and_node) -> None:
     assert heard.get(timeout=5)[0] == "alive"  # the hub still hears of it, and refuses it as it always did
     assert up_keys.refused == 1 and up_keys.open_count == 0
     token.undeclare()
+
+
+def test_an_id_refused_for_want_of_room_gets_its_key_when_one_closes(hub_and_node, monkeypatch) -> None:
+    """With room for two keys, a third id waits while its token is there and is heard once a key closes; an id
+    whose token went while it waited gets none."""
+    monkeypatch.setattr(up_keys_module, "UP_KEYS_MAX", 2)
+    up_keys, node, heard, keys = hub_and_node
+    holders = [node.liveliness().declare_token(keys.alive(f"rogue-{i}", "x")) for i in (1, 2)]
+    _wait(lambda: up_keys.open_count == 2)
+    gave_up = node.liveliness().declare_token(keys.alive("robot-9", "i1"))
+    token = node.liveliness().declare_token(keys.alive("robot-1", "i1"))
+    pub = node.declare_publisher(keys.up("robot-1"))
+    _wait(lambda: up_keys.waiting_count == 2)
+    gave_up.undeclare()
+    _wait(lambda: up_keys.waiting_count == 1)
+    assert not wait_for_up_key(pub, within_s=0.3) and up_keys.refused == 2
+    holders[0].undeclare()  # room, a grace after the rogue's token went: robot-1 (waiting), not robot-9 (gone)
+    assert wait_for_up_key(pub)
+    assert up_keys.open_count == 2 and up_keys.waiting_count == 0
+    while not heard.empty():
+        heard.get_nowait()
+    pub.put(b"heard at last")
+    assert heard.get(timeout=5) == b"heard at last"
+    for t in (holders[1], token):
+        t.undeclare()
 
 
 def test_an_event_the_thread_cannot_handle_is_counted_and_later_tokens_still_open_keys() -> None:

@@ -35,6 +35,7 @@ def test_a_rogue_holding_more_tokens_than_the_cap_costs_the_hub_a_bounded_amount
         grown, cpu = rss_mb(hub_pid) - rss0, cpu_seconds(hub_pid) - cpu0
         print(f"\n{tokens} rogue tokens: hub RSS +{grown:.1f} MB, {cpu:.2f} s of its CPU")
         assert seen["up_keys_open"] == UP_KEYS_MAX and seen["up_keys_refused"] == 64, seen
+        assert seen["up_keys_waiting"] == 64, seen  # remembered, to be opened as keys close
         assert grown < TOKENS_RSS_BOUND_MB, grown
     finally:
         for token in rogue:
