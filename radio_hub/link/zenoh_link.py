@@ -287,9 +287,10 @@ def declare_hub_keys(
     chaos: bool = True,
     oversized: Callable[[], None] | None = None,
     faults: Faults | None = None,
-) -> list[Any]:
+) -> tuple[UpKeys, list[Any]]:
     """What a hub shell serves on its router session, every callback a hand-off to ``put`` (its inbox): nodes'
-    messages (``("up", key, bytes)``) on the up keys of the nodes that are there (``UpKeys``, first in the list),
+    messages (``("up", key, bytes)``) on the up keys of the nodes that are there (the ``UpKeys``, returned on its
+    own for its counters and in the list of everything to undeclare),
     their liveliness (``("alive", key, kind)``), the queryables (``("stats", query)``...; the chaos queryable only
     with ``chaos``) and the hub's own liveliness token. A node's message longer than ``wire.MAX_UP_BYTES`` is
     dropped before it is copied out of zenoh (``oversized`` counts it). ``faults``: the hub's count of unexpected
@@ -302,8 +303,9 @@ def declare_hub_keys(
             return
         put(("up", str(sample.key_expr), sample.payload.to_bytes()))
 
+    up_keys = UpKeys(session, keys, up, put, faults=faults)
     decls = [
-        UpKeys(session, keys, up, put, faults=faults),
+        up_keys,
         session.declare_queryable(keys.stats, lambda q: put(("stats", q))),
         session.declare_queryable(keys.air, lambda q: put(("air", q))),
         session.declare_queryable(keys.world_query, lambda q: put(("world", q))),
@@ -311,7 +313,7 @@ def declare_hub_keys(
     ]
     if chaos:
         decls.append(session.declare_queryable(keys.chaos, lambda q: put(("chaos", q))))
-    return decls
+    return up_keys, decls
 
 
 def reply(query: zenoh.Query, body: dict[str, Any]) -> None:

@@ -179,10 +179,9 @@ class RadioHub:
         """Open the router session and declare the hub's keys. Raises zenoh.ZError if it cannot listen."""
         session = zenoh.open(session_config("router", self.endpoint))
         self._session = session
-        self._decls = declare_hub_keys(
+        self._up_keys, self._decls = declare_hub_keys(
             session, self.keys, self._admit, oversized=self._oversized, faults=self.env.faults
         )
-        self._up_keys = self._decls[0]
         self._downlink.world_pub = session.declare_publisher(self.keys.world_state)
         self._decls.append(self._downlink.world_pub)
         self._downlink.session = session

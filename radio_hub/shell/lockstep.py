@@ -334,7 +334,7 @@ class LockstepHub:
         session = zenoh.open(session_config("router", self.endpoint))
         self._session = session
         self._opened_at = time.monotonic()
-        self._decls = declare_hub_keys(session, self.keys, self._inbox.put, chaos=False, faults=self.env.faults)
+        _, self._decls = declare_hub_keys(session, self.keys, self._inbox.put, chaos=False, faults=self.env.faults)
         self._downlink.world_pub = session.declare_publisher(self.keys.world_state)
         self._decls.append(self._downlink.world_pub)
         self._downlink.session = session
