@@ -16,7 +16,7 @@ from typing import Any
 
 import pytest
 
-from petswarm.managers.formation import FormationConfig
+from petswarm.managers.formation import WATCH_PERIOD_S, FormationConfig
 from petswarm.robot import DEFAULT_PAN
 
 from .harness import LOSSLESS, ModelWorld, run_model_time
@@ -116,6 +116,33 @@ def test_table_2_the_closest_join_the_others_go_back_to_waiting_and_disperse_res
         # Table 2's other row: eight asked for, five available: all five join
         everyone = await w.command(1, "organize", count=8)
         assert sorted(everyone["members"]) == [2, 3, 4, 5, 6] and everyone["pan_id"] != pan
+
+    run_model_time(body, config=LOSSLESS)
+
+
+def test_the_master_dies_and_every_member_returns_to_waiting_on_its_master_silence_timeout() -> None:
+    """The bound tests/process/test_chaos.py once asserted on the wall clock (within the 2 s timeout plus 3 s of
+    margin for the machine), here without the margin: a member leaves once it has heard no roster for
+    ``master_silence_s``, at its watch's first look past that, and the last roster came at most a roster interval
+    before the kill."""
+
+    async def body(w: ModelWorld) -> None:
+        await w.robot(1, (0.0, 0.0), user=1)
+        await _ring(w, {2: 1.0, 3: 1.5, 4: 2.0})
+        organized = await w.command(1, "organize", count=3)
+        assert sorted(organized["members"]) == [2, 3, 4]
+        await w.advance(1.0)
+        killed = w.now
+        await w.kill(1)
+        await w.advance(MASTER_SILENCE_S + 0.5)
+        interval = FormationConfig().roster_interval_s
+        for rid in (2, 3, 4):
+            assert _states(w, [rid])[rid] == ("waiting", DEFAULT_PAN)
+            assert w.status(rid)["ir"]["ir_mode"] == "idle"  # nobody left shining
+            left = w.events(rid, "state")[-1]
+            assert (left["to"], left["reason"]) == ("waiting", "master silent"), left
+            # its watch looks at the deadline every WATCH_PERIOD_S: it leaves at the first look past it
+            assert killed + MASTER_SILENCE_S - interval <= left["mono"] <= killed + MASTER_SILENCE_S + WATCH_PERIOD_S
 
     run_model_time(body, config=LOSSLESS)
 
