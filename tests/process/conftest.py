@@ -17,6 +17,9 @@ from petswarm.lab.processes import Supervisor, free_tcp_port
 from radio_hub.interface import HubUnavailable, Keys, open_session, query_hub
 
 LOSSLESS = {"range": {"success_ratio_rx": 1.0}, "path_loss": {"shadowing_sigma_db": 0.0}}
+PING_UNTIL_S = 15.0
+"""How long ``Air.heard`` pings for the replies it expects: the 20 s a robot has to attach is the same kind of
+wait, for a process the machine's load may starve."""
 
 
 class Air:
@@ -84,6 +87,18 @@ class Air:
     def cmd(self, rid: int, name: str, timeout: float = 5.0, **args: Any) -> dict[str, Any]:
         """A control command to one robot."""
         return control.command(self.session, self.keys, rid, name, timeout, **args)
+
+    def heard(self, rid: int, expected: set[int], timeout: float = PING_UNTIL_S, **ping: Any) -> set[int]:
+        """Who answered robot ``rid``'s pings (``ping``: the command's ``dst``, ``wait``), pinging again until all
+        of ``expected`` have: a reply reaches the pinger within the ping's wait only when both processes get
+        the CPU in time, so a missing reply on a loaded machine says nothing; every sender that ever answered is
+        returned, so one that should not have still shows."""
+        senders: set[int] = set()
+        deadline = time.monotonic() + timeout
+        while True:
+            senders |= {r["from"] for r in self.cmd(rid, "ping", **ping)["replies"]}
+            if expected <= senders or time.monotonic() > deadline:
+                return senders
 
     def stats(self) -> dict[str, Any]:
         """The hub's counters."""
