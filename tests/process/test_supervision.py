@@ -43,6 +43,15 @@ def _state(pid: int) -> str | None:
         return None
 
 
+STOP_WAIT_S = 10.0
+"""A SIGSTOP is sent when ``chaos pause`` returns, but the process stops (state T) only once it is scheduled to
+take the signal: on a loaded machine, later than the next read of /proc."""
+
+
+def _wait_stopped(pid: int) -> None:
+    wait_for(f"process {pid} stopped (T)", lambda: _state(pid) == "T", STOP_WAIT_S, every=0.05)
+
+
 def _wait_registered(runtime: Path, name: str, proc: subprocess.Popen[bytes]) -> dict[str, Any]:
     entry = runtime / "petswarm" / name
     deadline = time.monotonic() + 20
@@ -66,7 +75,8 @@ def test_chaos_signals_only_a_registered_robot_of_that_world(tmp_path: Path) -> 
     robot = subprocess.Popen(
         [sys.executable, "-m", "cli", "robot", "--id", "1", "--world", "alpha", "--hub", hub], **quiet
     )
-    bystander = subprocess.Popen(["sleep", "30"])
+    # alive until the test kills it: a 30 s sleep ended by itself on a loaded machine, and the test read its exit
+    bystander = subprocess.Popen(["sleep", "infinity"])
     try:
         registered = _wait_registered(runtime, "alpha.robot-1.json", robot)
         assert registered["pid"] == robot.pid
@@ -86,7 +96,7 @@ def test_chaos_signals_only_a_registered_robot_of_that_world(tmp_path: Path) -> 
         assert bystander.poll() is None and _state(robot.pid) in ("R", "S")
 
         assert _petswarm(env, "chaos", "pause", "--robot", "1", "--world", "alpha").returncode == 0
-        assert _state(robot.pid) == "T"
+        _wait_stopped(robot.pid)
         assert _petswarm(env, "chaos", "resume", "--robot", "1", "--world", "alpha").returncode == 0
         assert _state(robot.pid) in ("R", "S")
         assert _petswarm(env, "chaos", "kill", "--robot", "1", "--world", "alpha").returncode == 0
@@ -215,7 +225,7 @@ def test_a_run_killed_outright_leaves_a_summary_and_no_children(tmp_path: Path) 
         paused = _petswarm(env, "chaos", "pause", "--robot", "2", "--world", "orphans")
         assert paused.returncode == 0, paused.stderr
         children = summary["processes"]
-        assert _state(children["robot-2"]) == "T"
+        _wait_stopped(children["robot-2"])
         run.kill()  # SIGKILL: run's own code gets no say
         run.wait()
     finally:
