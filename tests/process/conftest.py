@@ -72,11 +72,19 @@ class Air:
         deadline = time.monotonic() + 20
         while time.monotonic() < deadline:
             assert not self.sup.dead(), {n: self.sup.log_tail(n) for n in self.sup.dead()}
-            node = self.stats()["nodes"].get(f"robot-{rid}")
-            if node and node["attached"] and self._answers(rid):
+            if self._attached(rid) and self._answers(rid):
                 return
             time.sleep(0.1)
         raise AssertionError(f"robot {rid} did not attach:\n{self.sup.log_tail(f'robot-{rid}')}")
+
+    def _attached(self, rid: int) -> bool:
+        """The hub has robot ``rid`` attached; False when the hub is too busy to answer within its timeout (robots
+        starting on a loaded machine starve it too: the caller asks again until its own deadline)."""
+        try:
+            node = self.stats()["nodes"].get(f"robot-{rid}")
+        except HubUnavailable:
+            return False
+        return bool(node and node["attached"])
 
     def _answers(self, rid: int) -> bool:
         try:
