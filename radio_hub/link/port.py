@@ -707,12 +707,18 @@ class RadioClient:
             if on_done is not None:
                 on_done(TxResult(TxStatus.REFUSED, 0, 0, 0, 0, msg.reason))
             fut = self._pending.get(msg.token)
-            if fut is not None and not fut.done():
+            if fut is not None and not fut.done() and not self._answers_a_tokenless_message(msg):
                 fut.set_exception(RadioError(msg.reason))
             if msg.reason == wire.NOT_ATTACHED:
                 self._start_reattach()  # the hub restarted and forgot us
         else:
             self.malformed += 1
+
+    def _answers_a_tokenless_message(self, error: wire.Error) -> bool:
+        """A hub that does not know us answers a message without a token (a drive, say) "not attached" with
+        token 0, the token of our attach: never an answer to the attach itself, which it takes. Failing the
+        attach on it had a robot give up a re-attach the hub then took, and keep the radio it had before."""
+        return error.reason == wire.NOT_ATTACHED and self._pending_types.get(error.token) == wire.Attach.TYPE
 
     def _on_received(self, msg: wire.Received) -> None:
         try:

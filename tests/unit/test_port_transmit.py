@@ -138,6 +138,28 @@ def test_a_configure_refused_while_reattaching_is_made_once_attached():
     asyncio.run(scenario())
 
 
+def test_a_not_attached_answer_to_a_tokenless_message_does_not_fail_the_attach():
+    """The new hub answers a message without a token (a drive sent before the attach) "not attached" with token
+    0, which is the attach's: the re-attach must go on, and the configure made after it (seen in
+    test_chaos's hub restart: a robot back to waiting kept the swarm's PAN while the hub had it home)."""
+
+    async def scenario() -> None:
+        radio, link = await _reattaching()
+        configuring = asyncio.ensure_future(radio.configure(pan_id=HOME_PAN))
+        await asyncio.sleep(0)
+        link.down(wire.Error(token=link.sent[-1].token, reason=wire.NOT_ATTACHED))  # type: ignore[attr-defined]
+        link.down(wire.Error(token=0, reason=wire.NOT_ATTACHED))  # the answer to the drive
+        link.down(_attached(SWARM_PAN))
+        await _settle()
+        again = link.sent[-1]
+        assert isinstance(again, wire.Configure) and again.pan_id == HOME_PAN
+        link.down(_attached(HOME_PAN, again.token))
+        assert (await asyncio.wait_for(configuring, 1.0)).pan_id == HOME_PAN
+        assert radio.identity.pan_id == HOME_PAN and radio.reattaches == 1 and radio.faults.total == 0
+
+    asyncio.run(scenario())
+
+
 def test_a_late_answer_to_an_earlier_attach_copy_does_not_undo_a_configure():
     """The attach goes again every 0.5 s until answered: a slow new hub may answer two copies, and the second
     answer (swarm PAN) must not settle the configure that the robot still wants made."""
