@@ -19,8 +19,10 @@ import zenoh
 
 from radio_hub.air.mac import Frame, FrameType
 from radio_hub.link import wire
+from radio_hub.link.up_keys import wait_for_up_key
 from radio_hub.link.zenoh_link import reliable_publisher, session_config
 
+from ..waiting import wait_for
 from .procfs import FLOOD_RSS_BOUND_MB, cpu_seconds, peak_rss_mb
 
 ROBOTS = (1, 2, 3)
@@ -156,7 +158,9 @@ def test_a_rogue_client_cannot_take_the_hub_or_its_robots_down(make_air: Any) ->
         rogue.put(keys.up("robot-1"), wire.Detach(n=50, s=12345).encode())
         rogue.put(keys.up("robot-1"), wire.Attach(short_addr=1, pan_id=0x1000, instance="rogue", n=1, s=12345).encode())
         rogue.put(keys.up("robot-1"), wire.Drive(vx=1.0, n=51, s=12345).encode())
-        time.sleep(0.5)
+        # counted when the hub takes them, not within a fixed 0.5 s; then none more
+        wait_for("3 foreign", lambda: air.stats()["hub"]["foreign"] - foreign0 >= 3, 10, every=0.1)
+        time.sleep(0.2)
         stats = air.stats()
         assert stats["hub"]["foreign"] - foreign0 == 3
         assert "robot-1" in _attached(stats)
@@ -167,12 +171,13 @@ def test_a_rogue_client_cannot_take_the_hub_or_its_robots_down(make_air: Any) ->
         sub = rogue.declare_subscriber(
             keys.down("rogue-1"), lambda s: answers.extend(wire.decode_all(s.payload.to_bytes()))
         )
-        time.sleep(0.3)
-        rogue.put(keys.up("rogue-1"), wire.Attach(short_addr=77, pan_id=0x1000, instance="r1", n=1, s=9).encode())
+        up = rogue.declare_publisher(keys.up("rogue-1"))
+        assert wait_for_up_key(up)  # the hub listens once it has seen the token, not after a fixed 0.3 s
+        up.put(wire.Attach(short_addr=77, pan_id=0x1000, instance="r1", n=1, s=9).encode())
         spoof = Frame(FrameType.DATA, 1, 0x1000, 0xFFFF, 0x1000, 2, b"spoof").encode()
         for i in range(20):
-            rogue.put(keys.up("rogue-1"), wire.Transmit(token=i + 1, psdu=spoof, n=2 + i, s=9).encode())
-        time.sleep(0.5)
+            up.put(wire.Transmit(token=i + 1, psdu=spoof, n=2 + i, s=9).encode())
+        wait_for("20 answers", lambda: len([m for m in answers if isinstance(m, wire.TxDone)]) >= 20, 10, every=0.1)
         refused = [m for m in answers if isinstance(m, wire.TxDone) and m.status == "refused"]
         assert len(refused) == 20, answers
         assert air.stats()["hub"]["spoofed"] >= 20
@@ -185,6 +190,7 @@ def test_a_rogue_client_cannot_take_the_hub_or_its_robots_down(make_air: Any) ->
         down.undeclare()
         time.sleep(1.5)
         sub.undeclare()
+        up.undeclare()
         alive.undeclare()
 
         final = air.stats()
