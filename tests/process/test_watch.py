@@ -16,6 +16,7 @@ import pytest
 from petswarm.lab.processes import Supervisor
 from petswarm.lab.watch_frames import parse_replay
 
+from ..waiting import wait_for
 from .world_samples import write_record
 
 pytestmark = pytest.mark.process
@@ -128,6 +129,14 @@ def _fraction_of_the_walk(world_log: Path) -> float:
     return ((with_user[0] + with_user[-1]) / 2 - start) / (end - start)
 
 
+def _still(browser) -> dict | None:
+    """The page, when its model time did not move over 0.3 s; else None."""
+    before = _page(browser)["t_us"]
+    time.sleep(0.3)
+    page = _page(browser)
+    return page if page["t_us"] == before else None
+
+
 def _moved(before: dict[str, list[float]], after: dict[str, list[float]]) -> bool:
     return any(abs(after[i][0] - xy[0]) + abs(after[i][1] - xy[1]) > 0.01 for i, xy in before.items() if i in after)
 
@@ -143,8 +152,9 @@ def test_the_replay_page_shows_every_robot_moving_and_pauses_and_seeks(browser, 
         assert _moved(first["positions"], later["positions"])
 
         browser.find_element("id", "pause").click()
-        time.sleep(0.3)  # a frame already on its way may still land
-        held = _page(browser)["t_us"]
+        # a frame already on its way may still land, later than any fixed wait on a loaded machine: take the
+        # time once it stood still for 0.3 s (were the pause ignored, it never would), then check it holds
+        held = wait_for("the replay paused", lambda: _still(browser), 10, every=0)["t_us"]
         time.sleep(0.6)
         assert _page(browser)["t_us"] == held  # paused: model time stands still
 
