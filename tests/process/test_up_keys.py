@@ -167,10 +167,11 @@ def test_undeclare_ends_the_thread_without_handling_the_tokens_still_waiting(mon
         tokens = [node.liveliness().declare_token(keys.alive(f"fake-{i}", "x")) for i in range(CLOSE_TOKENS)]
         try:
             _wait(lambda: bool(seen))
-            started = time.monotonic()
+            handled, started = len(seen), time.monotonic()
             keeper.undeclare()
-            took = time.monotonic() - started
-            assert took < 1.0, took
+            print(f"undeclare took {time.monotonic() - started:.2f} s")
+            # at most the token in hand when it began: not a wall-clock bound, which a loaded machine moves
+            assert len(seen) - handled <= 1, (handled, len(seen))
             assert not keeper._thread.is_alive() and keeper.open_count == 0
             assert len(seen) < CLOSE_TOKENS  # what was still waiting was let go, not handled
         finally:
