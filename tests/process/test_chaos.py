@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 import subprocess
 import sys
@@ -14,7 +15,7 @@ from radio_hub.interface import query_hub
 
 from ..waiting import wait_for
 from . import swarm_of_four as rl
-from .conftest import LOSSLESS
+from .conftest import LOSSLESS, PING_UNTIL_S
 
 pytestmark = [pytest.mark.process, pytest.mark.long]
 
@@ -203,10 +204,19 @@ def _pings_from_1(air) -> list[dict]:
 
 
 def _best_rtt_ms(air, rounds: int = 2) -> float:
-    # the wait is only how long replies are collected: long enough for a 120 ms round trip on a loaded machine
-    answers = [air.cmd(1, "ping", dst=2, wait=1.0) for _ in range(rounds)]
-    assert all(a["tx"]["status"] == "success" for a in answers)  # the ACK keeps the air's timing
-    return min(r["rtt_ms"] for a in answers for r in a["replies"])
+    """The shortest round trip of robot 1's pings to robot 2: ``rounds`` of them, and more (up to
+    ``PING_UNTIL_S``) while none has a reply. The wait is only how long replies are collected, so a round trip
+    that a loaded machine made longer than it is no reply at all; a longer one only raises the minimum."""
+    rtts: list[float] = []
+    deadline = time.monotonic() + PING_UNTIL_S
+    for sent in itertools.count(1):
+        answer = air.cmd(1, "ping", dst=2, wait=1.0)
+        assert answer["tx"]["status"] == "success", answer  # the ACK keeps the air's timing
+        rtts += [r["rtt_ms"] for r in answer["replies"]]
+        if (sent >= rounds and rtts) or time.monotonic() > deadline:
+            break
+    assert rtts, f"no reply to robot 1's pings within {PING_UNTIL_S:g} s"
+    return min(rtts)
 
 
 def test_delay_faults_from_the_cli_hold_frames_back_on_their_path(make_air):
