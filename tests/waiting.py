@@ -23,6 +23,17 @@ def wait_for(what: str, probe: Any, timeout: float, every: float = 0.5) -> Any:
         time.sleep(every)
 
 
+def once_settled(probe: Any, settled: Any, timeout: float, every: float = 0.05) -> Any:
+    """``probe()`` once ``settled`` holds for it, or its value after ``timeout`` seconds: unlike ``wait_for``, the
+    caller gets the last value and asserts on it itself, saying what is wrong in the test's own terms."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = probe()
+        if settled(value) or time.monotonic() > deadline:
+            return value
+        time.sleep(every)
+
+
 def read_until(stream: IO[str] | None, text: str, timeout: float) -> str:
     """A child's output read line by line up to the first line holding ``text``, or all of it that came before
     its end or ``timeout`` seconds (the read blocks: a child that falls silent is left to the test's timeout)."""

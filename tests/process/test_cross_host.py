@@ -22,6 +22,8 @@ import pytest
 
 from petswarm.lab.processes import Supervisor
 
+from ..waiting import once_settled
+
 pytestmark = pytest.mark.process
 
 SUBNET = "10.200.0"
@@ -152,12 +154,8 @@ STATUS_WAIT_S = 10.0
 def _status_once(hosts: Any, where: list[str], rid: int, settled: Any) -> dict[str, Any]:
     """Robot ``rid``'s status from the user's host once ``settled(status)`` holds, or as it is after
     ``STATUS_WAIT_S`` (for the test to say what is wrong), instead of one read after a fixed sleep."""
-    deadline = time.monotonic() + STATUS_WAIT_S
-    while True:
-        status = json.loads(hosts.run("user", "swarm", "status", "--robot", str(rid), "--json", *where).stdout)
-        if settled(status) or time.monotonic() > deadline:
-            return status
-        time.sleep(0.1)
+    ask = ["swarm", "status", "--robot", str(rid), "--json", *where]
+    return once_settled(lambda: json.loads(hosts.run("user", *ask).stdout), settled, STATUS_WAIT_S, every=0.1)
 
 
 def test_robots_on_two_hosts_form_a_swarm_through_a_hub_on_a_third(hosts, tmp_path):

@@ -14,6 +14,7 @@ import pytest
 
 from petswarm.managers.formation_core import FormationConfig
 
+from ..waiting import once_settled
 from .conftest import LOSSLESS
 
 pytestmark = pytest.mark.process
@@ -46,12 +47,7 @@ its process has read it, or, were the release lost, on its candidate timeout: th
 def _states_once(air, rids, settled, wait_s: float) -> dict[int, dict]:
     """``_states`` once ``settled(states)`` holds, or as they are after ``wait_s`` (for the test to say what is
     wrong): a robot's state follows the messages its radio acknowledged, not the instant the master returns."""
-    deadline = time.monotonic() + wait_s
-    while True:
-        states = _states(air, rids)
-        if settled(states) or time.monotonic() > deadline:
-            return states
-        time.sleep(0.05)
+    return once_settled(lambda: _states(air, rids), settled, wait_s)
 
 
 def _rostered(slaves):
