@@ -189,7 +189,7 @@ class RadioHub:
         self.env.wall_epoch_us = time.time_ns() // 1000
 
     def stop(self) -> None:
-        """Ask the job loop to end (safe from any thread or a signal handler)."""
+        """Ask the job loop to end (from any thread)."""
         self._stop.set()
         self._world_wake.set()
         self._inbox.put(("wake",))

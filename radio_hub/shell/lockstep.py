@@ -340,7 +340,7 @@ class LockstepHub:
         self._downlink.session = session
 
     def stop(self) -> None:
-        """Ask the job loop to end (safe from any thread or a signal handler)."""
+        """Ask the job loop to end (from any thread)."""
         self._stop.set()
         self._inbox.put(("wake",))
 

@@ -13,9 +13,11 @@ from __future__ import annotations
 
 import faulthandler
 import os
+import queue
 import signal
 import sys
 import threading
+import time
 from typing import Protocol
 
 SHUTDOWN_GRACE_S = 4.0
@@ -26,26 +28,39 @@ EXIT_STUCK = 3
 
 
 class Stoppable(Protocol):
-    """A hub: ``stop`` asks its loop to end (safe from a signal handler)."""
+    """A hub: ``stop`` asks its loop to end (from any thread)."""
 
     def stop(self) -> None:
         """Ask the loop to end."""
 
 
 def stop_on_signals(hub: Stoppable, grace_s: float = SHUTDOWN_GRACE_S) -> None:
-    """Install the SIGINT and SIGTERM handlers of a hub process (main thread only)."""
-    deadline: list[threading.Timer] = []
+    """Install the SIGINT and SIGTERM handlers of a hub process (main thread only).
+
+    The handler only queues the signal; a thread of its own stops the hub and keeps the deadline. Why: a Python
+    handler runs on the main thread between any two of its bytecodes, also while that thread holds a lock of
+    its own (inside ``queue.Queue.get`` or ``Event.set``). A handler that called ``hub.stop()`` there took the
+    same lock again and waited for itself for good, before its deadline was set: a hub whose run was killed
+    outright was found so, alive twenty minutes later. ``SimpleQueue.put`` is reentrant."""
+    signals: queue.SimpleQueue[int] = queue.SimpleQueue()
 
     def on_signal(signum: int, _frame: object) -> None:
-        hub.stop()
-        if not deadline:
-            timer = threading.Timer(grace_s, _end_stuck, (grace_s,))
-            timer.daemon = True
-            timer.start()
-            deadline.append(timer)
+        signals.put(signum)
 
+    stopper = threading.Thread(target=_stop_when_signalled, args=(hub, signals, grace_s), name="hub-stopper")
+    stopper.daemon = True
+    stopper.start()
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, on_signal)
+
+
+def _stop_when_signalled(hub: Stoppable, signals: queue.SimpleQueue[int], grace_s: float) -> None:
+    """The first signal stops the hub and starts the clock; later ones change neither."""
+    signals.get()
+    deadline = time.monotonic() + grace_s
+    hub.stop()
+    time.sleep(max(0.0, deadline - time.monotonic()))
+    _end_stuck(grace_s)  # the process ends (os._exit) before this when the hub closed in time
 
 
 def _end_stuck(grace_s: float) -> None:

@@ -30,6 +30,30 @@ print("ready", flush=True)
 threading.Event().wait()  # the main thread blocked for good, as in a close that never returns
 """
 
+SIGNALLED_AGAIN_HUB = """
+import os, signal, threading
+from radio_hub.shell.stopping import stop_on_signals
+
+class Hub:
+    def __init__(self):
+        self.lock = threading.Lock()  # as the locks a real hub's stop takes (Event.set, Queue.put)
+        self.stopped = threading.Event()
+
+    def stop(self):
+        with self.lock:
+            if not self.stopped.is_set():
+                os.kill(os.getpid(), signal.SIGTERM)  # a second signal while stop holds its lock
+                self.stopped.set()
+
+hub = Hub()
+stop_on_signals(hub)
+print("ready", flush=True)
+while not hub.stopped.wait(0.01):  # the main thread in and out of a lock, as the hub's loop in its inbox
+    pass
+print("stopped", flush=True)
+os._exit(0)
+"""
+
 
 def _ready(proc: subprocess.Popen[str], word: str) -> None:
     assert proc.stdout is not None
@@ -67,3 +91,19 @@ def test_a_hub_that_cannot_stop_ends_by_its_deadline_and_says_where_it_was() -> 
     assert code == EXIT_STUCK, err
     assert took > SHUTDOWN_GRACE_S - 0.5, took  # ended by the deadline, not by the signal
     assert "not stopped" in err and "Current thread" in err and "<string>" in err, err  # the stack dump
+
+
+def test_a_second_signal_while_the_hub_stops_neither_deadlocks_nor_delays_it() -> None:
+    """A signal handler runs on the main thread between any two bytecodes: one that stopped the hub itself took
+    the hub's locks again while that thread held them (a killed run's hub was found so, hung for good)."""
+    hub = subprocess.Popen(
+        [sys.executable, "-c", SIGNALLED_AGAIN_HUB], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    try:
+        _ready(hub, "ready")
+        hub.send_signal(signal.SIGTERM)
+        code = hub.wait(timeout=SHUTDOWN_GRACE_S + 30)
+    finally:
+        hub.kill()
+        out, err = hub.communicate()
+    assert code == 0 and "stopped" in out, (code, err)  # stopped by itself, not ended by the deadline
