@@ -22,6 +22,7 @@ from radio_hub.interface import HubUnavailable, Keys, open_session, query_hub
 from radio_hub.link import wire
 from radio_hub.link.zenoh_link import reliable_publisher
 
+from ..model.test_driving import FORMATION_MEDIAN_BOUND_M
 from ..waiting import wait_for
 from .procfs import FLOOD_RSS_BOUND_MB, peak_rss_mb
 
@@ -86,25 +87,45 @@ def test_the_kim2017_profile_delays_frames_the_same_in_lockstep_processes_as_in_
     assert model["organization"]["organize_time_s"] > ideal["organization"]["organize_time_s"] + 0.3
 
 
-FORMATION_MEDIAN_BOUND_M = 0.25
-"""Documented bound (README, docs/RESULTS.md) on the median formation error of the following-turn scenario:
-IR fixes refresh once per token round (about 0.55 s for 4 robots) and the slaves dead-reckon between them."""
+FOLLOWING_TURN_SHORT = """
+name = "following-turn-short"
+description = "scenarios/following-turn.toml with its walks shortened: 3 m north, 90 degrees right, 4 m east"
+duration_s = 25
+[user]
+owner = 1
+start = [0.0, 0.0, 90.0]
+walk_at = 11
+path = [{ walk = 3.0, speed = 0.8 }, { turn = -90, rate = 60 }, { walk = 4.0, speed = 0.8 }, { stop = 2.0 }]
+watch = [
+  { at = 5.0, request = "follow" },
+  { at = 7.0, request = "organize", robots = 3, shape = "column", spacing = 0.6 },
+  { at = 24.0, request = "disperse" },
+]
+[robots]
+count = 4
+formation = "column"
+positions = [[0.0, -0.8, 90.0], [0.4, -1.5, 90.0], [-0.4, -2.1, 90.0], [0.3, -2.7, 90.0]]
+"""
+"""The shipped scenario with 5 s less wait before the walk and half its first walk (25 s of model time, not 45):
+what is under test here is that robot and user processes in lockstep do what the model-time run does, through
+every part of driving (pairing over LF and BLE, organizing, following, the turn). The shipped scenario's
+documented bounds are asserted in model time (tests/model/test_driving.py), where the run is the same."""
 
 
 @pytest.mark.timeout(600)
 def test_a_following_swarm_of_robot_processes_keeps_its_formation_through_the_turn(tmp_path: Path) -> None:
-    """The following-turn scenario in model time and as a hub, four robot processes and a user process in
+    """A following swarm through a turn in model time and as a hub, four robot processes and a user process in
     lockstep: the driving bounds hold, in processes because the run is the model-time run (same digest), not a
-    late copy. (The scenario's only test: tests/model/test_driving.py leaves it here, one 45 s run fewer.)"""
-    scenario = str(ROOT / "scenarios" / "following-turn.toml")
-    model, lockstep = (_scenario(tmp_path, scenario, clock, seed=5) for clock in ("model", "lockstep"))
+    late copy."""
+    scenario = tmp_path / "following-turn-short.toml"
+    scenario.write_text(FOLLOWING_TURN_SHORT)
+    model, lockstep = (_scenario(tmp_path, str(scenario), clock, seed=5) for clock in ("model", "lockstep"))
     assert lockstep["ok"], lockstep["problems"]
     assert lockstep["digest"] == model["digest"]
     driving = lockstep["driving"]
     assert driving["collisions"] == 0
     assert driving["formation_error_all_m"]["median"] < FORMATION_MEDIAN_BOUND_M, driving["formation_error_all_m"]
     assert set(driving["formation_error_m"]) == {"robot-2", "robot-3", "robot-4"}
-    assert 0.8 < driving["user_master_distance_m"]["median"] < 1.3
     # the user's rotation reached every slave: each heard it in the master's broadcast and turned
     [reaction] = driving["reactions"]
     assert reaction["master"] == "robot-1"
@@ -113,9 +134,9 @@ def test_a_following_swarm_of_robot_processes_keeps_its_formation_through_the_tu
     for rid in (2, 3, 4):
         events = read_events(record / "events" / f"robot-{rid}.jsonl")
         assert any(e["kind"] == "user_activity_heard" and e["user_rate"] != 0 for e in events), rid
-    # the swarm really moved with the user: the column's tail came along the 6 m walk north and round the turn
+    # the swarm really moved with the user: the column's tail came along the 3 m walk north and round the turn
     track = [b for tick in read_world(record / "world.jsonl") for b in tick["bodies"] if b["id"] == "robot-4"]
-    assert track[-1]["y"] - track[0]["y"] > 5.0 and track[-1]["x"] > track[0]["x"], (track[0], track[-1])
+    assert track[-1]["y"] - track[0]["y"] > 2.5 and track[-1]["x"] > track[0]["x"], (track[0], track[-1])
     processes = {"hub", "user", "robot-1", "robot-2", "robot-3", "robot-4"}
     assert lockstep["exit_codes"] == dict.fromkeys(processes, 0)
     assert all(node["peak_rss_mb"] for node in lockstep["nodes"].values())
