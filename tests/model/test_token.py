@@ -83,6 +83,53 @@ def test_default_noise_fixes_are_within_documented_bounds() -> None:
     run_model_time(body)
 
 
+def _fix_errors(status: dict[str, Any]) -> list[tuple[float, float]]:
+    """(distance error in m, bearing error in degrees) of each of a robot's neighbour fixes."""
+    me, table = status["robot_id"], status["relative_location"]
+    errors = []
+    for neighbour in status["swarm"]["neighbours"]:
+        fix = table[str(neighbour)]
+        bearing, distance = _truth(me, neighbour)
+        errors.append((abs(fix["distance_m"] - distance), _angle_gap(fix["bearing_deg"], bearing)))
+    return errors
+
+
+def _good(errors: list[tuple[float, float]]) -> bool:
+    return all(d <= 0.01 and b <= 1.0 for d, b in errors)  # noise-free IR: within 1 cm and 1 degree
+
+
+async def _more_rounds(w: ModelWorld, rounds: int) -> dict[int, dict[str, Any]]:
+    """Every robot's status once each has held ``rounds`` more rounds than now: every fix is that fresh."""
+    held = {rid: w.status(rid)["ir"]["rounds_held"] for rid in POSES}
+    fresh = await w.until(lambda: all(w.status(r)["ir"]["rounds_held"] >= held[r] + rounds for r in POSES), 10.0)
+    assert fresh is not None, {rid: w.status(rid)["ir"] for rid in POSES}
+    return {rid: w.status(rid) for rid in POSES}
+
+
+def test_ir_blinding_and_noise_spoil_the_fixes_until_cleared() -> None:
+    """The IR faults (``petswarm chaos ir-blind``, ``ir-noise``) on one receiving module spoil that robot's fixes
+    only, and clearing them restores its fixes within two rounds. Moved from tests/process/test_chaos.py with its
+    bounds (that file keeps the command line's path to the hub)."""
+
+    async def body(w: ModelWorld) -> None:
+        await _swarm_of_four(w)
+        assert all(_good(_fix_errors(s)) for s in (await _rounds(w, 2)).values())
+        w.fault("ir_blind", node="robot-2")
+        statuses = await _more_rounds(w, 2)
+        # saturated on every receiver, robot 2 reads each neighbour as if it touched it, bearing unknown
+        assert all(d > 0.5 for d, _ in _fix_errors(statuses[2])), _fix_errors(statuses[2])
+        assert all(_good(_fix_errors(statuses[rid])) for rid in (1, 3, 4))
+        w.clear()
+        assert _good(_fix_errors((await _more_rounds(w, 2))[2]))  # recovered
+        w.fault("ir_noise", node="robot-3", sigma=150)
+        statuses = await _more_rounds(w, 2)
+        assert max(max(d * 100, b) for d, b in _fix_errors(statuses[3])) > 10  # off by over 10 cm or 10 degrees
+        assert all(_good(_fix_errors(statuses[rid])) for rid in (1, 2, 4))
+        assert w.stats()["ir"]["overlap_episodes"] == 0
+
+    run_model_time(body, config={**LOSSLESS, "ir": NOISE_FREE_IR, "world": {"yaw_noise_deg": 0.0}})
+
+
 @pytest.mark.parametrize(("loss", "seed"), [(0.2, 7), (0.3, 1), (0.3, 2)])
 def test_under_loss_the_schedule_keeps_cycling_without_two_transmitters_at_once(loss: float, seed: int) -> None:
     async def body(w: ModelWorld) -> None:
