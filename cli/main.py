@@ -216,6 +216,13 @@ def build_parser() -> argparse.ArgumentParser:
         "on model time the hub owns, exact under any load, the same digest as model",
     )
 
+    run.add_argument(
+        "--dead-after",
+        type=bounded(float, 0.5, 3600),
+        default=None,
+        help="--clock lockstep: wall seconds the hub waits for a granted process before it takes it as gone and "
+        "model time goes on without it (default 10; longer to hold a robot in a debugger)",
+    )
     add_profile(run, "hub, robots and user alike (MAC, BLE, IR noise; MCU and UART per frame; recognition)")
     run.add_argument(
         "--fail-fast",
@@ -536,6 +543,9 @@ def _run(args: argparse.Namespace) -> int:
         )
         return 2
 
+    if args.dead_after is not None and args.clock != "lockstep":
+        print("petswarm run: --dead-after is the lockstep hub's patience; it needs --clock lockstep", file=sys.stderr)
+        return 2
     chosen_seed = args.seed if args.seed is not None else int.from_bytes(os.urandom(4), "big")
     opts = RunOptions(
         robots=args.robots,
@@ -553,6 +563,7 @@ def _run(args: argparse.Namespace) -> int:
         clock=args.clock,
         fail_fast=args.fail_fast,
         profile=args.profile,
+        **({} if args.dead_after is None else {"dead_after_s": args.dead_after}),
     )
     return run(opts)
 

@@ -31,7 +31,7 @@ def run_lockstep(opts: RunOptions, scenario: Scenario | None) -> int:
     clock: dict[str, float] = {}
 
     def hub_extra(record: RunRecord) -> list[str]:
-        extra = ["--clock", "lockstep", "--expect", str(nodes)]
+        extra = ["--clock", "lockstep", "--expect", str(nodes), "--dead-after", str(opts.dead_after_s)]
         if scenario is not None:
             extra += ["--scenario", str(scenario.path), "--world-log", str(record.path / "world.jsonl")]
         return extra

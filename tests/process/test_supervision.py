@@ -3,6 +3,7 @@ run killed outright that leaves a summary and no children behind."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -180,18 +181,23 @@ def test_a_wall_clock_run_survives_a_robot_killed_during_its_pings(tmp_path: Pat
 
 
 def test_a_lockstep_robot_taken_as_gone_while_alive_fails_the_run(tmp_path: Path) -> None:
-    """A robot process that stops answering (paused, not dead) is taken as gone by the lockstep hub after 10 s
-    of wall time and the world goes on; the run does not excuse it as it excuses a death: it says so."""
+    """A robot process that stops answering (paused, not dead) is taken as gone by the lockstep hub after the
+    run's ``--dead-after`` of wall time and the world goes on; the run does not excuse it as it excuses a death:
+    it says so."""
     env, record = _env(tmp_path), tmp_path / "record"
-    run = _run(env, record, "paused", "--robots", "2", "--duration", "3", "--json", "--clock", "lockstep")
+    argv = ["--robots", "2", "--duration", "3", "--json", "--clock", "lockstep", "--dead-after", "2"]
+    run = _run(env, record, "paused", *argv)
     try:
         seen = read_until(run.stderr, "t=  1.0/3s", timeout=60)
         assert "t=  1.0/3s" in seen, seen[-3000:]
         pid = _running_summary(record, run, "processes")["processes"]["robot-2"]
         os.kill(pid, signal.SIGSTOP)
         hub_log = record / "logs" / "hub.log"
-        wait_for("robot-2 taken as gone", lambda: "robot-2 is gone" in hub_log.read_text(errors="replace"), 30)
-        os.kill(pid, signal.SIGCONT)
+        gone = "robot-2 is gone at model time"
+        wait_for("robot-2 taken as gone", lambda: gone in hub_log.read_text(errors="replace"), 30)
+        assert "no idle within 2 s of wall time" in hub_log.read_text(errors="replace")  # the run's --dead-after
+        with contextlib.suppress(ProcessLookupError):  # the run's own stop may have resumed and ended it already
+            os.kill(pid, signal.SIGCONT)
         out, _ = run.communicate(timeout=120)
     finally:
         run.kill()

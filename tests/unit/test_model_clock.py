@@ -144,3 +144,10 @@ def test_the_next_instant_on_a_grid_is_the_one_a_periodic_timer_would_have_reach
         expected = next(t for t in [0.1 + 0.05, *ticks] if t > after)
         assert clock.next_on_grid(0.1, 0.05, after) == expected  # exactly: instants are compared exactly
     assert clock.next_on_grid(0.1, 0.05, 0.0) == 0.1 + 0.05  # never before the grid's next instant
+
+
+def test_dead_after_is_refused_outside_lockstep_with_the_reason(capsys: pytest.CaptureFixture[str]) -> None:
+    """The lockstep hub's patience means nothing to a wall-clock or model-time run: said, not ignored."""
+    for run_clock in ("wall", "model"):
+        assert main(["run", "--robots", "2", "--clock", run_clock, "--dead-after", "3"]) == 2
+        assert "needs --clock lockstep" in capsys.readouterr().err
