@@ -102,12 +102,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=1,
         help="lockstep: model time starts once this many nodes are there (default %(default)s)",
     )
-    hub.add_argument(
-        "--dead-after",
-        type=bounded(float, 0.5, 3600),
-        default=10.0,
-        help="lockstep: wall seconds a granted node may stay silent before it is taken as gone (default 10)",
-    )
+    _add_dead_after(hub, 10.0, "lockstep: wall seconds a granted node may stay silent before it is taken as gone")
     hub.add_argument(
         "--start-within",
         type=bounded(float, 1, 86400),
@@ -216,12 +211,11 @@ def build_parser() -> argparse.ArgumentParser:
         "on model time the hub owns, exact under any load, the same digest as model",
     )
 
-    run.add_argument(
-        "--dead-after",
-        type=bounded(float, 0.5, 3600),
-        default=None,
-        help="--clock lockstep: wall seconds the hub waits for a granted process before it takes it as gone and "
-        "model time goes on without it (default 10; longer to hold a robot in a debugger)",
+    _add_dead_after(
+        run,
+        None,
+        "--clock lockstep: wall seconds the hub waits for a granted process before it takes it as gone and "
+        "model time goes on without it (longer to hold a robot in a debugger)",
     )
     add_profile(run, "hub, robots and user alike (MAC, BLE, IR noise; MCU and UART per frame; recognition)")
     run.add_argument(
@@ -391,6 +385,11 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # `petswarm stats | head`: the reader left; not an error of ours
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+
+
+def _add_dead_after(parser: argparse.ArgumentParser, default: float | None, what: str) -> None:
+    """The lockstep hub's patience for a silent node (``LockstepHub.dead_after_s``), on the hub or a run."""
+    parser.add_argument("--dead-after", type=bounded(float, 0.5, 3600), default=default, help=f"{what} (default 10)")
 
 
 def _hub(args: argparse.Namespace) -> int:
