@@ -39,11 +39,13 @@ class _ModelSelector(selectors.DefaultSelector):
         self.loop: ModelClockLoop | None = None
 
     def select(self, timeout: float | None = None) -> list[tuple[selectors.SelectorKey, int]]:
+        loop = self.loop
+        assert loop is not None
+        if timeout == 0 and loop.nothing_to_read():
+            return []  # callbacks are ready: a poll of the self-pipe alone, nobody having written it, finds nothing
         ready = super().select(0)
         if ready or timeout == 0:
             return ready
-        loop = self.loop
-        assert loop is not None
         # nothing is ready: the instant is over for every task on this loop
         if loop.on_quiescent is not None and loop.on_quiescent():
             return []
@@ -79,6 +81,8 @@ class ModelClockLoop(asyncio.SelectorEventLoop):
         self._model = _ModelSelector()
         self._model.loop = self
         self._timer_order = itertools.count()
+        self._written = False
+        """A thread (``call_soon_threadsafe``) wrote to the self-pipe since the selector last polled it."""
         self.on_quiescent: Callable[[], bool] | None = None
         """Called when nothing is ready, before time moves; True when it made something ready (a driver
         releasing the messages it held for this instant, ``radio_hub.coordinator``)."""
@@ -97,6 +101,20 @@ class ModelClockLoop(asyncio.SelectorEventLoop):
     def time(self) -> float:
         """Model seconds since the loop was made."""
         return self._model.now
+
+    def nothing_to_read(self) -> bool:
+        """Whether a poll of the selector would surely find nothing: only the loop's self-pipe is watched, no
+        thread has written to it since the last poll, and no signal can (asyncio's signal handlers write to it
+        from C, unseen by ``_write_to_self``). Model time polls once per pass of the loop: about 60,000 system
+        calls in a 48 s driving scenario that, with nothing watched, can only come back empty."""
+        if self._written or self._signal_handlers or len(self._model.get_map()) > 1:  # type: ignore[attr-defined]
+            self._written = False
+            return False
+        return True
+
+    def _write_to_self(self) -> None:
+        self._written = True
+        super()._write_to_self()  # type: ignore[misc]
 
     def next_timer(self) -> float | None:
         """When the earliest live timer is due (None: no timer); cancelled timers at the head are dropped, as

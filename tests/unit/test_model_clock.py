@@ -6,6 +6,7 @@ import asyncio
 import itertools
 import json
 import math
+import signal
 from pathlib import Path
 
 import pytest
@@ -151,3 +152,20 @@ def test_dead_after_is_refused_outside_lockstep_with_the_reason(capsys: pytest.C
     for run_clock in ("wall", "model"):
         assert main(["run", "--robots", "2", "--clock", run_clock, "--dead-after", "3"]) == 2
         assert "needs --clock lockstep" in capsys.readouterr().err
+
+
+def test_the_selector_polls_the_self_pipe_only_when_something_can_have_written_it() -> None:
+    """Model time skips the system call of a poll that could only come back empty; a thread's wake-up (the
+    self-pipe written) or an asyncio signal handler (which writes it from C) makes it poll again."""
+    loop = ModelClockLoop()
+    try:
+        assert loop.nothing_to_read()
+        loop.call_soon_threadsafe(lambda: None)  # writes the self-pipe, as any thread's call does
+        assert not loop.nothing_to_read()
+        assert loop.nothing_to_read()  # once: the caller polls then, which drains what was written
+        loop.add_signal_handler(signal.SIGUSR1, lambda: None)
+        assert not loop.nothing_to_read() and not loop.nothing_to_read()
+        loop.remove_signal_handler(signal.SIGUSR1)
+        assert loop.nothing_to_read()
+    finally:
+        loop.close()
