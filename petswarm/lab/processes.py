@@ -10,7 +10,7 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import IO, Any, Protocol
 
@@ -199,9 +199,51 @@ class Supervisor:
         return codes
 
 
-def raise_interrupt(signum: int, frame: Any) -> None:
-    """A SIGTERM handler that unwinds like Ctrl-C, so ``finally`` blocks stop the children."""
-    raise KeyboardInterrupt
+class Interrupts:
+    """The stop signals of a process that stops its children and writes down how they ended when it is
+    interrupted (``petswarm run``, the benches).
+
+    From its creation the first SIGINT or SIGTERM raises KeyboardInterrupt (SIGTERM unwinds as Ctrl-C does), so
+    that ``finally`` blocks stop the children; every later one is only noted. ``deferred()``, the first thing in
+    that ``finally``, makes a first one only noted too until it ends; then every handler is back as it was before
+    ``Interrupts()``, and a signal noted in a run no signal had interrupted raises KeyboardInterrupt.
+
+    Why: a second Ctrl-C, or ``timeout`` or compose following its SIGTERM with SIGINT, raised KeyboardInterrupt
+    inside that ``finally`` while it stopped the children and wrote the record: the stop was cut short and
+    summary.json was left saying ``running``, without the children's exit codes. The stop is bounded
+    (``Supervisor.stop``: SIGKILL after its timeout), and SIGKILL still ends the process at once. A SIGINT that
+    whoever started the process ignored (nohup) stays ignored."""
+
+    def __init__(self) -> None:
+        self.noted: list[int] = []
+        self._raised = False
+        self._stopping = False
+        self._previous: dict[int, Any] = {}
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            current = signal.getsignal(signum)
+            if current not in (signal.SIG_IGN, None):  # None: a handler not set from Python, not ours to replace
+                self._previous[signum] = signal.signal(signum, self._on_signal)
+
+    def _on_signal(self, signum: int, _frame: Any) -> None:
+        # runs between any two bytecodes of the main thread: no locks, no I/O
+        if self._stopping:
+            self.noted.append(signum)
+            return
+        self._stopping = self._raised = True
+        raise KeyboardInterrupt
+
+    @contextlib.contextmanager
+    def deferred(self) -> Iterator[None]:
+        """Signals only noted within the block; the handlers from before ``Interrupts()`` after it, and
+        KeyboardInterrupt if a signal came within it and none had before."""
+        self._stopping = True
+        try:
+            yield
+        finally:
+            for signum, handler in self._previous.items():
+                signal.signal(signum, handler)
+        if self.noted and not self._raised:
+            raise KeyboardInterrupt
 
 
 def run_supervised(
@@ -213,7 +255,7 @@ def run_supervised(
     130 on Ctrl-C or SIGTERM.
     """
     sup = Supervisor(out / "logs")
-    previous = signal.signal(signal.SIGTERM, raise_interrupt)
+    interrupts = Interrupts()
     started = time.monotonic()
     try:
         results = body(sup)
@@ -224,9 +266,9 @@ def run_supervised(
         _progress("interrupted; stopping every process")
         return 130
     finally:
-        codes = sup.stop_all()
-        signal.signal(signal.SIGTERM, previous)
-        _progress(f"stopped {len(codes)} processes in total; logs in {out / 'logs'}")
+        with interrupts.deferred():  # a second Ctrl-C or SIGTERM waits for the stop (Interrupts)
+            codes = sup.stop_all()
+            _progress(f"stopped {len(codes)} processes in total; logs in {out / 'logs'}")
     results["elapsed_s"] = time.monotonic() - started
     return results
 

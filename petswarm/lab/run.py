@@ -5,7 +5,6 @@ from __future__ import annotations
 import asyncio
 import json
 import os
-import signal
 import sys
 import time
 from collections.abc import Callable, Collection
@@ -18,7 +17,7 @@ import zenoh
 from petswarm import control
 from petswarm.lab.checker import check_record
 from petswarm.lab.metrics import describe_driving
-from petswarm.lab.processes import Supervisor, free_tcp_port, raise_interrupt
+from petswarm.lab.processes import Interrupts, Supervisor, free_tcp_port
 from petswarm.lab.records import RunRecord
 from petswarm.lab.supervision import RunAborted, Supervision
 from petswarm.lab.swarm import describe
@@ -123,7 +122,7 @@ def supervise(
     sup = Supervisor(record.path / "logs")
     watch = Supervision(sup, record, opts.fail_fast, progress)
     watch.write_progress(force=True)  # from the first moment a kill leaves a summary
-    previous = signal.signal(signal.SIGTERM, raise_interrupt)
+    interrupts = Interrupts()  # SIGTERM stops the run as Ctrl-C does, and only the first signal acts
     session: zenoh.Session | None = None
     summary: dict[str, Any] = {"ok": False, "problems": ["the run did not finish"], "seed": opts.seed}
     try:
@@ -145,13 +144,14 @@ def supervise(
         summary["problems"] = ["interrupted"]
         return 130
     finally:
-        if session is not None:
-            session.close()
-        codes = sup.stop_all()
-        signal.signal(signal.SIGTERM, previous)
-        summary["deaths"] = watch.deaths
-        record.finish(summary, codes)
-        progress(f"stopped {len(codes)} processes; record in {record.path}")
+        # a second Ctrl-C or SIGTERM waits until every process is stopped and the record says how (Interrupts)
+        with interrupts.deferred():
+            if session is not None:
+                session.close()
+            codes = sup.stop_all()
+            summary["deaths"] = watch.deaths
+            record.finish(summary, codes)
+            progress(f"stopped {len(codes)} processes; record in {record.path}")
     if after_stop is not None:
         after_stop(summary, record)
     violations = check_record(record.path)

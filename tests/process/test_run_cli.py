@@ -92,6 +92,34 @@ def test_ctrl_c_stops_every_process_of_the_run():
     assert _processes_mentioning(world) == []
 
 
+def test_signals_that_come_while_the_run_stops_wait_for_the_stop_and_its_record(tmp_path):
+    """Ctrl-C, then SIGTERM after SIGTERM (a user pressing Ctrl-C again, ``timeout`` or compose following up)
+    while the run stops its processes: the stop goes on, and the summary says how every process ended."""
+    world = f"twice{uuid.uuid4().hex[:8]}"
+    record = tmp_path / "twice"
+    proc = _started_run(3, "--world", world, "--record", str(record))
+    sent = 0
+    try:
+        proc.send_signal(signal.SIGINT)
+        deadline = time.monotonic() + 30
+        while proc.poll() is None and time.monotonic() < deadline:
+            proc.send_signal(signal.SIGTERM)
+            sent += 1
+            time.sleep(0.02)
+        # 130: interrupted; -15: a SIGTERM came after the run had put SIGTERM's default action back
+        assert proc.wait(timeout=5) in (130, -signal.SIGTERM), proc.stderr.read() if proc.stderr else ""
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    summary = json.loads((record / "summary.json").read_text())
+    assert "running" not in summary and summary["problems"] == ["interrupted"], (sent, summary)
+    assert set(summary["exit_codes"]) == {"hub", "robot-1", "robot-2", "robot-3"}, summary["exit_codes"]
+    deadline = time.monotonic() + 5
+    while _processes_mentioning(world) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert _processes_mentioning(world) == []
+
+
 def test_absurd_arguments_get_clear_errors():
     bad = subprocess.run(_petswarm("run", "--robots", "0"), capture_output=True, text=True, timeout=30)
     assert bad.returncode == 2 and "outside 1..2000" in bad.stderr
