@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import os
 import random
 import signal
 import socket
@@ -36,11 +37,17 @@ class ChildProcess(Protocol):
 
 def _die_with_parent(signum: int) -> Callable[[], None]:
     """A preexec hook: on Linux the kernel sends ``signum`` to the child when the supervisor dies, even by
-    SIGKILL (it survives exec, so also through a wrapper such as ``ip netns exec``)."""
+    SIGKILL (it survives exec, so also through a wrapper such as ``ip netns exec``).
+
+    A supervisor that died between the fork and the arming sends nothing: the child, already someone else's,
+    ends there (as ``petswarm.lab.forking.become`` does) rather than run for good (a hub waits for a signal)."""
+    parent = os.getpid()
 
     def arm() -> None:
         with contextlib.suppress(OSError, AttributeError):
             ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signum)
+        if os.getppid() != parent:
+            os._exit(1)
 
     return arm
 
