@@ -28,6 +28,7 @@ from petswarm.control import RelayControl
 from petswarm.lab.checker import check_record
 from petswarm.lab.digest import record_digest
 from petswarm.lab.metrics import driving_metrics, read_world
+from petswarm.lab.processes import Interrupts
 from petswarm.lab.records import RunRecord
 from petswarm.lab.run import (
     HEARING_PROBLEMS,
@@ -373,16 +374,20 @@ def execute(opts: RunOptions, scenario: Scenario | None) -> dict[str, Any]:
     started = time.perf_counter()
     loop = ModelClockLoop()
     summary: dict[str, Any] = {"ok": False, "problems": ["interrupted"], "seed": opts.seed}
+    # SIGTERM (timeout, compose, a CI job cancelled) ends the run as Ctrl-C does, with its summary: at its
+    # default action it ended the process where it stood and the record had no summary.json at all
+    interrupts = Interrupts()
     try:
         summary = loop.run_until_complete(_run(opts, scenario, world, record))
     finally:
-        model_time_s = loop.time()
-        loop.close()
-        summary["clock"] = "model"
-        summary["model_time_s"] = round(model_time_s, 6)
-        summary["wall_time_s"] = round(time.perf_counter() - started, 3)
-        summary["speedup"] = round(model_time_s / max(summary["wall_time_s"], 1e-9), 1)
-        record.finish(summary, {})
+        with interrupts.deferred():  # a second signal waits for the summary (Interrupts)
+            model_time_s = loop.time()
+            loop.close()
+            summary["clock"] = "model"
+            summary["model_time_s"] = round(model_time_s, 6)
+            summary["wall_time_s"] = round(time.perf_counter() - started, 3)
+            summary["speedup"] = round(model_time_s / max(summary["wall_time_s"], 1e-9), 1)
+            record.finish(summary, {})
     if scenario is not None:
         summary["driving"] = driving_metrics(read_world(record.path / "world.jsonl"))
     violations = check_record(record.path)

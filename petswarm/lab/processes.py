@@ -208,7 +208,7 @@ class Supervisor:
 
 class Interrupts:
     """The stop signals of a process that stops its children and writes down how they ended when it is
-    interrupted (``petswarm run``, the benches).
+    interrupted (``petswarm run`` on every clock, the benches).
 
     From its creation the first SIGINT or SIGTERM raises KeyboardInterrupt (SIGTERM unwinds as Ctrl-C does), so
     that ``finally`` blocks stop the children; every later one is only noted. ``deferred()``, the first thing in

@@ -120,6 +120,25 @@ def test_signals_that_come_while_the_run_stops_wait_for_the_stop_and_its_record(
     assert _processes_mentioning(world) == []
 
 
+def test_sigterm_ends_a_model_time_run_as_ctrl_c_does_with_its_summary(tmp_path):
+    """``timeout`` or compose stops a run in model time (one process, no children) with SIGTERM: the record
+    gets its summary, as on Ctrl-C and as a run of processes does."""
+    record = tmp_path / "model"
+    argv = ["run", "--clock", "model", "--robots", "20", "--duration", "36000", "--record", str(record)]
+    proc = subprocess.Popen(_petswarm(*argv), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        seen = read_until(proc.stderr, "20/20 robots attached", timeout=60)
+        assert "20/20 robots attached" in seen, seen
+        proc.send_signal(signal.SIGTERM)
+        _, stderr = proc.communicate(timeout=30)  # read: the run's robots write on their way out
+        assert proc.returncode == 130, stderr[-2000:]
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    summary = json.loads((record / "summary.json").read_text())
+    assert summary["problems"] == ["interrupted"] and summary["clock"] == "model", summary
+
+
 def test_absurd_arguments_get_clear_errors():
     bad = subprocess.run(_petswarm("run", "--robots", "0"), capture_output=True, text=True, timeout=30)
     assert bad.returncode == 2 and "outside 1..2000" in bad.stderr
