@@ -612,4 +612,5 @@ async def run_robot(config: RobotConfig, link: HubLink | None = None) -> int:
     finally:
         control.close()
         await robot.close()
+        clock.work_done(loop)  # the next SIGTERM must not kill a robot that has stopped
     return 0

@@ -1,4 +1,5 @@
-"""A lockstep node's loop closes without ever putting SIGTERM back to its default action.
+"""A lockstep node's loop closes without ever putting SIGTERM back to its default action, and a wall-clock
+robot that stopped is not killed by the next SIGTERM.
 
 Each check runs in its own interpreter: it sends itself SIGTERM, which a test worker must not get. The signal
 is sent at the worst moment, from inside asyncio's close, right after it resets one of the loop's signals.
@@ -6,9 +7,11 @@ is sent at the worst moment, from inside asyncio's close, right after it resets 
 
 from __future__ import annotations
 
+import signal
 import subprocess
 import sys
 import textwrap
+import time
 
 SCRIPT = textwrap.dedent(
     """
@@ -71,3 +74,17 @@ def test_a_loop_that_never_handled_sigterm_leaves_its_process_handler_alone() ->
     proc = _python(RUN_LOOP_SCRIPT)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.split() == ["kept", "True"], proc.stdout
+
+
+def test_a_wall_clock_robot_that_stopped_on_sigterm_is_not_killed_by_the_next_one(make_air) -> None:
+    """A robot stops on SIGTERM; the next ones (``timeout``'s to the process group, then its supervisor's)
+    find its work done: it ends with 0, not as killed by a signal, and its last event is written."""
+    air = make_air()
+    air.robot(1)
+    robot = air.sup.children["robot-1"]
+    deadline = time.monotonic() + 30
+    while robot.poll() is None and time.monotonic() < deadline:
+        robot.send_signal(signal.SIGTERM)
+        time.sleep(0.005)
+    assert robot.wait(5) == 0, air.sup.log_tail("robot-1")
+    assert "Exception ignored" not in air.sup.log_tail("robot-1", 50)
