@@ -160,3 +160,21 @@ def _state(pid: int) -> str:
 
 def _root() -> Path:
     return Path(__file__).resolve().parents[2]
+
+
+def test_a_robot_stopped_just_after_it_was_forked_ends_on_that_sigterm(tmp_path: Path) -> None:
+    """The server ignores the stop signals (they are its supervisor's to act on); a child stopped before it has
+    taken on its own (``become``) must still end on that SIGTERM, not on the SIGKILL that follows 5 s later."""
+    sup = Supervisor(tmp_path / "logs")
+    try:
+        sup.spawn("robot-1", _waiting_robot(1))  # the server is up and has imported once this one waits
+        assert _log_says(sup, "robot-1", "waiting for a hub")
+        ends = []
+        for rid in range(2, 10):
+            sup.spawn(f"robot-{rid}", _waiting_robot(rid))
+            started = time.monotonic()
+            code = sup.stop([f"robot-{rid}"])[f"robot-{rid}"]
+            ends.append((code, round(time.monotonic() - started, 2)))
+    finally:
+        sup.stop_all()
+    assert all(code == -signal.SIGTERM for code, _ in ends), ends
