@@ -54,6 +54,9 @@ from radio_hub.interface import check_timed_fault
 
 RADIO_KEYS = ("sent", "delivered", "collided", "lost", "filtered", "mac_retries")
 """The hub's counters a run's row sums over its robots."""
+INTERRUPTED = 130
+"""The exit status of a run that Ctrl-C or SIGTERM stopped: it stops the experiment too, rather than its next run
+(each run takes the signals itself and returns this)."""
 _TOP_KEYS = ("name", "repetitions", "seed", "seeds", "require", "run", "faults")
 WAIVABLE = {
     "all_pairs_heard": "not every robot heard every other robot",
@@ -128,6 +131,8 @@ def experiment_command(args: argparse.Namespace) -> int:
     for i, seed in enumerate(seeds):
         rows.append(_one_run(spec, seed, out / f"run-{i + 1}-seed-{seed}"))
         print(progress_line(len(rows), len(seeds), rows[-1]), file=sys.stderr, flush=True)
+        if rows[-1]["exit_code"] == INTERRUPTED:  # the run took the Ctrl-C or SIGTERM: it was meant for us all
+            raise KeyboardInterrupt
     results = {
         "name": spec.get("name"),
         "file": str(args.file),

@@ -232,6 +232,32 @@ def test_an_experiment_file_runs_every_seed_with_its_fault_timeline(tmp_path):
     assert refused.returncode == 2 and "robotz" in refused.stderr
 
 
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_ctrl_c_or_sigterm_stops_an_experiment_not_only_its_current_run(tmp_path, signum):
+    spec = tmp_path / "long.toml"
+    spec.write_text('name = "long"\nseeds = [1, 2]\n[run]\nrobots = 20\nduration = 36000\nclock = "model"\n')
+    out = tmp_path / "out"
+    proc = subprocess.Popen(
+        _petswarm("experiment", str(spec), "--out", str(out)),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=_sigint_as_at_a_terminal,
+    )
+    try:
+        deadline = time.monotonic() + 60
+        while not (out / "run-1-seed-1" / "manifest.json").exists() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        time.sleep(1.0)  # the run is under way (its record is made before its robots start)
+        proc.send_signal(signum)
+        _, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, stderr[-2000:]
+    assert not (out / "run-2-seed-2").exists(), stderr[-2000:]
+
+
 def test_the_shipped_example_experiment_passes_and_repeats_exactly_in_model_time(tmp_path):
     results = []
     for out in (tmp_path / "out", tmp_path / "again"):
