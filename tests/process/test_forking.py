@@ -59,9 +59,13 @@ def test_a_forked_robot_is_a_robot_process_by_its_command_line_log_and_exit_code
 
 def test_stop_all_ends_forked_robots_with_sigterm_and_then_the_server(tmp_path: Path) -> None:
     sup = Supervisor(tmp_path / "logs")
-    robots = [sup.spawn(f"robot-{rid}", _waiting_robot(rid)) for rid in (1, 2, 3)]
-    assert all(_log_says(sup, f"robot-{rid}", "waiting for a hub") for rid in (1, 2, 3))
-    server = _server_pid(robots[0])
+    try:
+        robots = [sup.spawn(f"robot-{rid}", _waiting_robot(rid)) for rid in (1, 2, 3)]
+        assert all(_log_says(sup, f"robot-{rid}", "waiting for a hub") for rid in (1, 2, 3))
+        server = _server_pid(robots[0])
+    except BaseException:  # the server and its robots would stay as long as this test's traceback holds sup
+        sup.stop_all()
+        raise
     codes = sup.stop_all()
     assert set(codes) == {"robot-1", "robot-2", "robot-3"}
     assert all(code is not None and code != -signal.SIGKILL for code in codes.values()), codes  # they ended on TERM
