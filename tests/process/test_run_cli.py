@@ -122,7 +122,7 @@ def test_signals_that_come_while_the_run_stops_wait_for_the_stop_and_its_record(
 
 def test_sigterm_ends_a_model_time_run_as_ctrl_c_does_with_its_summary(tmp_path):
     """``timeout`` or compose stops a run in model time (one process, no children) with SIGTERM: the record
-    gets its summary, as on Ctrl-C and as a run of processes does."""
+    gets its summary, as on Ctrl-C and as a run of processes does, and the robots' tasks unwind quietly."""
     record = tmp_path / "model"
     argv = ["run", "--clock", "model", "--robots", "20", "--duration", "36000", "--record", str(record)]
     proc = subprocess.Popen(_petswarm(*argv), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -137,6 +137,7 @@ def test_sigterm_ends_a_model_time_run_as_ctrl_c_does_with_its_summary(tmp_path)
             proc.kill()
     summary = json.loads((record / "summary.json").read_text())
     assert summary["problems"] == ["interrupted"] and summary["clock"] == "model", summary
+    assert "Task was destroyed" not in stderr and len(stderr) < 20_000, stderr[-2000:]  # 300 kB of them for 50
 
 
 def test_absurd_arguments_get_clear_errors():
