@@ -206,6 +206,10 @@ class Supervisor:
         return codes
 
 
+HARD_EXIT_SIGINTS = 3
+"""Ctrl-Cs (SIGINT) after which a process that is stopping its children ends at once (``Interrupts``)."""
+
+
 class Interrupts:
     """The stop signals of a process that stops its children and writes down how they ended when it is
     interrupted (``petswarm run`` on every clock, the benches).
@@ -219,11 +223,17 @@ class Interrupts:
     inside that ``finally`` while it stopped the children and wrote the record: the stop was cut short and
     summary.json was left saying ``running``, without the children's exit codes. The stop is bounded
     (``Supervisor.stop``: SIGKILL after its timeout), and SIGKILL still ends the process at once. A SIGINT that
-    whoever started the process ignored (nohup) stays ignored."""
+    whoever started the process ignored (nohup) stays ignored.
+
+    A person's third Ctrl-C (``HARD_EXIT_SIGINTS``) ends the process at once, as many command-line tools do: a
+    stop that waits on something (a robot's answer, up to a minute for an organize) is theirs to cut short. The
+    children go with it (their parent-death signal); the record keeps what it had. SIGTERMs never add up to
+    that: a process manager may send several, and means the stop to be whole."""
 
     def __init__(self) -> None:
         self.noted: list[int] = []
         self._raised = False
+        self._raised_by_sigint = 0
         self._stopping = False
         self._previous: dict[int, Any] = {}
         for signum in (signal.SIGINT, signal.SIGTERM):
@@ -232,10 +242,14 @@ class Interrupts:
                 self._previous[signum] = signal.signal(signum, self._on_signal)
 
     def _on_signal(self, signum: int, _frame: Any) -> None:
-        # runs between any two bytecodes of the main thread: no locks, no I/O
+        # runs between any two bytecodes of the main thread: no locks, no I/O but a plain write(2)
         if self._stopping:
             self.noted.append(signum)
+            if self.noted.count(signal.SIGINT) + self._raised_by_sigint >= HARD_EXIT_SIGINTS:
+                os.write(2, b"\npetswarm: third Ctrl-C: ending now, without waiting for the stop\n")
+                os._exit(130)
             return
+        self._raised_by_sigint = int(signum == signal.SIGINT)
         self._stopping = self._raised = True
         raise KeyboardInterrupt
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from ..waiting import read_until
+from ..waiting import read_until, wait_for
 
 pytestmark = [pytest.mark.process, pytest.mark.long]
 
@@ -90,6 +90,23 @@ def test_ctrl_c_stops_every_process_of_the_run():
     while _processes_mentioning(world) and time.monotonic() < deadline:
         time.sleep(0.1)
     assert _processes_mentioning(world) == []
+
+
+def test_a_third_ctrl_c_ends_the_run_at_once_and_its_processes_go_with_it():
+    """Ctrl-C, then two more before the stop is done: the run ends there (a stop can wait up to a minute on a
+    robot's answer), saying so, and none of its processes outlives it."""
+    world = f"thrice{uuid.uuid4().hex[:8]}"
+    proc = _started_run(3, "--world", world)
+    try:
+        for _ in range(3):
+            proc.send_signal(signal.SIGINT)
+            time.sleep(0.01)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130 and "third Ctrl-C: ending now" in err, err[-2000:]
+    assert wait_for("the run's processes gone", lambda: not _processes_mentioning(world), 10, every=0.1)
 
 
 def test_signals_that_come_while_the_run_stops_wait_for_the_stop_and_its_record(tmp_path):
