@@ -132,17 +132,30 @@ def experiment_command(args: argparse.Namespace) -> int:
         rows.append(_one_run(spec, seed, out / f"run-{i + 1}-seed-{seed}"))
         print(progress_line(len(rows), len(seeds), rows[-1]), file=sys.stderr, flush=True)
         if rows[-1]["exit_code"] == INTERRUPTED:  # the run took the Ctrl-C or SIGTERM: it was meant for us all
+            save(_results(spec, args, rows, interrupted=True), out, "results", _plot)  # what was found so far
+            print(
+                f"[experiment] interrupted in run {len(rows)} of {len(seeds)}; results so far in {out}", file=sys.stderr
+            )
             raise KeyboardInterrupt
-    results = {
+    results = _results(spec, args, rows)
+    save(results, out, "results", _plot)
+    emit([*table(results), f"records and results in {out}"], results, args.json)
+    return 0 if all(r["ok"] for r in rows) else 1
+
+
+def _results(
+    spec: dict[str, Any], args: argparse.Namespace, rows: list[dict[str, Any]], **extra: Any
+) -> dict[str, Any]:
+    """results.json: the file's spec, a row per run and their aggregate (``interrupted``: a Ctrl-C or SIGTERM
+    stopped the last run, whose row is in as it ended)."""
+    return {
         "name": spec.get("name"),
         "file": str(args.file),
         "spec": spec,
         "runs": rows,
         "aggregate": _aggregate(rows),
+        **extra,
     }
-    save(results, out, "results", _plot)
-    emit([*table(results), f"records and results in {out}"], results, args.json)
-    return 0 if all(r["ok"] for r in rows) else 1
 
 
 def _one_run(spec: dict[str, Any], seed: int, record: Path) -> dict[str, Any]:

@@ -274,6 +274,9 @@ def test_ctrl_c_or_sigterm_stops_an_experiment_not_only_its_current_run(tmp_path
             proc.kill()
     assert proc.returncode == 130, stderr[-2000:]
     assert not (out / "run-2-seed-2").exists(), stderr[-2000:]
+    results = json.loads((out / "results.json").read_text())  # what the experiment found until then
+    assert results["interrupted"] and [r["seed"] for r in results["runs"]] == [1], results["runs"]
+    assert "interrupted in run 1 of 2" in stderr
 
 
 def test_the_shipped_example_experiment_passes_and_repeats_exactly_in_model_time(tmp_path):
