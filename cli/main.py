@@ -562,7 +562,7 @@ def _run(args: argparse.Namespace) -> int:
         clock=args.clock,
         fail_fast=args.fail_fast,
         profile=args.profile,
-        **({} if args.dead_after is None else {"dead_after_s": args.dead_after}),
+        dead_after_s=args.dead_after,
     )
     return run(opts)
 

@@ -31,7 +31,8 @@ def run_lockstep(opts: RunOptions, scenario: Scenario | None) -> int:
     clock: dict[str, float] = {}
 
     def hub_extra(record: RunRecord) -> list[str]:
-        extra = ["--clock", "lockstep", "--expect", str(nodes), "--dead-after", str(opts.dead_after_s)]
+        extra = ["--clock", "lockstep", "--expect", str(nodes)]
+        extra += [] if opts.dead_after_s is None else ["--dead-after", str(opts.dead_after_s)]
         if scenario is not None:
             extra += ["--scenario", str(scenario.path), "--world-log", str(record.path / "world.jsonl")]
         return extra

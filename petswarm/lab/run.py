@@ -56,8 +56,9 @@ class RunOptions:
     """End the run at a robot's unexpected death instead of recording it and going on without the robot."""
     profile: str = "ideal"
     """The testbed profile (``petswarm.profiles``, ``radio_hub.profiles``) of the hub, the robots and the user."""
-    dead_after_s: float = 10.0
-    """``lockstep``: wall seconds the hub waits for a granted process's idle before it takes the process as gone."""
+    dead_after_s: float | None = None
+    """``lockstep``: wall seconds the hub waits for a granted process's idle before it takes the process as gone
+    (None: the hub's own default)."""
 
     def for_scenario(self, scenario: Any) -> RunOptions:
         """These options with the scenario's robot count and duration (what its record's manifest shows)."""
