@@ -218,12 +218,8 @@ class LockstepLoop(ModelClockLoop):
         its nodes at the end must not kill it while it closes (it would report death by signal, -15). asyncio's
         close resets each of the loop's signals to its default first; a SIGTERM in that gap killed a robot in CI
         right after its stop event. A loop without a SIGTERM handler (the run's own) leaves SIGTERM alone."""
-        # asyncio keeps its handlers in _signal_handlers and resets whatever is left there on close
-        if self._signal_handlers.pop(signal.SIGTERM, None) is not None:  # type: ignore[attr-defined]
-            signal.signal(signal.SIGTERM, signal.SIG_IGN)
-            super().close()
-            signal.set_wakeup_fd(-1)  # the self-pipe is closed; asyncio lets it go with its last handler
-            return
+        if signal.SIGTERM in self._signal_handlers:  # type: ignore[attr-defined]
+            work_done(self)
         super().close()
 
     def _on_signal(self, signum: int, frame: Any) -> None:
