@@ -241,7 +241,7 @@ def work_done(loop: asyncio.AbstractEventLoop) -> None:
     wall-clock robot that had stopped and written its last event: its exit code said death by signal (-15). A
     second SIGTERM 20 to 50 ms after the first did so 8 times in 8. asyncio's close also shuts its self-pipe
     before it hands the signals back, and a signal in between was written to a closed descriptor ("Exception
-    ignored ... Bad file descriptor" in a robot's log). ``LockstepLoop.close`` does the same for a lockstep node."""
+    ignored ... Bad file descriptor" in a robot's log). ``LockstepLoop.close`` calls it for a lockstep node."""
     handlers = getattr(loop, "_signal_handlers", {})  # asyncio's: it resets whatever is left there on close
     if handlers.pop(signal.SIGTERM, None) is not None:  # popped, not removed: no moment at the default action
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
