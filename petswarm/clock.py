@@ -41,6 +41,8 @@ class _ModelSelector(selectors.DefaultSelector):
     def select(self, timeout: float | None = None) -> list[tuple[selectors.SelectorKey, int]]:
         loop = self.loop
         assert loop is not None
+        if loop.checkpoint is not None:
+            loop.checkpoint()
         if timeout == 0 and loop.nothing_to_read():
             return []  # callbacks are ready: a poll of the self-pipe alone, nobody having written it, finds nothing
         ready = super().select(0)
@@ -86,6 +88,9 @@ class ModelClockLoop(asyncio.SelectorEventLoop):
         self.on_quiescent: Callable[[], bool] | None = None
         """Called when nothing is ready, before time moves; True when it made something ready (a driver
         releasing the messages it held for this instant, ``radio_hub.coordinator``)."""
+        self.checkpoint: Callable[[], None] | None = None
+        """Called once per pass of the loop, before it looks for I/O: an exception it raises leaves
+        ``run_until_complete`` with the loop as it was between two passes (``Interrupts.check``)."""
         super().__init__(self._model)
 
     def call_at(

@@ -400,7 +400,8 @@ def execute(opts: RunOptions, scenario: Scenario | None) -> dict[str, Any]:
     summary: dict[str, Any] = {"ok": False, "problems": ["interrupted"], "seed": opts.seed}
     # SIGTERM (timeout, compose, a CI job cancelled) ends the run as Ctrl-C does, with its summary: at its
     # default action it ended the process where it stood and the record had no summary.json at all
-    interrupts = Interrupts()
+    interrupts = Interrupts(at_safe_points=True)
+    loop.checkpoint = interrupts.check  # raised between two passes: never lost in a weakref callback (Interrupts)
     finished = False
     try:
         summary = loop.run_until_complete(_run(opts, scenario, world, record))

@@ -228,10 +228,19 @@ class Interrupts:
     A person's third Ctrl-C (``HARD_EXIT_SIGINTS``) ends the process at once, as many command-line tools do: a
     stop that waits on something (a robot's answer, up to a minute for an organize) is theirs to cut short. The
     children go with it (their parent-death signal); the record keeps what it had. SIGTERMs never add up to
-    that: a process manager may send several, and means the stop to be whole."""
+    that: a process manager may send several, and means the stop to be whole.
 
-    def __init__(self) -> None:
+    ``at_safe_points``: the first signal is only made pending, and ``check()`` raises it where the caller polls
+    (a model-time loop, once per pass). A handler's KeyboardInterrupt lands wherever the main thread is, and
+    where that is a weakref callback or a ``__del__`` Python prints "Exception ignored" and drops it: the signal
+    was spent, every later one only noted, and the run went on. A model run drops a weakref per timer it fires,
+    and an experiment in CI ran on after its SIGINT until the test's minute was up."""
+
+    def __init__(self, at_safe_points: bool = False) -> None:
         self.noted: list[int] = []
+        self.pending = False
+        """A first signal that ``check()`` has not raised yet (``at_safe_points``)."""
+        self._at_safe_points = at_safe_points
         self._raised = False
         self._raised_by_sigint = 0
         self._stopping = False
@@ -250,20 +259,33 @@ class Interrupts:
                 os._exit(130)
             return
         self._raised_by_sigint = int(signum == signal.SIGINT)
-        self._stopping = self._raised = True
+        self._stopping = True
+        if self._at_safe_points:
+            self.pending = True
+            return
+        self._raised = True
         raise KeyboardInterrupt
+
+    def check(self) -> None:
+        """A safe point: raise the pending first signal's KeyboardInterrupt here (``at_safe_points``)."""
+        if self.pending:
+            self.pending = False
+            self._raised = True
+            raise KeyboardInterrupt
 
     @contextlib.contextmanager
     def deferred(self) -> Iterator[None]:
         """Signals only noted within the block; the handlers from before ``Interrupts()`` after it, and
-        KeyboardInterrupt if a signal came within it and none had before."""
+        KeyboardInterrupt if a signal came within it, or is still pending, and none had been raised."""
         self._stopping = True
         try:
             yield
         finally:
             for signum, handler in self._previous.items():
                 signal.signal(signum, handler)
-        if self.noted and not self._raised:
+        if (self.noted or self.pending) and not self._raised:
+            self.pending = False
+            self._raised = True
             raise KeyboardInterrupt
 
 

@@ -1,0 +1,44 @@
+"""``Interrupts(at_safe_points=True)`` (petswarm/lab/processes.py): the first stop signal waits for a safe point,
+and is never dropped on the way out."""
+
+from __future__ import annotations
+
+import signal
+
+import pytest
+
+from petswarm.lab.processes import Interrupts
+
+
+def test_the_first_signal_waits_for_the_safe_point_and_is_raised_there_once() -> None:
+    interrupts = Interrupts(at_safe_points=True)
+    with pytest.raises(KeyboardInterrupt):
+        try:
+            signal.raise_signal(signal.SIGTERM)  # the handler returns: nothing is raised where it landed
+            assert interrupts.pending
+            interrupts.check()
+        finally:
+            signal.raise_signal(signal.SIGINT)  # during the stop: only noted
+            with interrupts.deferred():
+                interrupts.check()  # raised already: the stop is not interrupted again
+    assert interrupts.noted == [signal.SIGINT] and not interrupts.pending
+
+
+def test_a_signal_still_pending_when_the_stop_begins_is_raised_after_the_stop() -> None:
+    interrupts = Interrupts(at_safe_points=True)
+    signal.raise_signal(signal.SIGINT)  # after the last safe point
+    stopped = []
+    with pytest.raises(KeyboardInterrupt), interrupts.deferred():
+        stopped.append(True)
+    assert stopped == [True] and signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_without_safe_points_the_first_signal_raises_where_it_lands() -> None:
+    interrupts = Interrupts()
+    with pytest.raises(KeyboardInterrupt):
+        try:
+            signal.raise_signal(signal.SIGINT)
+        finally:
+            with interrupts.deferred():
+                pass
+    assert not interrupts.pending and interrupts.noted == []
