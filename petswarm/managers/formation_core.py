@@ -133,7 +133,8 @@ class Send:
 
 @dataclass(frozen=True)
 class Answer:
-    """Send an answer to a master's request; its MAC report goes back to the core (``answer_sent``)."""
+    """Send an answer to a master's request, or a master's non-participating notice; its MAC report goes back
+    to the core (``answer_sent``), which sends it again when it failed."""
 
     dst: int
     message: m.SwarmMessage
@@ -347,13 +348,20 @@ class FormationCore:
     def _scan(self, session: int, slot: int, count: int) -> Exchange:
         """The scan is open (the master knows nobody yet), so "every answer came" means: as many free robots as
         the user asked for answered. Until then the scan is retried, as the paper retries any step whose
-        responses have not all arrived; a robot whose answer was lost (a collision, no MAC ACK) answers again."""
+        responses have not all arrived; a robot whose answer was lost (a collision, no MAC ACK) answers again.
+
+        Only a free robot the master hears inside the available region counts: one heard weaker would, by
+        Table 1, refuse the query (the link's loss is the same both ways, up to its fading). Counted, such
+        replies ended the scan early in a crowd: of 50 robots, the first 11 to answer included 4 outside the
+        region, and 7 joined a swarm of 10 while robots inside the region went unasked."""
+        region = self.config.min_rssi_dbm
 
         def requests(_: set[int] | None) -> list[Send]:
             return [Send(BROADCAST, m.Scan(session, self.user, slot), dst_pan=BROADCAST, ack=False)]
 
         def enough(responses: Mapping[int, Incoming]) -> bool:
-            return sum(1 for i in responses.values() if _free_reply(i.message)) >= count
+            inside = (i for i in responses.values() if i.rx.rssi_dbm >= region)
+            return sum(1 for i in inside if _free_reply(i.message)) >= count
 
         step = Step(session, (m.ScanReply,), None, self._timing(slot, 8), enough=enough)
         return Exchange("scan", step, requests)
@@ -816,7 +824,10 @@ def _free_reply(message: m.SwarmMessage) -> bool:
 
 
 def _releases(session: int, robots: set[int]) -> list[Action]:
-    return [Send(addr, m.NotParticipating(session), dst_pan=BROADCAST) for addr in sorted(robots)]
+    # sent as answers are: a notice the MAC failed to deliver goes again after a random pause (``answer_sent``).
+    # Nothing else tells a candidate it was not chosen; in a crowded channel (50 robots) a lost one left a robot
+    # organizing for its whole candidate timeout, after the swarm had formed and even been dispersed
+    return [Answer(addr, m.NotParticipating(session), BROADCAST) for addr in sorted(robots)]
 
 
 def _answers(step: StepResult) -> tuple[dict[int, float], dict[str, list[int]]]:

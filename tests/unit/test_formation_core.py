@@ -347,7 +347,7 @@ def test_organize_scans_asks_the_candidates_notifies_the_closest_and_asks_again_
     assert figures["members"] == [2, 3] and figures["missing"] == [] and figures["step_retries"]["notice"] == 2
     pan = figures["pan_id"]
     assert actions.index(ConfigurePan(pan)) < actions.index(
-        Send(4, m.NotParticipating(figures["session"]), dst_pan=BROADCAST)
+        Answer(4, m.NotParticipating(figures["session"]), BROADCAST)
     )
     assert core.sequence.state == RobotState.MASTER_DRIVING and core.swarm == Swarm(
         figures["session"], pan, 1, 0, (2, 3)
@@ -393,6 +393,23 @@ def test_a_scan_reply_of_a_robot_in_another_swarm_does_not_count_towards_the_req
     assert figures["candidates"] == [2, 3] and figures["members"] == [2, 3]
 
 
+def test_a_scan_reply_heard_outside_the_region_does_not_count_towards_the_requested_number():
+    # robot 3 is heard below the region's -70 dBm: by Table 1 it will refuse, so the scan goes on for robot 4
+    core = _core(1, RobotState.FOLLOWING, user=9)
+    robots = _robots({}, joins={2: 1, 4: 1}, rssi={2: -40.0, 3: -85.0, 4: -50.0})
+    waiting = RobotState.WAITING
+
+    def scan(requests: list[Send], attempt: int) -> list[Incoming]:
+        heard = {2: -40.0, 3: -85.0} if attempt == 1 else {2: -40.0, 3: -85.0, 4: -50.0}
+        session = requests[0].message.session_id
+        return [_incoming(a, m.ScanReply(session, int(waiting), WAITING_PAN, 0), rssi) for a, rssi in heard.items()]
+
+    robots["scan"] = scan
+    figures, _, attempts = carry_out(core.organize(2, "paper", 0.0), robots)
+    assert len(attempts["scan"]) == 2 and figures["candidates"] == [2, 3, 4]
+    assert figures["refused"] == {"outside_region": [3]} and figures["members"] == [2, 4]
+
+
 def test_a_scan_with_enough_free_replies_in_its_first_window_is_not_retried():
     core = _core(1, RobotState.FOLLOWING, user=9)
     robots = _robots({2: RobotState.WAITING, 3: RobotState.WAITING}, joins={2: 1, 3: 1}, rssi={2: -40.0, 3: -50.0})
@@ -410,7 +427,7 @@ def test_organize_releases_a_chosen_robot_that_never_joined_after_the_last_retry
     assert all([r.dst for r in a] == [3] for a in attempts["notice"][1:])
     assert figures["members"] == [2] and figures["missing"] == [3]
     notice = actions.index(_of(actions, Exchange)[-1])
-    assert actions[notice + 1] == Send(3, m.NotParticipating(figures["session"]), dst_pan=BROADCAST)
+    assert actions[notice + 1] == Answer(3, m.NotParticipating(figures["session"]), BROADCAST)
 
 
 def test_organize_with_nobody_around_waits_out_every_scan_deadline_and_goes_back_to_driving():
