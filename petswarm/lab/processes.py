@@ -168,8 +168,9 @@ class Supervisor:
         text = path.read_text(errors="replace") if path.exists() else ""
         return "\n".join(text.splitlines()[-lines:])
 
-    def stop(self, names: list[str], timeout: float = 5.0) -> dict[str, int]:
-        """SIGTERM the named children, SIGKILL any still alive after ``timeout``; returns exit codes.
+    def stop(self, names: list[str], timeout: float = 5.0) -> dict[str, int | None]:
+        """SIGTERM the named children, SIGKILL any still alive after ``timeout``; returns exit codes (None: not
+        known ``KILLED_WITHIN_S`` after the SIGKILL, said on stderr).
 
         A paused child (``petswarm chaos pause``) is continued first: a stopped process keeps SIGTERM pending."""
         procs = {n: self.children[n] for n in names if n in self.children}
@@ -185,17 +186,20 @@ class Supervisor:
                 proc.wait(max(deadline - time.monotonic(), 0.05))
             except subprocess.TimeoutExpired:
                 proc.kill()
-                proc.wait()
-        for name in procs:
+                with contextlib.suppress(subprocess.TimeoutExpired):
+                    proc.wait(KILLED_WITHIN_S)
+        for name, proc in procs.items():
+            if proc.returncode is None:
+                print(f"petswarm: no exit code for {name} {KILLED_WITHIN_S:g} s after its SIGKILL", file=sys.stderr)
             log = self._logs.pop(name, None)
             if log is not None:
                 log.close()
         return {n: p.returncode for n, p in procs.items()}
 
-    def stop_all(self, timeout: float = 5.0) -> dict[str, int]:
+    def stop_all(self, timeout: float = 5.0) -> dict[str, int | None]:
         """Stop every child: robots first, so the hub sees them leave, then the rest."""
         order = sorted(self.children, key=lambda n: n == "hub")
-        codes: dict[str, int] = {}
+        codes: dict[str, int | None] = {}
         robots = [n for n in order if n != "hub"]
         codes.update(self.stop(robots, timeout))
         codes.update(self.stop([n for n in order if n == "hub"], timeout))
@@ -205,6 +209,11 @@ class Supervisor:
             self._logs.pop("forkserver").close()
         return codes
 
+
+KILLED_WITHIN_S = 5.0
+"""How long a stop waits for a child's exit code after its SIGKILL. A killed process ends at once, but the code
+of a forked robot comes from its fork server, and a server that is stopped (SIGSTOP) or wedged never sends it:
+the stop waited for ever and the run never wrote its summary."""
 
 HARD_EXIT_SIGINTS = 3
 """Ctrl-Cs (SIGINT) after which a process that is stopping its children ends at once (``Interrupts``)."""

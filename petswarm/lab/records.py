@@ -81,7 +81,7 @@ class RunRecord:
         part.write_text(json.dumps(body, indent=2, default=str) + "\n")
         os.replace(part, self.path / name)
 
-    def finish(self, summary: dict[str, Any], exit_codes: dict[str, int]) -> None:
+    def finish(self, summary: dict[str, Any], exit_codes: dict[str, int | None]) -> None:
         """The summary, with every process's exit code."""
         self.write("summary.json", {**summary, "exit_codes": exit_codes})
 

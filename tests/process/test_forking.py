@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from petswarm.lab.forking import TITLE_ROOM, ForkedProcess
-from petswarm.lab.processes import Supervisor, free_tcp_port
+from petswarm.lab.processes import KILLED_WITHIN_S, Supervisor, free_tcp_port
 from petswarm.lab.runtime import check_process, start_time
 
 pytestmark = pytest.mark.timeout(60)
@@ -182,3 +182,24 @@ def test_a_robot_stopped_just_after_it_was_forked_ends_on_that_sigterm(tmp_path:
     finally:
         sup.stop_all()
     assert all(code == -signal.SIGTERM for code, _ in ends), ends
+
+
+def test_a_stop_whose_exit_reports_never_come_ends_all_the_same_with_the_codes_unknown(tmp_path: Path) -> None:
+    """The fork server reaps the robots and reports their exit codes. Stopped (SIGSTOP), it reports nothing: the
+    stop still ends within its bounds, saying which codes it does not know, rather than failing or waiting."""
+    sup = Supervisor(tmp_path / "logs")
+    server = 0
+    try:
+        robot = sup.spawn("robot-6", _waiting_robot(6))
+        assert _log_says(sup, "robot-6", "waiting for a hub")
+        server = _server_pid(robot)
+        os.kill(server, signal.SIGSTOP)
+        started = time.monotonic()
+        codes = sup.stop(["robot-6"], timeout=1.0)
+        took = time.monotonic() - started
+    finally:
+        if server:
+            os.kill(server, signal.SIGCONT)
+        sup.stop_all()
+    assert codes == {"robot-6": None} and took < 1.0 + KILLED_WITHIN_S + 2.0, (codes, took)
+    assert not Path(f"/proc/{robot.pid}").exists() or _state(robot.pid) == "Z"  # it did end: only its code is lost
