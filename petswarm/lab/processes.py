@@ -92,6 +92,12 @@ def _ephemeral_low() -> int:
         return 32768
 
 
+KILLED_WITHIN_S = 5.0
+"""How long a stop waits for a child's exit code after its SIGKILL. A killed process ends at once, but the code
+of a forked robot comes from its fork server, and a server that is stopped (SIGSTOP) or wedged never sends it:
+the stop waited for ever and the run never wrote its summary."""
+
+
 class Supervisor:
     """Owns child processes running ``petswarm`` subcommands; ``stop_all`` ends every one of them."""
 
@@ -168,9 +174,11 @@ class Supervisor:
         text = path.read_text(errors="replace") if path.exists() else ""
         return "\n".join(text.splitlines()[-lines:])
 
-    def stop(self, names: list[str], timeout: float = 5.0) -> dict[str, int | None]:
+    def stop(
+        self, names: list[str], timeout: float = 5.0, killed_within_s: float = KILLED_WITHIN_S
+    ) -> dict[str, int | None]:
         """SIGTERM the named children, SIGKILL any still alive after ``timeout``; returns exit codes (None: not
-        known ``KILLED_WITHIN_S`` after the SIGKILL, said on stderr).
+        known ``killed_within_s`` after the SIGKILL, said on stderr).
 
         A paused child (``petswarm chaos pause``) is continued first: a stopped process keeps SIGTERM pending."""
         procs = {n: self.children[n] for n in names if n in self.children}
@@ -187,10 +195,10 @@ class Supervisor:
             except subprocess.TimeoutExpired:
                 proc.kill()
                 with contextlib.suppress(subprocess.TimeoutExpired):
-                    proc.wait(KILLED_WITHIN_S)
+                    proc.wait(killed_within_s)
         for name, proc in procs.items():
             if proc.returncode is None:
-                print(f"petswarm: no exit code for {name} {KILLED_WITHIN_S:g} s after its SIGKILL", file=sys.stderr)
+                print(f"petswarm: no exit code for {name} {killed_within_s:g} s after its SIGKILL", file=sys.stderr)
             log = self._logs.pop(name, None)
             if log is not None:
                 log.close()
@@ -209,11 +217,6 @@ class Supervisor:
             self._logs.pop("forkserver").close()
         return codes
 
-
-KILLED_WITHIN_S = 5.0
-"""How long a stop waits for a child's exit code after its SIGKILL. A killed process ends at once, but the code
-of a forked robot comes from its fork server, and a server that is stopped (SIGSTOP) or wedged never sends it:
-the stop waited for ever and the run never wrote its summary."""
 
 HARD_EXIT_SIGINTS = 3
 """Ctrl-Cs (SIGINT) after which a process that is stopping its children ends at once (``Interrupts``)."""

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from petswarm.lab.forking import TITLE_ROOM, ForkedProcess
-from petswarm.lab.processes import KILLED_WITHIN_S, Supervisor, free_tcp_port
+from petswarm.lab.processes import Supervisor, free_tcp_port
 from petswarm.lab.runtime import check_process, start_time
 
 pytestmark = pytest.mark.timeout(60)
@@ -195,11 +195,11 @@ def test_a_stop_whose_exit_reports_never_come_ends_all_the_same_with_the_codes_u
         server = _server_pid(robot)
         os.kill(server, signal.SIGSTOP)
         started = time.monotonic()
-        codes = sup.stop(["robot-6"], timeout=1.0)
+        codes = sup.stop(["robot-6"], timeout=0.5, killed_within_s=0.5)
         took = time.monotonic() - started
     finally:
         if server:
             os.kill(server, signal.SIGCONT)
         sup.stop_all()
-    assert codes == {"robot-6": None} and took < 1.0 + KILLED_WITHIN_S + 2.0, (codes, took)
+    assert codes == {"robot-6": None} and took < 10.0, (codes, took)  # 1 s of waits; before, it waited for ever
     assert not Path(f"/proc/{robot.pid}").exists() or _state(robot.pid) == "Z"  # it did end: only its code is lost
