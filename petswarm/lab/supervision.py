@@ -69,8 +69,9 @@ class Supervision:
         """Record children that died since the last call; RunAborted when the run cannot carry on."""
         fatal = []
         for name, code in self.sup.unexpected_deaths().items():
-            if code == 0 and (robot_of(name) is None or self.world_over):
+            if code == 0 and (self.world_over or (robot_of(name) is None and name != "hub")):
                 continue  # a user walked its path and left, or the world ended: its work is done
+            # (a hub that exits 0 before then was stopped from outside: the air is gone all the same)
             death = self._record_death(name, code)
             if death["robot"] is None or self.fail_fast:
                 fatal.append(f"{name} died ({describe_code(code)}):\n{self.sup.log_tail(name)}")

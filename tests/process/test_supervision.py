@@ -224,6 +224,25 @@ def test_a_robot_death_ends_the_run_under_fail_fast(tmp_path: Path) -> None:
     assert [d["process"] for d in final["deaths"]] == ["robot-2"]
 
 
+def test_a_hub_that_ends_cleanly_mid_run_ends_the_run_too(tmp_path: Path) -> None:
+    """A hub stopped by someone else's SIGTERM closes and exits 0; that is still the end of the air, not a
+    user walking off. The run took a clean exit of any child but a robot as work done, and went on for its
+    whole --duration with the progress frozen and the summary saying running."""
+    env, record = _env(tmp_path), tmp_path / "record"
+    run = _run(env, record, "hub-ends", "--robots", "2", "--duration", "600")
+    try:
+        summary = _running_summary(record, run, "totals")
+        os.kill(summary["processes"]["hub"], signal.SIGTERM)
+        _, err = run.communicate(timeout=60)
+    finally:
+        run.kill()
+        run.wait()
+    assert run.returncode == 1, err[-3000:]
+    final = json.loads((record / "summary.json").read_text())
+    assert not final["ok"] and final["problems"][0].startswith("failed: hub died (exit 0)"), final["problems"]
+    assert not final.get("running") and [d["process"] for d in final["deaths"]] == ["hub"]
+
+
 def test_a_run_killed_outright_leaves_a_summary_and_no_children(tmp_path: Path) -> None:
     env, record = _env(tmp_path), tmp_path / "record"
     run = _run(env, record, "orphans", "--robots", "3", "--duration", "30")
