@@ -163,6 +163,12 @@ def load(path: str | Path) -> Scenario:
         data = tomllib.loads(path.read_text())
     except FileNotFoundError:
         raise ScenarioError(f"no scenario file {path}") from None
+    except IsADirectoryError:
+        raise ScenarioError(
+            f"{path} is a directory, not a scenario file (the shipped ones: scenarios/*.toml)"
+        ) from None
+    except (OSError, UnicodeDecodeError) as err:
+        raise ScenarioError(f"cannot read scenario file {path}: {err}") from None
     except tomllib.TOMLDecodeError as err:
         raise ScenarioError(f"{path}: not TOML: {err}") from None
     try:

@@ -170,6 +170,33 @@ def test_absurd_arguments_get_clear_errors():
     assert nohub.returncode == 2 and "petswarm stats:" in nohub.stderr
 
 
+@pytest.mark.parametrize(
+    ("args", "says"),
+    [
+        (("scenarios", "--clock", "model"), "scenarios is a directory, not a scenario file"),
+        (("--config", "no-such.toml"), "--config cannot read no-such.toml"),
+        (("--config", "scenarios"), "--config cannot read scenarios"),
+        (("--config", "{bad}", "--clock", "model"), "unknown key 'min_bee' (did you mean 'min_be'?)"),
+        (("--config", "{bad}"), "unknown key 'min_bee'"),  # on the wall clock: before a hub starts and dies of it
+    ],
+)
+def test_a_scenario_or_config_that_cannot_be_used_is_refused_before_anything_starts(
+    tmp_path: Path, args: tuple[str, ...], says: str
+) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[mac]\nmin_bee = 3\n")
+    argv = [a.replace("{bad}", str(bad)) for a in args]
+    proc = subprocess.run(
+        _petswarm("run", *argv, "--record", str(tmp_path / "run")),
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=Path(__file__).resolve().parents[2],
+    )
+    assert proc.returncode == 2 and says in proc.stderr and "Traceback" not in proc.stderr, proc.stderr[-2000:]
+    assert len(proc.stderr.strip().splitlines()) == 1 and not (tmp_path / "run").exists()
+
+
 def test_a_run_leaves_a_record_with_manifest_events_and_summary(tmp_path):
     """The record of a run of processes. In lockstep, so that the swarm it asks for forms on a loaded machine
     too: on the wall clock, starved robots miss the protocol's step deadlines (seen at load 9: no member)."""
