@@ -170,11 +170,11 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument(
         "--robots",
         type=bounded(int, 1, MAX_MODEL_ROBOTS),
-        default=5,
+        default=None,
         help=f"number of robots (default 5; up to {MAX_PROCESS_ROBOTS} as processes, {MAX_MODEL_ROBOTS} in model time)",
     )
     run.add_argument("--seed", type=seed, default=None, help="seed (default: random, and reported)")
-    run.add_argument("--duration", type=bounded(float, 0.1, 86400), default=5.0, help="seconds of traffic (default 5)")
+    run.add_argument("--duration", type=bounded(float, 0.1, 86400), default=None, help="seconds of traffic (default 5)")
     run.add_argument(
         "--ping-interval",
         type=bounded(float, 0.01, 60),
@@ -195,7 +195,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument(
         "--organize",
         type=bounded(int, 0, 199),
-        default=0,
+        default=None,
         help="robot 1 is connected to user 1 and organizes a swarm of this many (default 0: none)",
     )
     run.add_argument(
@@ -530,10 +530,27 @@ def _run_robot(args: argparse.Namespace, config: RobotConfig) -> int:
     return asyncio.run(run_robot(config))
 
 
+SCENARIO_SETS = {
+    "robots": "[robots] count",
+    "duration": "duration_s",
+    "organize": "its robots' roles",
+    "ping_interval": "no ping phase",
+}
+"""Options of ``petswarm run`` that a scenario decides for itself, with where (given with one, they were ignored)."""
+
+
 def _run(args: argparse.Namespace) -> int:
     from petswarm.lab.launch import run
     from petswarm.lab.run import RunOptions, default_ping_interval
 
+    given = [name for name in SCENARIO_SETS if getattr(args, name) is not None]
+    if args.scenario and given:
+        why = "; ".join(f"--{n.replace('_', '-')}: {SCENARIO_SETS[n]}" for n in given)
+        print(f"petswarm run: the scenario sets these itself ({why}); leave them out or edit the file", file=sys.stderr)
+        return 2
+    args.robots = 5 if args.robots is None else args.robots
+    args.duration = 5.0 if args.duration is None else args.duration
+    args.organize = 0 if args.organize is None else args.organize
     if args.clock != "model" and args.robots > MAX_PROCESS_ROBOTS:
         print(
             f"petswarm run: --robots {args.robots} is more robot processes than one run starts "

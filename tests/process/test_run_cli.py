@@ -178,9 +178,14 @@ def test_absurd_arguments_get_clear_errors():
         (("--config", "scenarios"), "--config cannot read scenarios"),
         (("--config", "{bad}", "--clock", "model"), "unknown key 'min_bee' (did you mean 'min_be'?)"),
         (("--config", "{bad}"), "unknown key 'min_bee'"),  # on the wall clock: before a hub starts and dies of it
+        # options a scenario sets itself were ignored without a word (1 robot for 30 s, not 10 for 2)
+        (
+            ("scenarios/leading-arcs.toml", "--robots", "10", "--duration", "2", "--clock", "model"),
+            "the scenario sets these itself (--robots: [robots] count; --duration: duration_s)",
+        ),
     ],
 )
-def test_a_scenario_or_config_that_cannot_be_used_is_refused_before_anything_starts(
+def test_a_scenario_config_or_option_that_cannot_be_used_is_refused_before_anything_starts(
     tmp_path: Path, args: tuple[str, ...], says: str
 ) -> None:
     bad = tmp_path / "bad.toml"
