@@ -60,7 +60,7 @@ INTERRUPTED = 130
 _TOP_KEYS = ("name", "repetitions", "seed", "seeds", "require", "run", "faults")
 WAIVABLE = {
     "all_pairs_heard": "not every robot heard every other robot",
-    "full_swarm": "robots available joined the swarm",
+    "full_swarm": "robots it could take joined the swarm",
 }
 """The checks of `petswarm run` an experiment's ``require`` may leave out, by the wording of the problem the
 run reports for each (petswarm/lab/run.py; a unit test keeps the two in step). Every other problem fails a run."""

@@ -362,7 +362,11 @@ async def organize_and_disperse(
     problems = swarm_problems(opts.robots, await statuses(ctl, opts.robots, dead()), organized)
     expected = min(opts.organize, opts.robots - 1 - len(set(dead()) - {1}))
     if len(organized["members"]) < expected:
-        problems.append(f"only {len(organized['members'])} of the {expected} robots available joined the swarm")
+        found = len(organized.get("available", []))  # the master's count: the robots that answered available
+        problems.append(
+            f"only {len(organized['members'])} of the {expected} robots it could take joined the swarm "
+            f"(the master found {found} available)"
+        )
     if not organized["members"]:
         return {"organization": organized, "problems": problems}
     dispersed = await ctl.command(1, "disperse", 60.0)
