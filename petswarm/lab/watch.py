@@ -56,6 +56,11 @@ def watch_command(args: argparse.Namespace) -> int:
 def load_replay(path: Path) -> Replay:
     """The frames of a run record (its directory or its ``world.jsonl``); ValueError when it holds none."""
     file = path / "world.jsonl" if path.is_dir() else path
+    if path.is_dir() and not file.exists() and (path / "manifest.json").exists():
+        # a run without a world (the default run: robots pinging where they stand) writes no world log
+        raise ValueError(
+            f"{path} is a run record without a world log: only scenario runs (petswarm run SCENARIO) have one"
+        )
     with file.open() as lines:
         replay = parse_replay(lines)
     if not replay.frames:

@@ -73,3 +73,13 @@ def test_the_replay_clock_plays_pauses_seeks_and_changes_speed():
         clock.set_speed(0, 103.0)
     with pytest.raises(ValueError, match="times_us"):
         ReplayClock([])
+
+
+def test_replaying_a_record_without_a_world_log_says_which_runs_have_one(tmp_path):
+    from petswarm.lab.watch import load_replay
+
+    (tmp_path / "manifest.json").write_text("{}")  # the default run's record: robots pinging, no world
+    with pytest.raises(ValueError, match=r"without a world log: only scenario runs \(petswarm run SCENARIO\)"):
+        load_replay(tmp_path)
+    with pytest.raises(FileNotFoundError):  # not a record at all: the plain error names the file
+        load_replay(tmp_path / "elsewhere")
