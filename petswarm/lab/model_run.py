@@ -16,6 +16,7 @@ import asyncio
 import contextlib
 import contextvars
 import functools
+import json
 import math
 import time
 import weakref
@@ -406,6 +407,12 @@ def execute(opts: RunOptions, scenario: Scenario | None) -> dict[str, Any]:
     try:
         summary = loop.run_until_complete(_run(opts, scenario, world, record))
         finished = True
+    except KeyboardInterrupt:
+        summary["interrupted"] = True
+        raise
+    except Exception as err:  # the record says what ended the run, not "interrupted"
+        summary["problems"] = [f"failed: {type(err).__name__}: {err}"]
+        raise
     finally:
         with interrupts.deferred():  # a second signal waits for the summary (Interrupts)
             model_time_s = loop.time()
@@ -417,6 +424,8 @@ def execute(opts: RunOptions, scenario: Scenario | None) -> dict[str, Any]:
             summary["wall_time_s"] = round(time.perf_counter() - started, 3)
             summary["speedup"] = round(model_time_s / max(summary["wall_time_s"], 1e-9), 1)
             record.finish(summary, {})
+            if summary.get("interrupted") and opts.as_json:
+                print(json.dumps(summary, indent=2))  # --json promises a summary, interrupted too
     if scenario is not None:
         summary["driving"] = driving_metrics(read_world(record.path / "world.jsonl"))
     violations = check_record(record.path)

@@ -142,7 +142,8 @@ def supervise(
         return 1
     except KeyboardInterrupt:
         progress("interrupted; stopping every process")
-        summary["problems"] = ["interrupted"]
+        # what the run had learnt by then (the phase, its traffic totals), as its running summary showed it
+        summary = {**watch.progress, **summary, "problems": ["interrupted"], "interrupted": True}
         return 130
     finally:
         # a second Ctrl-C or SIGTERM waits until every process is stopped and the record says how (Interrupts)
@@ -151,8 +152,11 @@ def supervise(
                 session.close()
             codes = sup.stop_all()
             summary["deaths"] = watch.deaths
+            summary["elapsed_s"] = round(time.monotonic() - watch.started, 2)
             record.finish(summary, codes)
             progress(f"stopped {len(codes)} processes; record in {record.path}")
+            if summary.get("interrupted") and opts.as_json:
+                print(json.dumps({**summary, "exit_codes": codes}, indent=2))  # --json promises a summary
     if after_stop is not None:
         after_stop(summary, record)
     violations = check_record(record.path)
@@ -313,11 +317,16 @@ def _cleared(fault_id: int | None) -> str:
     return "clear every fault" if fault_id is None else f"clear fault {fault_id}"
 
 
+_NOT_COUNTERS = ("pan_id", "short_addr", "channel")
+"""Integers of a node's stats that name its radio rather than count anything: no total."""
+
+
 def _totals(stats: dict[str, Any]) -> dict[str, int]:
+    """The hub's per-node counters summed over the nodes (the progress line's and running summary's)."""
     totals: dict[str, int] = {}
     for node in stats["nodes"].values():
         for name, value in node.items():
-            if isinstance(value, int) and not isinstance(value, bool):
+            if isinstance(value, int) and not isinstance(value, bool) and name not in _NOT_COUNTERS:
                 totals[name] = totals.get(name, 0) + value
     return totals
 

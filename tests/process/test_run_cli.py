@@ -117,6 +117,7 @@ def test_signals_that_come_while_the_run_stops_wait_for_the_stop_and_its_record(
     proc = _started_run(3, "--world", world, "--record", str(record))
     sent = 0
     try:
+        assert "t=  0.0/60s" in read_until(proc.stderr, "t=  0.0/60s", timeout=30)  # the ping phase's first totals
         proc.send_signal(signal.SIGINT)
         deadline = time.monotonic() + 30
         while proc.poll() is None and time.monotonic() < deadline:
@@ -131,6 +132,9 @@ def test_signals_that_come_while_the_run_stops_wait_for_the_stop_and_its_record(
     summary = json.loads((record / "summary.json").read_text())
     assert "running" not in summary and summary["problems"] == ["interrupted"], (sent, summary)
     assert set(summary["exit_codes"]) == {"hub", "robot-1", "robot-2", "robot-3"}, summary["exit_codes"]
+    # what the run had found until then stays in its summary, as its running summary showed it
+    assert summary["interrupted"] and summary["phase"] == "ping" and summary["totals"]["sent"] > 0, summary
+    assert "pan_id" not in summary["totals"]  # a radio's name, not a counter to add up
     deadline = time.monotonic() + 5
     while _processes_mentioning(world) and time.monotonic() < deadline:
         time.sleep(0.1)
@@ -141,19 +145,20 @@ def test_sigterm_ends_a_model_time_run_as_ctrl_c_does_with_its_summary(tmp_path)
     """``timeout`` or compose stops a run in model time (one process, no children) with SIGTERM: the record
     gets its summary, as on Ctrl-C and as a run of processes does, and the robots' tasks unwind quietly."""
     record = tmp_path / "model"
-    argv = ["run", "--clock", "model", "--robots", "20", "--duration", "36000", "--record", str(record)]
+    argv = ["run", "--clock", "model", "--robots", "20", "--duration", "36000", "--record", str(record), "--json"]
     proc = subprocess.Popen(_petswarm(*argv), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         seen = read_until(proc.stderr, "20/20 robots attached", timeout=60)
         assert "20/20 robots attached" in seen, seen
         proc.send_signal(signal.SIGTERM)
-        _, stderr = proc.communicate(timeout=30)  # read: the run's robots write on their way out
+        out, stderr = proc.communicate(timeout=30)  # read: the run's robots write on their way out
         assert proc.returncode == 130, stderr[-2000:]
     finally:
         if proc.poll() is None:
             proc.kill()
     summary = json.loads((record / "summary.json").read_text())
-    assert summary["problems"] == ["interrupted"] and summary["clock"] == "model", summary
+    assert summary["problems"] == ["interrupted"] and summary["clock"] == "model" and summary["interrupted"], summary
+    assert {**json.loads(out), "exit_codes": {}} == summary  # --json: the interrupted summary on stdout too
     assert "Task was destroyed" not in stderr and len(stderr) < 20_000, stderr[-2000:]  # 300 kB of them for 50
 
 
