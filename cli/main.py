@@ -33,7 +33,7 @@ EPILOG = """examples:
   petswarm stats                                the hub's counters per node and per channel
   petswarm report runs/<time>-<seed>            a recorded run's summary and plots
   petswarm watch --world lab                    a web page drawing the world live (--replay RUN: a record)
-  petswarm bench hub|organize|ir|reaction|surround   the benchmarks (figures, JSON and plots)
+  petswarm bench hub|organize|ir|reaction|surround|scale|start   the benchmarks (figures, JSON, plots)
 
 start the hub before its robots (they wait up to 15 s for it); every process of one swarm uses the
 same --world and --hub endpoint.

@@ -48,9 +48,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--clock",
         choices=("wall", "model"),
-        default="wall",
-        help="wall (default): each run as processes over zenoh; model: each run in model time (petswarm run "
-        "--clock model), deterministic per seed and much faster",
+        default="model",
+        help="model (default, as bench organize): each run in model time (petswarm run --clock model), "
+        "deterministic per seed and much faster; wall: each run as processes over zenoh",
     )
 
 

@@ -23,7 +23,9 @@ from petswarm.bench.output import emit, save
 
 
 def robot_counts(text: str) -> list[int]:
-    """``10,20,50,100``: the robot counts, each 2..5000."""
+    """``10,20,50,100``: the robot counts, each 2..5000 (``none``: no count, for ``--model-robots``)."""
+    if text.strip().lower() == "none":
+        return []
     try:
         counts = sorted({int(part) for part in text.split(",") if part.strip()})
     except ValueError:
@@ -40,9 +42,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--robots", type=robot_counts, default=[10, 20, 50, 100], help="robot counts (default 10,20,50,100)"
     )
-    parser.add_argument("--model-robots", type=robot_counts, default=[1000], help="more counts in model time only")
-    parser.add_argument("--lockstep-max", type=bounded(int, 0, 5000), default=100, help="largest lockstep run")
-    parser.add_argument("--duration", type=bounded(float, 0.5, 3600), default=5.0, help="model seconds a run")
+    parser.add_argument(
+        "--model-robots",
+        type=robot_counts,
+        default=[1000],
+        help="more counts run in model time only (default 1000; none: no more)",
+    )
+    parser.add_argument(
+        "--lockstep-max", type=bounded(int, 0, 5000), default=100, help="largest lockstep run (default %(default)s)"
+    )
+    parser.add_argument(
+        "--duration", type=bounded(float, 0.5, 3600), default=5.0, help="model seconds a run (default %(default)s)"
+    )
     parser.add_argument("--seed", type=seed, default=3, help="seed of every run (default %(default)s)")
     parser.add_argument("--out", default="bench-results", help="directory for JSON and plots (default %(default)s)")
     parser.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
