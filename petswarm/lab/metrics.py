@@ -186,8 +186,23 @@ def describe_driving(driving: dict[str, Any]) -> str:
     distance = driving.get("user_master_distance_m")
     if distance:
         lines.append(f"user-master distance: median {distance['median']:.2f} m, p90 {distance['p90']:.2f} m")
+    lines += _swarm_shape(driving)
     lines += reaction_table(driving.get("reactions", []))
     return "\n".join(lines)
+
+
+def _swarm_shape(driving: dict[str, Any]) -> list[str]:
+    """The swarm as a whole (a surround run's figures): connected, its centre's distance from the user, r."""
+    centre, extent = driving.get("centre_to_user_m"), driving.get("extent_m")
+    if not centre or not extent or driving.get("connected_fraction") is None:
+        return []
+    return [
+        f"swarm connected {driving['connected_fraction']:.3f} of the time"
+        + (", and at the end" if driving.get("connected_at_end") else ", not at the end"),
+        f"swarm centre to user: median {centre['median']:.2f} m, p90 {centre['p90']:.2f} m, "
+        f"{driving['centre_to_user_end_m']:.2f} m at the end",
+        f"swarm extent r: median {extent['median']:.2f} m, {driving['extent_end_m']:.2f} m at the end",
+    ]
 
 
 def reaction_table(reactions: list[dict[str, Any]]) -> list[str]:

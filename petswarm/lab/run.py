@@ -511,9 +511,14 @@ def _print(summary: dict[str, Any], as_json: bool) -> None:
         return
     print(f"seed {summary['seed']}  world {summary['world']}  {summary['robots']} robots  {summary['duration_s']:g} s")
     pinged = "scenario" not in summary  # a scenario run has no ping phase: nobody is 'heard from'
-    header = f"{'node':<10}{'sent':>7}{'delivered':>11}{'collided':>10}{'lost':>7}{'retries':>9}{'cca fail':>10}"
-    print(header + ("  heard from" if pinged else ""))
-    for name, n in summary["nodes"].items():
+    nodes = summary["nodes"]
+    if not pinged and not any(n["sent"] or n["delivered"] for n in nodes.values()):
+        nodes = {}  # a surround swarm exchanges no messages: a table of zeros says nothing
+        print(f"radio: silent (none of the {len(summary['nodes'])} nodes sent or received a frame)")
+    else:
+        header = f"{'node':<10}{'sent':>7}{'delivered':>11}{'collided':>10}{'lost':>7}{'retries':>9}{'cca fail':>10}"
+        print(header + ("  heard from" if pinged else ""))
+    for name, n in nodes.items():
         heard = "  " + (", ".join(map(str, n["heard_from"])) or "nobody") if pinged else ""
         print(
             f"{name:<10}{n['sent']:>7}{n['delivered']:>11}{n['collided']:>10}{n['lost']:>7}"

@@ -128,6 +128,28 @@ def test_a_scenario_summary_has_no_empty_heard_from_column(capsys: Any) -> None:
     assert "heard from" in out and "  2, 3" in out and "  nobody" in out and "[" not in out, out
 
 
+def test_a_surround_run_prints_the_swarm_not_a_table_of_silent_radios(capsys: Any) -> None:
+    from petswarm.lab.run import _print
+
+    silent = {"sent": 0, "delivered": 0, "collided": 0, "lost": 0, "mac_retries": 0, "channel_access_failures": 0}
+    driving = {
+        "collisions": 0,
+        "connected_fraction": 0.994,
+        "connected_at_end": True,
+        "centre_to_user_m": {"median": 0.18, "p90": 0.29},
+        "centre_to_user_end_m": 0.05,
+        "extent_m": {"median": 0.69, "p90": 0.74},
+        "extent_end_m": 0.7,
+    }
+    nodes = {f"robot-{i}": silent for i in range(1, 21)}
+    _print(_summary(scenario="surround-cylinder", problems=[], nodes=nodes, driving=driving), as_json=False)
+    out = capsys.readouterr().out
+    assert "radio: silent (none of the 20 nodes sent or received a frame)" in out and "robot-7" not in out, out
+    assert "swarm connected 0.994 of the time, and at the end" in out
+    assert "swarm centre to user: median 0.18 m, p90 0.29 m, 0.05 m at the end" in out
+    assert "swarm extent r: median 0.69 m, 0.70 m at the end" in out
+
+
 def test_report_prints_its_plots_once_and_json_on_request(tmp_path: Path, capsys: Any) -> None:
     from petswarm.lab.report import report_command
     from tests.unit.test_report_world import _run_record
