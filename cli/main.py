@@ -9,7 +9,7 @@ import os
 import sys
 from typing import TYPE_CHECKING, Any
 
-from petswarm.lab.arguments import CLOCKS, bounded, robot_id, seed
+from petswarm.lab.arguments import CLOCKS, CommandParser, bounded, robot_id, seed
 from petswarm.lab.robot_command import add_hub as _add_hub
 from petswarm.lab.robot_command import add_node_clock as _add_node_clock
 from petswarm.lab.robot_command import add_profile, add_robot_arguments, robot_config
@@ -58,11 +58,21 @@ summary.json is rewritten every second while the run goes, so a run killed outri
 ("running": true); its children die with it, paused ones too."""
 
 
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("petswarm")
+    except PackageNotFoundError:  # run from a checkout that was never installed
+        return "(not installed)"
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The whole command line."""
-    parser = argparse.ArgumentParser(
+    parser = CommandParser(
         prog="petswarm", description=__doc__, epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter
     )
+    parser.add_argument("--version", action="version", version=f"petswarm {_version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     hub = sub.add_parser("hub", help="run the radio hub (zenoh router + emulated air)")

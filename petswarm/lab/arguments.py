@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import difflib
 import json
 import math
 import os
@@ -14,6 +15,21 @@ if TYPE_CHECKING:
 
 CLOCKS = ("wall", "model", "lockstep")
 """The clocks a run takes (``petswarm run --clock``, an experiment's ``[run] clock``; docs/DESIGN.md "Time")."""
+
+
+class CommandParser(argparse.ArgumentParser):
+    """A parser whose subcommands refuse an argument they do not know themselves, with their own usage and the
+    nearest option: argparse hands it up to the top, which printed ``petswarm [-h] COMMAND ...`` for a typo
+    such as ``petswarm run --robtos 5``."""
+
+    def parse_known_args(self, args=None, namespace=None):  # type: ignore[no-untyped-def,override]
+        """As argparse's, but an argument left over is an error of this parser's."""
+        parsed, extra = super().parse_known_args(args, namespace)
+        if extra:
+            options = [o for o in self._option_string_actions if o.startswith("--")]
+            near = difflib.get_close_matches(extra[0].split("=")[0], options, n=1)
+            self.error(f"unrecognized arguments: {' '.join(extra)}" + (f" (did you mean {near[0]}?)" if near else ""))
+        return parsed, extra
 
 
 def int_auto(text: str) -> int:

@@ -163,3 +163,32 @@ def test_report_prints_its_plots_once_and_json_on_request(tmp_path: Path, capsys
     assert report_command(argparse.Namespace(run=str(run), out=None, json=True)) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["summary"]["ok"] and report["driving"]["reactions"] and len(report["plots"]) == 3
+
+
+@pytest.mark.parametrize(
+    ("argv", "says"),
+    [
+        (["run", "--robtos", "5"], "petswarm run: error: unrecognized arguments: --robtos (did you mean --robots?)"),
+        (["bench", "scale", "--robts", "5"], "petswarm bench scale: error: unrecognized arguments: --robts 5"),
+        (["swarm", "status", "--robot", "2", "--jsn"], "petswarm swarm status: error: unrecognized arguments"),
+    ],
+)
+def test_a_mistyped_option_is_refused_by_its_own_command_with_the_nearest_name(
+    argv: list[str], says: str, capsys: Any
+) -> None:
+    with pytest.raises(SystemExit) as stop:
+        build_parser().parse_args(argv)
+    err = capsys.readouterr().err
+    assert (
+        stop.value.code == 2
+        and says in err
+        and f"usage: petswarm {' '.join(argv[: 2 if argv[0] != 'run' else 1])}" in err
+    )
+
+
+def test_version_names_the_installed_package(capsys: Any) -> None:
+    from importlib.metadata import version
+
+    with pytest.raises(SystemExit) as stop:
+        build_parser().parse_args(["--version"])
+    assert stop.value.code == 0 and capsys.readouterr().out == f"petswarm {version('petswarm')}\n"
