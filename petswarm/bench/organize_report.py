@@ -196,7 +196,7 @@ def table(results: dict[str, Any]) -> list[str]:
         *odd_lines(results["runs"]),
         "",
         *(paper.lines(results["paper"], s.get("profile", "ideal")) if results.get("paper") else []),
-        f"wall time {results['elapsed_s']:.0f} s; raw figures of every run in {results['files']['json']}",
+        f"wall time {results['elapsed_s']:.1f} s; raw figures of every run in {results['files']['json']}",
     ]
 
 

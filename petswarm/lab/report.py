@@ -42,7 +42,9 @@ def report_command(args: argparse.Namespace) -> int:
     manifest = json.loads((run / "manifest.json").read_text())
     summary_file = run / "summary.json"
     summary = json.loads(summary_file.read_text()) if summary_file.exists() else None
-    events = {p.stem: read_events(p) for p in sorted((run / "events").glob("*.jsonl"))}
+    # robot-2 before robot-10: by length, then name
+    files = sorted((run / "events").glob("*.jsonl"), key=lambda p: (len(p.stem), p.stem))
+    events = {p.stem: read_events(p) for p in files}
     out = Path(args.out) if args.out else run
     out.mkdir(parents=True, exist_ok=True)
     plots = [out / "report.png"]

@@ -80,3 +80,14 @@ def test_report_without_world_log_draws_no_driving_plots(tmp_path: Path, capsys:
     assert (run / "report.png").exists()
     assert not (run / "trajectories.png").exists()
     assert "formation error" not in capsys.readouterr().out
+
+
+def test_report_lists_robots_in_number_order(tmp_path: Path, capsys: Any) -> None:
+    run = tmp_path / "run"
+    _run_record(run, with_world=False)
+    for rid in (1, 2, 10, 11, 3):
+        event = {"t": 1.0, "mono": 0.0, "kind": "start", "robot_id": rid, "state": "waiting"}
+        (run / "events" / f"robot-{rid}.jsonl").write_text(json.dumps(event) + "\n")
+    assert report_command(argparse.Namespace(run=str(run), out=None, json=False)) == 0
+    listed = [line.split()[0] for line in capsys.readouterr().out.splitlines() if " events; " in line]
+    assert listed == ["robot-1", "robot-2", "robot-3", "robot-10", "robot-11"], listed
