@@ -491,6 +491,11 @@ async def _run_robot(argv: list[str], air: MemoryAir) -> None:
         assert running.task is not None
         await running.task
         await running.robot.close()
+    except asyncio.CancelledError:
+        if not running.gone:  # the run was interrupted (a killed robot, gone, leaves no last event)
+            # its record ends as a process's does on SIGTERM, not at whatever it did last
+            running.robot.log.record("stop", driving=dict(running.robot.driver.counters), interrupted=True)
+        raise
     finally:
         running._end()  # as at the end of its process: whatever it left pending ends with it
 

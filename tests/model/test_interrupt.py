@@ -63,4 +63,7 @@ def test_a_signal_landing_in_a_weakref_callback_still_stops_the_model_run(
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
     assert summary["problems"] == ["interrupted"] and summary["clock"] == "model"
     assert summary["model_time_s"] == SIGNAL_AT_S  # raised at the next pass, before time moves on
+    for rid in (1, 2, 3):  # each robot's record ends as a process's does when its run is stopped
+        last = json.loads((tmp_path / "run" / "events" / f"robot-{rid}.jsonl").read_text().splitlines()[-1])
+        assert last["kind"] == "stop" and last["interrupted"] and last["mono"] == SIGNAL_AT_S, last
     assert {s: signal.getsignal(s) for s in before} == before  # the process's own handlers are back
