@@ -246,7 +246,10 @@ class Interrupts:
     (a model-time loop, once per pass). A handler's KeyboardInterrupt lands wherever the main thread is, and
     where that is a weakref callback or a ``__del__`` Python prints "Exception ignored" and drops it: the signal
     was spent, every later one only noted, and the run went on. A model run drops a weakref per timer it fires,
-    and an experiment in CI ran on after its SIGINT until the test's minute was up."""
+    and an experiment in CI ran on after its SIGINT until the test's minute was up. Without ``at_safe_points``
+    (a run of processes, whose main thread may block on a robot's answer for a minute and must be interrupted
+    there) the handler still raises where it lands, and ``check()``, called from the run's own loop, raises
+    again a first signal whose KeyboardInterrupt never reached it."""
 
     def __init__(self, at_safe_points: bool = False) -> None:
         self.noted: list[int] = []
@@ -256,6 +259,8 @@ class Interrupts:
         self._raised = False
         self._raised_by_sigint = 0
         self._stopping = False
+        self._stop_began = False
+        """In or past ``deferred()``: the KeyboardInterrupt has done its work (or none came)."""
         self._previous: dict[int, Any] = {}
         for signum in (signal.SIGINT, signal.SIGTERM):
             current = signal.getsignal(signum)
@@ -279,8 +284,9 @@ class Interrupts:
         raise KeyboardInterrupt
 
     def check(self) -> None:
-        """A safe point: raise the pending first signal's KeyboardInterrupt here (``at_safe_points``)."""
-        if self.pending:
+        """A safe point of the run's own loop: raise the first signal's KeyboardInterrupt here when it is
+        pending (``at_safe_points``), or when the handler raised it and yet the loop goes on (it was lost)."""
+        if self.pending or (self._raised and not self._stop_began):
             self.pending = False
             self._raised = True
             raise KeyboardInterrupt
@@ -289,7 +295,7 @@ class Interrupts:
     def deferred(self) -> Iterator[None]:
         """Signals only noted within the block; the handlers from before ``Interrupts()`` after it, and
         KeyboardInterrupt if a signal came within it, or is still pending, and none had been raised."""
-        self._stopping = True
+        self._stopping = self._stop_began = True
         try:
             yield
         finally:

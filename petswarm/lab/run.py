@@ -124,6 +124,7 @@ def supervise(
     watch = Supervision(sup, record, opts.fail_fast, progress)
     watch.write_progress(force=True)  # from the first moment a kill leaves a summary
     interrupts = Interrupts()  # SIGTERM stops the run as Ctrl-C does, and only the first signal acts
+    watch.checkpoint = interrupts.check  # the run's loops raise again a first signal whose raise was lost
     session: zenoh.Session | None = None
     summary: dict[str, Any] = {"ok": False, "problems": ["the run did not finish"], "seed": opts.seed}
     try:

@@ -57,6 +57,8 @@ class Supervision:
         self.progress: dict[str, Any] = {}
         """What the run last learnt (totals, phase): it goes into the summary written as the run goes."""
         self._written = 0.0
+        self.checkpoint: Callable[[], None] | None = None
+        """Called first by every ``check`` (``Interrupts.check``: a stop signal whose raise was lost)."""
         self.world_over = False
         """Set once the run's world has ended (a lockstep run's model time is over): nodes then leave by
         themselves, and a clean exit is no death."""
@@ -67,6 +69,8 @@ class Supervision:
 
     def check(self) -> None:
         """Record children that died since the last call; RunAborted when the run cannot carry on."""
+        if self.checkpoint is not None:
+            self.checkpoint()
         fatal = []
         for name, code in self.sup.unexpected_deaths().items():
             if code == 0 and (self.world_over or (robot_of(name) is None and name != "hub")):

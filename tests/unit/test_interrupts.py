@@ -4,6 +4,7 @@ and is never dropped on the way out."""
 from __future__ import annotations
 
 import signal
+import weakref
 
 import pytest
 
@@ -42,3 +43,21 @@ def test_without_safe_points_the_first_signal_raises_where_it_lands() -> None:
             with interrupts.deferred():
                 pass
     assert not interrupts.pending and interrupts.noted == []
+
+
+class _Dropped:
+    """An object whose only strong reference goes away: its weakref's callback runs at once."""
+
+
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
+def test_a_first_signal_lost_in_a_weakref_callback_is_raised_again_at_the_runs_next_check() -> None:
+    interrupts = Interrupts()  # a run of processes: the handler raises where the signal lands
+    dropped = _Dropped()
+    ref = weakref.ref(dropped, lambda _: signal.raise_signal(signal.SIGTERM))
+    del dropped  # the handler's KeyboardInterrupt is raised in the callback, where Python drops it
+    assert ref() is None  # and this line runs: the run would go on
+    with pytest.raises(KeyboardInterrupt):
+        interrupts.check()  # the run's loop (Supervision.check) raises it again
+    with interrupts.deferred():
+        interrupts.check()  # the stop under way is not interrupted again
+    assert interrupts.noted == []
