@@ -350,18 +350,17 @@ class FormationCore:
         the user asked for answered. Until then the scan is retried, as the paper retries any step whose
         responses have not all arrived; a robot whose answer was lost (a collision, no MAC ACK) answers again.
 
-        Only a free robot the master hears inside the available region counts: one heard weaker would, by
-        Table 1, refuse the query (the link's loss is the same both ways, up to its fading). Counted, such
-        replies ended the scan early in a crowd: of 50 robots, the first 11 to answer included 4 outside the
-        region, and 7 joined a swarm of 10 while robots inside the region went unasked."""
+        Only a robot that Table 1 will let join counts: waiting, connected to no user, and heard inside the
+        available region (the link's loss is the same both ways, up to its fading). The others are asked all
+        the same and refuse; counted, they ended the scan early: of 50 robots, the first 11 to answer
+        included 4 outside the region, and 7 joined a swarm of 10 while robots inside it went unasked."""
         region = self.config.min_rssi_dbm
 
         def requests(_: set[int] | None) -> list[Send]:
             return [Send(BROADCAST, m.Scan(session, self.user, slot), dst_pan=BROADCAST, ack=False)]
 
         def enough(responses: Mapping[int, Incoming]) -> bool:
-            inside = (i for i in responses.values() if i.rx.rssi_dbm >= region)
-            return sum(1 for i in inside if _free_reply(i.message)) >= count
+            return sum(1 for i in responses.values() if _may_join(i, region)) >= count
 
         step = Step(session, (m.ScanReply,), None, self._timing(slot, 8), enough=enough)
         return Exchange("scan", step, requests)
@@ -818,6 +817,14 @@ def _each(actions: Iterable[Action], first: Done | None = None) -> Procedure[Don
     return done
 
 
+def _may_join(incoming: Incoming, region_dbm: int) -> bool:
+    """A scan reply of a robot that Table 1 will let join: waiting, no user, heard inside the region (rounded
+    as the robot rounds what it hears of the master)."""
+    msg = incoming.message
+    waiting = isinstance(msg, m.ScanReply) and msg.state == RobotState.WAITING and not msg.user
+    return waiting and round(incoming.rx.rssi_dbm) >= region_dbm
+
+
 def _free_reply(message: m.SwarmMessage) -> bool:
     """A scan reply of a robot not in a swarm: a candidate for the joining query."""
     return isinstance(message, m.ScanReply) and message.state in _FREE
@@ -842,7 +849,7 @@ def _answers(step: StepResult) -> tuple[dict[int, float], dict[str, list[int]]]:
         elif isinstance(msg, m.JoinUnavailable):
             reason = m.Refusal(msg.reason).name.lower() if msg.reason in iter(m.Refusal) else "unknown"
             refused.setdefault(reason, []).append(addr)
-    return available, refused
+    return available, {reason: sorted(addrs) for reason, addrs in refused.items()}  # not in arrival order
 
 
 def _last_arrival(step: StepResult, t0: float) -> float:

@@ -410,6 +410,36 @@ def test_a_scan_reply_heard_outside_the_region_does_not_count_towards_the_reques
     assert figures["refused"] == {"outside_region": [3]} and figures["members"] == [2, 4]
 
 
+def test_a_scan_reply_of_a_robot_driving_with_another_user_does_not_count_towards_the_requested_number():
+    # robot 3 follows user 5: it is asked (and refuses, connected to a user), but the scan goes on for robot 4
+    core = _core(1, RobotState.FOLLOWING, user=9)
+    robots = _robots({}, joins={2: 1, 4: 1}, rssi={2: -40.0, 4: -50.0})
+    waiting, following = int(RobotState.WAITING), int(RobotState.FOLLOWING)
+
+    def scan(requests: list[Send], attempt: int) -> list[Incoming]:
+        session = requests[0].message.session_id
+        heard = [_incoming(2, m.ScanReply(session, waiting, WAITING_PAN, 0), -40.0)]
+        heard.append(_incoming(3, m.ScanReply(session, following, WAITING_PAN, 5), -45.0))
+        if attempt > 1:
+            heard.append(_incoming(4, m.ScanReply(session, waiting, WAITING_PAN, 0), -50.0))
+        return heard
+
+    def query(requests: list[Send], attempt: int) -> list[Incoming]:
+        session = requests[0].message.session_id
+        pending: tuple[int, ...] = requests[0].message.pending  # type: ignore[attr-defined]
+        rssi = {2: -40.0, 4: -50.0}
+        return [
+            _incoming(a, m.JoinUnavailable(session, int(m.Refusal.CONNECTED_TO_USER)))
+            if a == 3
+            else _incoming(a, m.JoinAvailable(session, round(rssi[a])), rssi[a])
+            for a in pending
+        ]
+
+    figures, _, attempts = carry_out(core.organize(2, "paper", 0.0), {**robots, "scan": scan, "query": query})
+    assert len(attempts["scan"]) == 2 and figures["candidates"] == [2, 3, 4]
+    assert figures["refused"] == {"connected_to_user": [3]} and figures["members"] == [2, 4]
+
+
 def test_a_scan_with_enough_free_replies_in_its_first_window_is_not_retried():
     core = _core(1, RobotState.FOLLOWING, user=9)
     robots = _robots({2: RobotState.WAITING, 3: RobotState.WAITING}, joins={2: 1, 3: 1}, rssi={2: -40.0, 3: -50.0})
