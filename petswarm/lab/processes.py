@@ -11,7 +11,7 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import IO, Any, Protocol
 
@@ -90,6 +90,14 @@ def _ephemeral_low() -> int:
         return int(EPHEMERAL_RANGE_FILE.read_text().split()[0])
     except (OSError, ValueError, IndexError):
         return 32768
+
+
+def _wait_all(procs: Iterable[ChildProcess], within_s: float) -> None:
+    """Wait for each to end, all within one deadline."""
+    deadline = time.monotonic() + within_s
+    for proc in procs:
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            proc.wait(max(deadline - time.monotonic(), 0.05))
 
 
 KILLED_WITHIN_S = 5.0
@@ -188,14 +196,11 @@ class Supervisor:
                 with contextlib.suppress(ProcessLookupError):
                     proc.send_signal(signal.SIGCONT)
                 proc.send_signal(signal.SIGTERM)
-        deadline = time.monotonic() + timeout
-        for proc in procs.values():
-            try:
-                proc.wait(max(deadline - time.monotonic(), 0.05))
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                with contextlib.suppress(subprocess.TimeoutExpired):
-                    proc.wait(killed_within_s)
+        _wait_all(procs.values(), timeout)
+        overdue = [proc for proc in procs.values() if proc.poll() is None]
+        for proc in overdue:
+            proc.kill()
+        _wait_all(overdue, killed_within_s)  # one deadline for all: a wedged fork server costs it once, not per robot
         for name, proc in procs.items():
             if proc.returncode is None:
                 print(f"petswarm: no exit code for {name} {killed_within_s:g} s after its SIGKILL", file=sys.stderr)
