@@ -6,6 +6,7 @@ import argparse
 import asyncio
 import json
 import os
+import signal
 import sys
 from typing import TYPE_CHECKING, Any
 
@@ -389,12 +390,19 @@ def main(argv: list[str] | None = None) -> int:
         print(f"petswarm {args.command}: {unfit}", file=sys.stderr)
         return 2
     try:
-        return handler(args)
+        code = handler(args)
     except KeyboardInterrupt:
-        return 130
+        code = 130
     except BrokenPipeError:  # `petswarm stats | head`: the reader left; not an error of ours
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+    if code == 130:
+        # interrupted, and all written: a second Ctrl-C during the interpreter's exit (which puts Python's own
+        # handlers back to the default action, 50 ms and more) killed it as -2 instead of this 130; ignored
+        # signals stay ignored through that exit
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(signum, signal.SIG_IGN)
+    return code
 
 
 def _add_dead_after(parser: argparse.ArgumentParser, default: float | None, what: str) -> None:

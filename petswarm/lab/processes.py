@@ -233,8 +233,11 @@ class Interrupts:
 
     From its creation the first SIGINT or SIGTERM raises KeyboardInterrupt (SIGTERM unwinds as Ctrl-C does), so
     that ``finally`` blocks stop the children; every later one is only noted. ``deferred()``, the first thing in
-    that ``finally``, makes a first one only noted too until it ends; then every handler is back as it was before
-    ``Interrupts()``, and a signal noted in a run no signal had interrupted raises KeyboardInterrupt.
+    that ``finally``, makes a first one only noted too until it ends; then, in a run no signal touched, every
+    handler is back as it was before ``Interrupts()`` (an experiment's next run takes them), and a signal noted
+    in a run no signal had interrupted raises KeyboardInterrupt. Once a signal came the process is on its way
+    out with status 130, and later ones stay only noted: handed back, a second Ctrl-C 30-60 ms after the first
+    raised KeyboardInterrupt on the way out (exit -2, not 130) or inside an experiment's save of its results.
 
     Why: a second Ctrl-C, or ``timeout`` or compose following its SIGTERM with SIGINT, raised KeyboardInterrupt
     inside that ``finally`` while it stopped the children and wrote the record: the stop was cut short and
@@ -288,6 +291,12 @@ class Interrupts:
         self._raised = True
         raise KeyboardInterrupt
 
+    def release(self) -> None:
+        """Hand the signals back to the handlers from before ``Interrupts()`` (``deferred`` does when no signal
+        came; a process that goes on after an interrupted run, such as a test, does it itself)."""
+        for signum, handler in self._previous.items():
+            signal.signal(signum, handler)
+
     def check(self) -> None:
         """A safe point of the run's own loop: raise the first signal's KeyboardInterrupt here when it is
         pending (``at_safe_points``), or when the handler raised it and yet the loop goes on (it was lost)."""
@@ -304,8 +313,8 @@ class Interrupts:
         try:
             yield
         finally:
-            for signum, handler in self._previous.items():
-                signal.signal(signum, handler)
+            if not (self._raised or self.pending or self.noted):
+                self.release()
         if (self.noted or self.pending) and not self._raised:
             self.pending = False
             self._raised = True

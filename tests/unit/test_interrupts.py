@@ -1,5 +1,7 @@
-"""``Interrupts(at_safe_points=True)`` (petswarm/lab/processes.py): the first stop signal waits for a safe point,
-and is never dropped on the way out."""
+"""``Interrupts`` (petswarm/lab/processes.py): the first stop signal waits for a safe point (``at_safe_points``) or
+is raised again at one when it was lost, is never dropped on the way out, and once a run was interrupted later
+signals stay only noted until the process ends. Each test hands the signals back (``release``), as the process
+that ends would not need to."""
 
 from __future__ import annotations
 
@@ -9,6 +11,14 @@ import weakref
 import pytest
 
 from petswarm.lab.processes import Interrupts
+
+
+@pytest.fixture(autouse=True)
+def _handlers_back():
+    before = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    yield
+    for signum, handler in before.items():
+        signal.signal(signum, handler)
 
 
 def test_the_first_signal_waits_for_the_safe_point_and_is_raised_there_once() -> None:
@@ -31,7 +41,21 @@ def test_a_signal_still_pending_when_the_stop_begins_is_raised_after_the_stop() 
     stopped = []
     with pytest.raises(KeyboardInterrupt), interrupts.deferred():
         stopped.append(True)
-    assert stopped == [True] and signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    assert stopped == [True]
+    # on the way out (exit 130) a second Ctrl-C is only noted, not a KeyboardInterrupt that ends it as -2
+    signal.raise_signal(signal.SIGINT)
+    assert interrupts.noted == [signal.SIGINT]
+    interrupts.release()
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_a_run_no_signal_touched_hands_the_signals_back() -> None:
+    before = signal.getsignal(signal.SIGTERM)
+    interrupts = Interrupts()
+    assert signal.getsignal(signal.SIGTERM) != before
+    with interrupts.deferred():
+        pass
+    assert signal.getsignal(signal.SIGTERM) == before  # the next run of an experiment takes them
 
 
 def test_without_safe_points_the_first_signal_raises_where_it_lands() -> None:
