@@ -144,7 +144,7 @@ def supervise(
     except KeyboardInterrupt:
         progress("interrupted; stopping every process")
         # what the run had learnt by then (the phase, its traffic totals), as its running summary showed it
-        summary = {**watch.progress, **summary, "problems": ["interrupted"], "interrupted": True}
+        summary = {**watch.progress, **summary, "ok": False, "problems": ["interrupted"], "interrupted": True}
         return 130
     finally:
         # a second Ctrl-C or SIGTERM waits until every process is stopped and the record says how (Interrupts)
