@@ -209,17 +209,24 @@ def test_a_lockstep_robot_taken_as_gone_while_alive_fails_the_run(tmp_path: Path
     assert any("robot 2 could not be told to stop" in p for p in final["problems"]), final["problems"]
 
 
-def test_a_robot_death_ends_the_run_under_fail_fast(tmp_path: Path) -> None:
+def _signal_mid_run(tmp_path: Path, world: str, process: str, signum: int, *args: str) -> tuple[int, str, dict]:
+    """A wall-clock run of 2 robots with ``args``; once its ping phase runs, ``signum`` to its child ``process``.
+    The run's exit status, its stderr and its final summary."""
     env, record = _env(tmp_path), tmp_path / "record"
-    run = _run(env, record, "fast", "--robots", "2", "--duration", "20", "--fail-fast")
+    run = _run(env, record, world, "--robots", "2", *args)
     try:
         summary = _running_summary(record, run, "totals")
-        os.kill(summary["processes"]["robot-2"], signal.SIGKILL)
-        _, err = run.communicate(timeout=30)
+        os.kill(summary["processes"][process], signum)
+        _, err = run.communicate(timeout=60)
     finally:
         run.kill()
-    assert run.returncode == 1, err[-3000:]
-    final = json.loads((record / "summary.json").read_text())
+        run.wait()
+    return run.returncode, err, json.loads((record / "summary.json").read_text())
+
+
+def test_a_robot_death_ends_the_run_under_fail_fast(tmp_path: Path) -> None:
+    code, err, final = _signal_mid_run(tmp_path, "fast", "robot-2", signal.SIGKILL, "--duration", "20", "--fail-fast")
+    assert code == 1, err[-3000:]
     assert not final["ok"] and "robot-2 died (SIGKILL)" in final["problems"][0]
     assert [d["process"] for d in final["deaths"]] == ["robot-2"]
 
@@ -228,17 +235,8 @@ def test_a_hub_that_ends_cleanly_mid_run_ends_the_run_too(tmp_path: Path) -> Non
     """A hub stopped by someone else's SIGTERM closes and exits 0; that is still the end of the air, not a
     user walking off. The run took a clean exit of any child but a robot as work done, and went on for its
     whole --duration with the progress frozen and the summary saying running."""
-    env, record = _env(tmp_path), tmp_path / "record"
-    run = _run(env, record, "hub-ends", "--robots", "2", "--duration", "600")
-    try:
-        summary = _running_summary(record, run, "totals")
-        os.kill(summary["processes"]["hub"], signal.SIGTERM)
-        _, err = run.communicate(timeout=60)
-    finally:
-        run.kill()
-        run.wait()
-    assert run.returncode == 1, err[-3000:]
-    final = json.loads((record / "summary.json").read_text())
+    code, err, final = _signal_mid_run(tmp_path, "hub-ends", "hub", signal.SIGTERM, "--duration", "600")
+    assert code == 1, err[-3000:]
     assert not final["ok"] and final["problems"][0].startswith("failed: hub died (exit 0)"), final["problems"]
     assert not final.get("running") and [d["process"] for d in final["deaths"]] == ["hub"]
 
