@@ -307,8 +307,9 @@ class Interrupts:
 
     @contextlib.contextmanager
     def deferred(self) -> Iterator[None]:
-        """Signals only noted within the block; the handlers from before ``Interrupts()`` after it, and
-        KeyboardInterrupt if a signal came within it, or is still pending, and none had been raised."""
+        """Signals only noted within the block; after it, the handlers from before ``Interrupts()`` if no signal
+        came at all (else they stay noted: the process is ending), and KeyboardInterrupt if a signal came within
+        it, or is still pending, and none had been raised."""
         self._stopping = self._stop_began = True
         try:
             yield
