@@ -164,28 +164,25 @@ def test_sigterm_ends_a_model_time_run_as_ctrl_c_does_with_its_summary(tmp_path)
 
 def test_a_second_ctrl_c_as_an_interrupted_run_exits_keeps_its_status_130(tmp_path):
     """Two Ctrl-Cs 50 ms apart (a person pressing twice): the first stops the run, the second lands while the
-    process exits, where Python had put SIGINT's default action back: it died of it (-2), 18 times in 18."""
+    process exits, where Python had put SIGINT's default action back: it died of it (-2), 21 times in 21."""
     argv = ["run", "--clock", "model", "--robots", "10", "--duration", "600", "--record", str(tmp_path / "run")]
-    codes = []
-    for _ in range(3):
-        proc = subprocess.Popen(
-            _petswarm(*argv),
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.PIPE,
-            text=True,
-            preexec_fn=_sigint_as_at_a_terminal,
-        )
-        try:
-            assert "10/10 robots attached" in read_until(proc.stderr, "10/10 robots attached", timeout=60)
-            proc.send_signal(signal.SIGINT)
-            time.sleep(0.05)
-            proc.send_signal(signal.SIGINT)
-            proc.communicate(timeout=30)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-        codes.append(proc.returncode)
-    assert codes == [130, 130, 130], codes
+    proc = subprocess.Popen(
+        _petswarm(*argv),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=_sigint_as_at_a_terminal,
+    )
+    try:
+        assert "10/10 robots attached" in read_until(proc.stderr, "10/10 robots attached", timeout=60)
+        proc.send_signal(signal.SIGINT)
+        time.sleep(0.05)
+        proc.send_signal(signal.SIGINT)
+        proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130
 
 
 def test_absurd_arguments_get_clear_errors():
