@@ -964,6 +964,18 @@ def load_config(path: str | Path) -> EnvironmentConfig:
         raise ValueError(f"{path}: {err}") from None
 
 
+def config_problem(path: str | Path) -> str | None:
+    """Why the hub config file at ``path`` cannot be used (it names the file), or None: for a run or an
+    experiment to refuse it before anything starts."""
+    try:
+        load_config(path)
+    except (OSError, UnicodeDecodeError) as err:
+        return f"cannot read {path}: {err}"
+    except ValueError as err:  # a bad key, value or syntax; the message names the file and the table
+        return str(err)
+    return None
+
+
 def environment_from_dict(data: dict[str, Any]) -> EnvironmentConfig:
     """The tables of a hub config (or a scenario's ``[hub]`` table plus its obstacles)."""
     # the radio's tables sit at the top level or under [medium], not both

@@ -91,6 +91,7 @@ _LAB_ENTRY_POINTS = {
     "check_name": "radio_hub.link.keys",
     "check_timed_fault": "radio_hub.air.chaos",
     "describe_fault": "radio_hub.air.chaos",
+    "config_problem": "radio_hub.environment",
     "environment_from_dict": "radio_hub.environment",
     "lazy_numpy": "radio_hub.lazy",
     "load_config": "radio_hub.shell.hub",

@@ -90,14 +90,11 @@ def _check(data: dict[str, Any]) -> dict[str, Any]:
     _check_clock_and_profile(data.get("run", {}))
     config = data.get("run", {}).get("config")
     if config is not None:
-        from radio_hub.interface import load_config
+        from radio_hub.interface import config_problem
 
-        try:
-            load_config(config)
-        except OSError as err:
-            raise ValueError(f"[run] config: cannot read {config}: {err}") from None
-        except ValueError as err:  # it names its own file
-            raise ValueError(f"[run] config: {err}") from None
+        problem = config_problem(config)
+        if problem is not None:
+            raise ValueError(f"[run] config: {problem}")
     return {**data, "seeds": seeds, "require": require}
 
 

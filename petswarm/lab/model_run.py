@@ -16,7 +16,6 @@ import asyncio
 import contextlib
 import contextvars
 import functools
-import json
 import math
 import time
 import weakref
@@ -425,7 +424,7 @@ def execute(opts: RunOptions, scenario: Scenario | None) -> dict[str, Any]:
             summary["speedup"] = round(model_time_s / max(summary["wall_time_s"], 1e-9), 1)
             record.finish(summary, {})
             if summary.get("interrupted") and opts.as_json:
-                print(json.dumps(summary, indent=2))  # --json promises a summary, interrupted too
+                _print(summary, as_json=True)  # --json promises a summary, interrupted too
     if scenario is not None:
         summary["driving"] = driving_metrics(read_world(record.path / "world.jsonl"))
     violations = check_record(record.path)

@@ -157,7 +157,7 @@ def supervise(
             record.finish(summary, codes)
             progress(f"stopped {len(codes)} processes; record in {record.path}")
             if summary.get("interrupted") and opts.as_json:
-                print(json.dumps({**summary, "exit_codes": codes}, indent=2))  # --json promises a summary
+                _print({**summary, "exit_codes": codes}, as_json=True)  # --json promises a summary
     if after_stop is not None:
         after_stop(summary, record)
     violations = check_record(record.path)
