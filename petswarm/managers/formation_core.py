@@ -818,11 +818,12 @@ def _each(actions: Iterable[Action], first: Done | None = None) -> Procedure[Don
 
 
 def _may_join(incoming: Incoming, region_dbm: int) -> bool:
-    """A scan reply of a robot that Table 1 will let join: waiting, no user, heard inside the region (rounded
-    as the robot rounds what it hears of the master)."""
+    """A scan reply of a robot that Table 1 (``may_join``, as the robot will judge the query) lets join, and that
+    is waiting (any other state answers busy): the link's loss is the same both ways, up to its fading."""
     msg = incoming.message
-    waiting = isinstance(msg, m.ScanReply) and msg.state == RobotState.WAITING and not msg.user
-    return waiting and round(incoming.rx.rssi_dbm) >= region_dbm
+    if not isinstance(msg, m.ScanReply) or msg.state != RobotState.WAITING:
+        return False
+    return may_join(msg.user, round(incoming.rx.rssi_dbm), region_dbm) is None
 
 
 def _free_reply(message: m.SwarmMessage) -> bool:
