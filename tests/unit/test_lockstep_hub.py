@@ -11,9 +11,14 @@ from radio_hub.environment import EnvironmentConfig
 from radio_hub.link import wire
 from radio_hub.shell.lockstep import _GRANT_TYPE, LockstepHub, _grant_of
 
+SLOW_S = 0.05
+"""``dead_after_s`` of the tests of a node taken as gone (they sleep past it); the others leave it at 60 s, so
+that a loaded machine's pause between two lines of a test cannot bury a node (a CI run took robot-2 as gone
+within 50 ms and the round went on: "now_s 0.02 == 0.0")."""
 
-def _hub(expect: int = 2) -> LockstepHub:
-    return LockstepHub("tcp/127.0.0.1:1", "unit", EnvironmentConfig(), seed=1, expect=expect, dead_after_s=0.05)
+
+def _hub(expect: int = 2, dead_after_s: float = 60.0) -> LockstepHub:
+    return LockstepHub("tcp/127.0.0.1:1", "unit", EnvironmentConfig(), seed=1, expect=expect, dead_after_s=dead_after_s)
 
 
 def _up(hub: LockstepHub, node_id: str, msg: wire.Message) -> None:
@@ -30,7 +35,7 @@ def _attach(hub: LockstepHub, node_id: str, key: int) -> None:
 def _robot_2_slow_and_taken_as_gone() -> tuple[LockstepHub, int]:
     """Two robots in their rounds; robot-2 says nothing past dead_after_s while robot-1 answers. Returns the hub
     and the grant robot-2 was last sent."""
-    hub = _hub()
+    hub = _hub(dead_after_s=SLOW_S)
     _attach(hub, "robot-1", 11)
     _attach(hub, "robot-2", 12)
     late = hub.nodes["robot-2"].granted
@@ -85,7 +90,7 @@ def test_an_earlier_process_idle_does_not_count_for_the_new_one() -> None:
 
 def test_a_node_that_attaches_and_never_says_idle_does_not_hold_the_start_for_good() -> None:
     hub = LockstepHub(
-        "tcp/127.0.0.1:1", "unit", EnvironmentConfig(), seed=1, expect=2, dead_after_s=0.05, start_within_s=0.05
+        "tcp/127.0.0.1:1", "unit", EnvironmentConfig(), seed=1, expect=2, dead_after_s=SLOW_S, start_within_s=SLOW_S
     )
     _attach(hub, "robot-1", 11)
     _up(hub, "robot-2", wire.Attach(ext_addr=12, short_addr=12, instance="i12", n=1, s=12))  # then it hangs
