@@ -897,6 +897,34 @@ class EchoRanges:
         angles, cos, sin = self._trig(sensors.angles_rad)
         return angles, ranges, self._receding(sensors, ranges, cos, sin)
 
+    @staticmethod
+    def floats_all(
+        rings: list[EchoRanges], samples: list[OwnSensors], ranges: list[list[float]]
+    ) -> tuple[list[list[float]], np.ndarray, np.ndarray, np.ndarray]:
+        """``floats`` of many robots' rings (all of one size) at once, bit for bit as each alone: their angles,
+        latest ranges (n, s), receding speeds (n, s) and whether each robot has them (n,)."""
+        angles, latest, oldest, spans, cos, sin, velocity, known = [], [], [], [], [], [], [], []
+        for ring, sensors, given in zip(rings, samples, ranges, strict=True):
+            ring.observe(sensors, given)
+            now = _ranges_of(ring._history[-1])
+            ring_angles, ring_cos, ring_sin = ring._trig(sensors.angles_rad)
+            first = ring._history[0]
+            span = (sensors.t_us - first[0]) / 1e6
+            old = _ranges_of(first) if span >= 0.1 else now
+            angles.append(ring_angles)
+            latest.append(now)
+            known.append(span >= 0.1 and len(old) == len(now))
+            oldest.append(old if known[-1] else now)
+            spans.append(span if known[-1] else 1.0)
+            cos.append(ring_cos)
+            sin.append(ring_sin)
+            velocity.append(sensors.odometry[:2])
+        now_m, old_m, moving = np.array(latest), np.array(oldest), np.array(velocity, dtype=float)
+        rate = (now_m - old_m) / np.array(spans)[:, None]
+        along = moving[:, 0:1] * np.array(cos) + moving[:, 1:2] * np.array(sin)
+        receding = np.where(np.isnan(rate), 0.0, rate + along)
+        return angles, now_m, receding, np.array(known)
+
     def observe(self, sensors: OwnSensors, ranges: list[float] | None = None) -> None:
         """Keep ``sensors`` in the history the range rates are taken over (once per sample); ``ranges``: its
         ranges as floats, if the caller has them."""

@@ -14,8 +14,15 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from petswarm.controllers.motion import STOP, DriveLimits, MotorCommand, wrap
+from radio_hub.interface import lazy_numpy
+
+if TYPE_CHECKING:
+    import numpy as np
+else:
+    np = lazy_numpy(__name__)
 
 SENSOR_ANGLES_RAD = (math.radians(-30), 0.0, math.radians(30))
 """Default ultrasonic sensors ahead: a fan of three, 30 degrees apart (the paper shows them, not the angles)."""
@@ -232,9 +239,7 @@ class SafetyStage:
         ``readings`` pairs ``angles`` with ``ranges`` (nan: nothing seen, as None); raises as ``Ranges`` does on a
         negative range."""
         cfg = self.cfg
-        if self._angles is not angles:
-            self._angles = angles
-            self._trig = [(math.cos(a), math.sin(a)) for a in angles]
+        trig = self._ring_trig(angles)
         if len(ranges) != len(angles):
             raise ValueError(f"{len(ranges)} ranges for {len(angles)} sensors")
         if receding and len(receding) != len(ranges):
@@ -253,13 +258,57 @@ class SafetyStage:
             approach, braking = k_approach * gap, math.sqrt(2 * brake * gap)
             allowed = braking if braking < approach else approach
             away = receding[k] if receding else 0.0
-            c, s = self._trig[k]
+            c, s = trig[k]
             constraints.append((c, s, allowed + away if away > 0.0 else allowed + 0.0))
         vx, vy = _nearest_allowed((vx, vy), constraints)
         # MotorCommand.limited
         speed = math.hypot(vx, vy)
         scale = min(1.0, cfg.limits.max_speed / speed) if speed > 0 else 1.0
         return vx * scale, vy * scale
+
+    @staticmethod
+    def translation_all(
+        stages: list[SafetyStage],
+        commands: np.ndarray,
+        angles: list[list[float]],
+        ranges: np.ndarray,
+        receding: np.ndarray,
+        has_receding: np.ndarray,
+    ) -> list[tuple[float, float]]:
+        """``translation`` of many robots' stages (of one config) at once, bit for bit as each alone: ``commands``
+        (n, 2), their rings' ``angles``, ``ranges`` (n, s) with no negative one, ``receding`` (n, s) where
+        ``has_receding``. Each sensor's limit is worked out elementwise; a command within every limit (the usual
+        case) goes on as it is, the others through ``_nearest_allowed`` one by one."""
+        cfg = stages[0].cfg  # every stage's (the caller's word)
+        trig_rows = [stage._ring_trig(ring) for stage, ring in zip(stages, angles, strict=True)]
+        trig = np.array(trig_rows)  # (n, s, 2)
+        gap = ranges - cfg.stop_distance_m
+        gap = np.where(gap > 0.0, gap, 0.0)
+        approach, braking = cfg.k_approach * gap, np.sqrt(2 * cfg.brake_decel_mps2 * gap)
+        allowed = np.where(braking < approach, braking, approach)
+        away = np.where(has_receding[:, None], receding, 0.0)
+        limit = np.where(away > 0.0, allowed + away, allowed + 0.0)
+        seen = ~np.isnan(ranges)
+        vx, vy = commands[:, 0:1], commands[:, 1:2]
+        within = ~seen | (trig[..., 0] * vx + trig[..., 1] * vy <= limit + 1e-12)
+        out = []
+        limits, seen_rows = limit.tolist(), seen.tolist()
+        rows = zip(commands.tolist(), np.logical_and.reduce(within, axis=1).tolist(), strict=True)
+        for i, ((x, y), free) in enumerate(rows):
+            if not free:
+                sensors = zip(trig_rows[i], limits[i], seen_rows[i], strict=True)
+                x, y = _nearest_allowed((x, y), [(c, s, lim) for (c, s), lim, ok in sensors if ok])
+            speed = math.hypot(x, y)  # MotorCommand.limited
+            scale = min(1.0, cfg.limits.max_speed / speed) if speed > 0 else 1.0
+            out.append((x * scale, y * scale))
+        return out
+
+    def _ring_trig(self, angles: list[float]) -> list[tuple[float, float]]:
+        """Each sensor's (cos, sin), worked out again only when the ring changes."""
+        if self._angles is not angles:
+            self._angles = angles
+            self._trig = [(math.cos(a), math.sin(a)) for a in angles]
+        return self._trig
 
 
 def _nearest_allowed(v: tuple[float, float], constraints: list[tuple[float, float, float]]) -> tuple[float, float]:

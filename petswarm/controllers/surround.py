@@ -385,6 +385,69 @@ class SurroundController:
         force = (f_r[0] + f_o[0] + f_g[0], f_r[1] + f_o[1] + f_g[1])
         return self._command(force, velocity, dt)
 
+    @staticmethod
+    def step_all(
+        controllers: list[SurroundController],
+        terms: np.ndarray,
+        neighbours: np.ndarray,
+        count: np.ndarray,
+        human: np.ndarray,
+        human_seen: np.ndarray,
+        velocity: np.ndarray,
+        dt: np.ndarray,
+    ) -> np.ndarray:
+        """``step_plain`` of many robots' controllers (of one config, without the centroid filter) at once,
+        bit for bit as each alone; returns their commands (n, 2).
+
+        Per robot (row): ``terms`` (n, t, 2) its neighbours (the first ``neighbours``) then its obstacle points,
+        ``count`` of them, zeros after; ``human`` (n, 2) where ``human_seen``; ``velocity`` (n, 2); ``dt`` (n,).
+        The same elementwise operations as ``step_plain``; its sums, from the first term on, are the running sums
+        (``np.add.accumulate``, strictly in order) read at each row's last term: the zeros after never enter."""
+        c = controllers[0].config  # every controller's (the caller's word: comparing configs cost more than the law)
+        if c.centroid_filter_s > 0:
+            raise ValueError("step_all takes controllers without the centroid filter")
+        x, y = terms[..., 0], terms[..., 1]
+        distance = np.sqrt(x * x + y * y)
+        slot = np.arange(terms.shape[1])
+        neighbour = slot < neighbours[:, None]
+        near = neighbour & (distance <= c.sight_m)
+        g = np.stack([_sum_first(np.where(near, x, 0.0), neighbours), _sum_first(np.where(near, y, 0.0), neighbours)])
+        g = (g / (np.add.reduce(near, axis=1) + 1)).T
+        rate, accel = SurroundController._derivatives_all(controllers, g, np.add.reduce(near, axis=1), dt)
+        f_r = c.inertia * accel + c.damping * rate + c.stiffness * g
+        inside = (slot < count[:, None]) & (near | ~neighbour) & (distance <= c.avoidance_m) & (distance > 0)
+        reach = np.where(distance < MIN_RANGE_M, MIN_RANGE_M, distance)
+        magnitude = np.where(inside, c.repulsion / (reach * reach), 0.0)
+        scale = np.where(distance < 1e-12, 1e-12, distance)
+        f_o = -np.stack([_sum_first(magnitude * (x / scale), count), _sum_first(magnitude * (y / scale), count)]).T
+        f_g = _surround_all(c, g, human, human_seen, velocity)
+        force = f_r + f_o + f_g
+        accel = _clip_all((force - c.drag * velocity) / c.body_mass, c.max_accel_mps2)
+        command = _clip_all(velocity + accel * dt[:, None], c.max_speed_mps)
+        for ctl, forces in zip(controllers, zip(f_r.tolist(), f_o.tolist(), f_g.tolist(), strict=True), strict=True):
+            ctl._forces = tuple(tuple(f) for f in forces)  # type: ignore[assignment]
+        return command
+
+    @staticmethod
+    def _derivatives_all(
+        controllers: list[SurroundController], g: np.ndarray, count: np.ndarray, dt: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``_derivatives`` of every controller, elementwise; each keeps its own g, rate, count and age."""
+        old = [ctl._g for ctl in controllers]
+        had = np.array([o is not None for o in old])
+        old_g = np.array([(0.0, 0.0) if o is None else o for o in old])
+        old_rate = np.array([ctl._rate for ctl in controllers])
+        same = had & (count == np.array([ctl._count for ctl in controllers]))
+        differenced = np.array([ctl._differenced for ctl in controllers])
+        step = dt[:, None]
+        rate = np.where(same[:, None], (g - old_g) / step, np.where(had[:, None], old_rate, 0.0))
+        accel = np.where((same & (differenced >= 1))[:, None], (rate - old_rate) / step, 0.0)
+        rows = zip(controllers, g.tolist(), rate.tolist(), count.tolist(), same.tolist(), strict=True)
+        for ctl, g_i, rate_i, count_i, same_i in rows:
+            ctl._g, ctl._rate, ctl._count = (g_i[0], g_i[1]), (rate_i[0], rate_i[1]), count_i
+            ctl._differenced += same_i
+        return rate, accel
+
     def _centring(
         self, neighbours: Sequence[Sequence[float]], dt: float
     ) -> tuple[list[float], list[bool], tuple[float, float], tuple[float, float]]:
@@ -518,6 +581,44 @@ class SurroundController:
             (force[0] - c.drag * vx) / c.body_mass, (force[1] - c.drag * vy) / c.body_mass, c.max_accel_mps2
         )
         return _plain_clip(vx + ax * dt, vy + ay * dt, c.max_speed_mps)
+
+
+def _sum_first(values: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """Per row of ``values`` (n, t), the sum of its first ``count`` terms in order from the first term on (0.0 for
+    none), as ``SurroundController``'s loops sum them, bit for bit and to the sign of zero."""
+    if values.shape[1] == 0:
+        return np.zeros(len(values))
+    running = np.add.accumulate(values, axis=1)
+    last = running[np.arange(len(values)), np.maximum(count - 1, 0)]
+    return np.where(count > 0, last, 0.0)
+
+
+def _surround_all(
+    c: SurroundConfig, g: np.ndarray, human: np.ndarray, seen: np.ndarray, velocity: np.ndarray
+) -> np.ndarray:
+    """``SurroundController._surround`` of many robots (n, 2), elementwise in its order."""
+    hx, hy = human[:, 0], human[:, 1]
+    human_distance = np.sqrt(hx * hx + hy * hy)
+    reach = np.maximum(human_distance, 1e-9)
+    tx, ty = hx / reach, hy / reach
+    gx, gy = g[:, 0], g[:, 1]
+    g_norm = np.maximum(np.sqrt(gx * gx + gy * gy), 1e-9)
+    ux, uy = gx / g_norm, gy / g_norm
+    vx, vy = velocity[:, 0], velocity[:, 1]
+    speed = np.sqrt(vx * vx + vy * vy)
+    moving = np.maximum(speed, 1e-9)
+    cos_human = tx * ux + ty * uy
+    cos_motion = np.where(speed > STILL_MPS, vx / moving * ux + vy / moving * uy, 0.0)
+    pull = c.surround_force * ((1 + cos_human) * (1 + cos_motion) / 4)
+    active = (seen & (human_distance > 0))[:, None]
+    return np.where(active, np.stack([pull * tx, pull * ty], axis=1), 0.0)
+
+
+def _clip_all(v: np.ndarray, limit: float) -> np.ndarray:
+    """``_plain_clip`` of each row of ``v`` (n, 2)."""
+    x, y = v[:, 0], v[:, 1]
+    scale = np.minimum(1.0, limit / np.maximum(np.sqrt(x * x + y * y), 1e-12))
+    return np.stack([x * scale, y * scale], axis=1)
 
 
 def _plain_clip(x: float, y: float, limit: float) -> tuple[float, float]:

@@ -81,7 +81,28 @@ class SurroundCore:
         if not self.beaconing:
             return
         engaged = self.pilot.engaged
-        command = self.pilot.step(sensors, beacons, now)
+        self._commanded(engaged, self.pilot.step(sensors, beacons, now))
+
+    @staticmethod
+    def sensors_samples(
+        cores: list[SurroundCore], samples: list[tuple[OwnSensors, BeaconSweep]], now: float
+    ) -> list[Exception | None]:
+        """``sensors_sample`` of many cores at one instant, their pilots stepped together
+        (``SurroundPilot.step_all``); each core's error (its pilot's step's), or None."""
+        stepping = [k for k, core in enumerate(cores) if core.beaconing]
+        engaged = [cores[k].pilot.engaged for k in stepping]
+        pilots = [cores[k].pilot for k in stepping]
+        results = SurroundPilot.step_all(pilots, [samples[k] for k in stepping], now)
+        errors: list[Exception | None] = [None] * len(cores)
+        for k, was, result in zip(stepping, engaged, results, strict=True):
+            if isinstance(result, Exception):
+                errors[k] = result
+            else:
+                cores[k]._commanded(was, result)
+        return errors
+
+    def _commanded(self, engaged: bool, command: tuple[float, float] | None) -> None:
+        """The pilot's step gave ``command`` (None: nothing to send); it had engaged before if ``engaged``."""
         if command is None:
             return
         if not engaged:

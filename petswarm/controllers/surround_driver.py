@@ -23,7 +23,7 @@ from petswarm.controllers.surround_pilot import SurroundDriverConfig, SurroundPi
 from petswarm.controllers.surround_sensing import SweepJob, beacon_fixes_batch
 from petswarm.managers.relative_location import IrModuleManager
 from petswarm.managers.sequence import EventLog
-from radio_hub.interface import BeaconSweep, HubUnavailable, RadioClient, RadioError
+from radio_hub.interface import BeaconSweep, HubUnavailable, OwnSensors, RadioClient, RadioError
 
 __all__ = ["TELEMETRY_EVERY", "SurroundDriver"]
 
@@ -120,6 +120,8 @@ class SurroundTask:
     """
 
     _of_loop: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, SurroundTask] = weakref.WeakKeyDictionary()
+    together = True
+    """Step the robots of one instant together (``surround_batch``); False: one by one (tests hold both equal)."""
 
     def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
         self._loop = loop
@@ -170,6 +172,9 @@ class SurroundTask:
             self._wake.clear()
             fresh, self._fresh = list(self._fresh), {}
             now = clock.now()
+            if self.together and len(fresh) > 1:
+                self._step_together(fresh, now)
+                continue
             for driver in fresh:
                 self._step(driver, now)
 
@@ -183,6 +188,34 @@ class SurroundTask:
         for stepped in self._members.values():
             if not stepped.done():
                 stepped.set_exception(RuntimeError("the surround robots' stepping task ended"))
+
+    def _step_together(self, fresh: list[SurroundDriver], now: float) -> None:
+        """``_step`` of each driver in ``fresh``, their cores stepped together (``SurroundCore.sensors_samples``),
+        then each one's actions carried out in the order the samples came, as one by one: nothing a robot's
+        actions do reaches another robot within the instant (a model run holds every message until all are idle)."""
+        ready: list[tuple[SurroundDriver, OwnSensors, BeaconSweep]] = []
+        for driver in fresh:
+            stepped = self._members.get(driver)
+            sensors = driver.radio.sensors
+            if stepped is None or stepped.done() or sensors is None:
+                continue
+            sweep = driver.radio.beacons
+            try:
+                self.sweeps.prepare(driver.pilot, sweep)
+            except Exception as err:
+                stepped.set_exception(err)
+                continue
+            ready.append((driver, sensors, sweep))
+        samples = [(sensors, sweep) for _, sensors, sweep in ready]
+        errors = SurroundCore.sensors_samples([driver.core for driver, _, _ in ready], samples, now)
+        for (driver, _, _), error in zip(ready, errors, strict=True):
+            try:
+                if error is not None:
+                    raise error
+                for action in driver.core.actions():
+                    driver._execute_now(action)
+            except Exception as err:  # this robot's error ends this robot's surround task, not the others'
+                self._members[driver].set_exception(err)
 
     def _step(self, driver: SurroundDriver, now: float) -> None:
         stepped = self._members.get(driver)

@@ -31,6 +31,7 @@ The command is (vx, vy): the law assumes a fixed heading, so the robot never tur
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -138,6 +139,8 @@ class SurroundPilot:
         self._ring_trig: tuple[list[float], list[float]] = ([], [])
         self._given: tuple[BeaconSweep, list[str], np.ndarray] | None = None
         """A sweep's fixes worked out for it ahead of its step (``give_fixes``)."""
+        self._batched_with: SurroundDriverConfig | None = None
+        """A config found equal to this pilot's (``_batchable``): compared once, not on every step."""
 
     @property
     def command(self) -> np.ndarray:
@@ -168,22 +171,83 @@ class SurroundPilot:
         self._track(sensors, sweep, dt, now_s)
         return self._drive(sensors, dt)
 
+    @staticmethod
+    def step_all(
+        pilots: list[SurroundPilot], samples: list[tuple[OwnSensors, BeaconSweep]], now_s: float
+    ) -> list[tuple[float, float] | Exception | None]:
+        """``step`` of many pilots on their samples at once, each bit for bit as its own ``step``: what a model
+        run's robots do at one instant. Pilots of the paper's law with ordinary samples are stepped together
+        (``surround_batch``); the rest, and a lone one, step alone. A pilot's error is its result: the others
+        still step, as each robot's own step would."""
+        from petswarm.controllers.surround_batch import step_together  # numpy's stage, for many robots only
+
+        first = samples[0][0] if samples else None
+        ring = 0 if first is None else len(first.angles_rad)
+        together = [
+            i
+            for i, (pilot, (sensors, _)) in enumerate(zip(pilots, samples, strict=True))
+            if pilot._batchable(sensors, pilots[0].config, ring)
+        ]
+        ranges = [samples[i][0].ranges_list() for i in together]
+        if any(len(r) != ring for r in ranges):
+            together, ranges = [], []
+        elif together and (np.array(ranges) < 0).any():  # a ring that reads as none does: that robot fails alone
+            keep = [k for k, r in enumerate(ranges) if not any(x < 0 for x in r)]
+            together, ranges = [together[k] for k in keep], [ranges[k] for k in keep]
+        if len(together) < 2:
+            together, ranges = [], []
+        results: list[tuple[float, float] | Exception | None] = [None] * len(pilots)
+        chosen = set(together)
+        for i, (pilot, (sensors, sweep)) in enumerate(zip(pilots, samples, strict=True)):
+            if i not in chosen:
+                results[i] = _step_alone(pilot, sensors, sweep, now_s)
+        if together:
+            stepped = step_together([pilots[i] for i in together], [samples[i] for i in together], ranges, now_s)
+            for i, result in zip(together, stepped, strict=True):
+                results[i] = result
+        return results
+
+    def _batchable(self, sensors: OwnSensors, config: SurroundDriverConfig, ring: int) -> bool:
+        """Whether this pilot's step may go with others' (``surround_batch``): the paper's law without the
+        centroid filter, ``config`` as the rest, and a ring of ``ring`` sensors that reads as a robot's does
+        (no negative range, finite odometry: the others fail alone, as they would)."""
+        if type(self.controller) is not SurroundController or config.law.centroid_filter_s != 0:
+            return False
+        if config is not self._batched_with:  # the configs of a run's robots are equal, not one object
+            if self.config != config:
+                return False
+            self._batched_with = config
+        odometry = sensors.odometry
+        return (
+            len(sensors.angles_rad) == ring
+            and len(odometry) == 3
+            and math.isfinite(odometry[0])
+            and math.isfinite(odometry[1])
+            and math.isfinite(odometry[2])
+        )
+
     def _track(self, sensors: OwnSensors, sweep: BeaconSweep, dt: float, now_s: float) -> None:
         own_velocity = np.array(sensors.odometry[:2], dtype=float)
         self.tracker.predict(own_velocity, dt)
+        fixes = self._new_fixes(sweep, now_s)
+        if fixes is not None:
+            self.tracker.update_many(*fixes, own_velocity)
+
+    def _new_fixes(self, sweep: BeaconSweep, now_s: float) -> tuple[list[str], np.ndarray] | None:
+        """The fixes of ``sweep`` if it is new (given, or estimated now), else None; a robot whose sweeps
+        stopped ``STALE_AFTER_S`` ago forgets its tracks."""
         if sweep.t_us != self._sweep_t_us:
             self._sweep_t_us, self._sweep_at = sweep.t_us, now_s
             given, self._given = self._given, None
             if given is not None and given[0] is sweep:
-                seen, xy = given[1], given[2]
-            else:
-                config = self.config
-                names, readings, gains = sweep.arrays()
-                seen, xy = beacon_fixes(names, readings, gains, config.ir, config.estimator, config.human_id)
-            self.tracker.update_many(seen, xy, own_velocity)
-        elif now_s - self._sweep_at > STALE_AFTER_S:
+                return given[1], given[2]
+            config = self.config
+            names, readings, gains = sweep.arrays()
+            return beacon_fixes(names, readings, gains, config.ir, config.estimator, config.human_id)
+        if now_s - self._sweep_at > STALE_AFTER_S:
             self.tracker.clear()
             self.counters["stale_steps"] += 1
+        return None
 
     def _drive(self, sensors: OwnSensors, dt: float) -> tuple[float, float] | None:
         config = self.config
@@ -266,3 +330,13 @@ class SurroundPilot:
             self._ring_angles = angles_rad
             self._ring_trig = (np.cos(angles_rad).tolist(), np.sin(angles_rad).tolist())
         return self._ring_trig
+
+
+def _step_alone(
+    pilot: SurroundPilot, sensors: OwnSensors, sweep: BeaconSweep, now_s: float
+) -> tuple[float, float] | Exception | None:
+    """``pilot.step``, its error as its result."""
+    try:
+        return pilot.step(sensors, sweep, now_s)
+    except Exception as err:  # one robot's bad sample fails that robot's step only
+        return err

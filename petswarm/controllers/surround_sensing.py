@@ -333,6 +333,68 @@ class BeaconTracker:
         self._reorder = (list(names), self._names, order)
         return order
 
+    @staticmethod
+    def predict_all(trackers: list[BeaconTracker], own_velocities: np.ndarray, dts: list[float]) -> None:
+        """``predict`` of many trackers at once (``own_velocities`` (n, 2), ``dts`` > 0 from the caller), bit
+        for bit as each alone: the same elementwise operations, on every track's rows stacked."""
+        moving = [i for i, tracker in enumerate(trackers) if tracker._names]
+        for tracker, dt in zip(trackers, dts, strict=True):
+            tracker._since_fix += dt
+        if not moving:
+            return
+        counts = [len(trackers[i]._names) for i in moving]
+        position = np.concatenate([trackers[i]._position for i in moving])
+        velocity = np.concatenate([trackers[i]._velocity for i in moving])
+        own = np.repeat(own_velocities[moving], counts, axis=0)
+        dt = np.repeat(np.array([dts[i] for i in moving]), counts)[:, None]
+        BeaconTracker._spread([trackers[i] for i in moving], counts, position + (velocity - own) * dt, None)
+
+    @staticmethod
+    def update_all(
+        trackers: list[BeaconTracker], fixes: list[tuple[list[str], np.ndarray]], own_velocities: np.ndarray
+    ) -> None:
+        """``update_many`` of many trackers at once, bit for bit as each alone: those whose sweep holds the
+        beacons they track (the usual sweep) are corrected together, the others one by one."""
+        steady: list[tuple[BeaconTracker, np.ndarray, float]] = []
+        for tracker, (names, xy), own in zip(trackers, fixes, own_velocities, strict=True):
+            period = tracker._since_fix
+            order = tracker._same_beacons(names) if period > 0 and names else None
+            if order is None:
+                tracker.update_many(names, xy, own)
+                continue
+            tracker._since_fix = 0.0
+            fixed = (
+                xy if order is _IN_ORDER and xy.dtype == float else np.asarray(xy, dtype=float).reshape(-1, 2)[order]
+            )
+            steady.append((tracker, fixed, period))
+        if not steady:
+            return
+        counts = [len(fixed) for _, fixed, _ in steady]
+        position = np.concatenate([tracker._position for tracker, _, _ in steady])
+        velocity = np.concatenate([tracker._velocity for tracker, _, _ in steady])
+        period = np.repeat(np.array([p for _, _, p in steady]), counts)[:, None]
+        innovation = np.concatenate([fixed for _, fixed, _ in steady]) - position
+        alpha, beta = steady[0][0].alpha, steady[0][0].beta
+        if any(t.alpha != alpha or t.beta != beta for t, _, _ in steady):
+            raise ValueError("update_all takes trackers of one alpha and beta")
+        position = position + alpha * innovation
+        velocity = velocity + beta * innovation / period
+        BeaconTracker._spread([tracker for tracker, _, _ in steady], counts, position, velocity)
+
+    @staticmethod
+    def _spread(
+        trackers: list[BeaconTracker], counts: list[int], position: np.ndarray, velocity: np.ndarray | None
+    ) -> None:
+        """Hand each tracker its rows of the stacked ``position`` (and ``velocity`` unless None), as views:
+        the stacks are new arrays, never written in place, as a lone tracker's are."""
+        start = 0
+        for tracker, count in zip(trackers, counts, strict=True):
+            end = start + count
+            tracker._position = position[start:end]
+            if velocity is not None:
+                tracker._velocity = velocity[start:end]
+            start = end
+
     def clear(self) -> None:
         """Forget every beacon (the sweeps stopped)."""
         self._names, self._rows = [], {}
@@ -453,3 +515,82 @@ def _surface_toward_me(centre: np.ndarray, radius: float) -> Point:
     x, y = centre.tolist()
     scale = reach / distance
     return (x * scale, y * scale)
+
+
+@dataclass(frozen=True)
+class SensedAll:
+    """``sense_lists`` of many robots as padded arrays, for ``SurroundController.step_all``: per robot (row) its
+    neighbours first, then its obstacle points (echoes no beacon explains, in ring order, then the human's body),
+    left-aligned in ``terms`` (n, t, 2) with zeros after."""
+
+    terms: np.ndarray
+    neighbours: np.ndarray
+    """How many of a row's terms are neighbours (n,)."""
+    count: np.ndarray
+    """How many of a row's terms there are (n,)."""
+    human: np.ndarray
+    """The human's centre (n, 2), zeros where unseen."""
+    human_seen: np.ndarray
+    dropped: list[int]
+
+
+def sense_all(
+    trackers: list[BeaconTracker],
+    ranges: np.ndarray,
+    ring: np.ndarray,
+    human_id: str,
+    config: SensingConfig,
+) -> SensedAll:
+    """``echo_list`` then ``sense_lists`` of many robots at once, bit for bit as each alone (the same elementwise
+    operations in the same order; an echo is explained by any body, so the order of that test is free):
+    ``trackers`` their tracked beacons, ``ranges`` (n, s) their rings' ranges (nan: no echo), ``ring`` (2, n, s)
+    the cosines and sines of their sensors' angles (as ``echo_list`` is given them)."""
+    n = len(trackers)
+    reach = config.robot_radius_m + ranges
+    echoes = np.stack([ring[0] * reach, ring[1] * reach], axis=-1)  # (n, s, 2)
+    finite = np.isfinite(ranges)
+    counts = [len(t._names) for t in trackers]
+    human_row = [t._names.index(human_id) if human_id in t._rows else -1 for t in trackers]  # as sense_lists
+    explained = np.zeros(ranges.shape, dtype=bool)
+    if sum(counts):
+        explained = _explained_all(trackers, counts, human_row, echoes, config)
+    kept = finite & ~explained
+    kept_count = np.add.reduce(kept, axis=1)
+    seen = np.array([row >= 0 for row in human_row], dtype=bool)
+    neighbours = np.array([c - (row >= 0) for c, row in zip(counts, human_row, strict=True)], dtype=np.intp)
+    count = neighbours + kept_count + seen
+    terms = np.zeros((n, int(count.max(initial=0)), 2))
+    human = np.zeros((n, 2))
+    for i, (tracker, row) in enumerate(zip(trackers, human_row, strict=True)):
+        position = tracker._position
+        if row < 0:
+            terms[i, : neighbours[i]] = position
+            continue
+        terms[i, :row] = position[:row]
+        terms[i, row : neighbours[i]] = position[row + 1 :]
+        human[i] = position[row]
+        terms[i, count[i] - 1] = _surface_toward_me(position[row], config.person_radius_m)
+    rows, sensors = np.nonzero(kept)
+    slots = neighbours[rows] + np.cumsum(kept, axis=1)[rows, sensors] - 1
+    terms[rows, slots] = echoes[rows, sensors]
+    dropped = np.add.reduce(finite & explained, axis=1).tolist()
+    return SensedAll(terms, neighbours, count, human, seen, dropped)
+
+
+def _explained_all(
+    trackers: list[BeaconTracker], counts: list[int], human_row: list[int], echoes: np.ndarray, config: SensingConfig
+) -> np.ndarray:
+    """Per robot and echo (n, s), whether one of its tracked bodies explains the echo (``_explained``)."""
+    owner = np.repeat(np.arange(len(trackers)), counts)
+    centres = np.concatenate([t._position for t in trackers if t._names])
+    body = np.full(len(owner), config.robot_radius_m + config.echo_match_m)
+    start = np.cumsum([0, *counts[:-1]])
+    person = [start[i] + row for i, row in enumerate(human_row) if row >= 0]
+    body[person] = config.person_radius_m + config.echo_match_m
+    gx = echoes[owner, :, 0] - centres[:, 0:1]
+    gy = echoes[owner, :, 1] - centres[:, 1:2]
+    inside = np.sqrt(gx * gx + gy * gy) <= body[:, None]  # (rows, s); nan (no echo) is never inside
+    holders = [i for i, c in enumerate(counts) if c]
+    explained = np.zeros(echoes.shape[:2], dtype=bool)
+    explained[holders] = np.logical_or.reduceat(inside, start[holders], axis=0)
+    return explained

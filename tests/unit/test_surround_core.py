@@ -8,6 +8,7 @@ import math
 from typing import Any
 
 import numpy as np
+import pytest
 
 from petswarm.controllers.driving_core import Drive, Log, Telemetry
 from petswarm.controllers.motion import MotorCommand
@@ -184,8 +185,12 @@ class _StepDriver:
             raise RuntimeError(f"{self.name} broke")
 
 
-def test_one_task_steps_every_robot_in_the_order_their_samples_came() -> None:
+def test_one_task_steps_every_robot_in_the_order_their_samples_came(monkeypatch: pytest.MonkeyPatch) -> None:
     from petswarm.controllers.surround_driver import SurroundTask
+
+    # the task's own rules, with stand-in drivers stepping one by one (stepped together, the robots' cores go
+    # through SurroundCore.sensors_samples: tests/model/test_surround_batch.py)
+    monkeypatch.setattr(SurroundTask, "together", False)
 
     async def scenario() -> tuple[list[list[str]], BaseException | None, bool]:
         steps: list[str] = []
