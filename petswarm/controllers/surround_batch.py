@@ -31,15 +31,56 @@ if TYPE_CHECKING:
 else:
     np = lazy_numpy(__name__)
 
-Result = tuple[float, float] | None | Exception
+Result = tuple[float, float] | Exception | None
 """A pilot's step: its command, None for none, or the error its step raised."""
+
+
+def step_pilots(
+    pilots: list[SurroundPilot], samples: list[tuple[OwnSensors, BeaconSweep]], now_s: float
+) -> list[Result]:
+    """``SurroundPilot.step`` of many pilots on their samples at one instant, each bit for bit as its own step:
+    pilots of the paper's law with ordinary samples go together (``step_together``); the rest, and a lone one,
+    step alone. A pilot's error is its result: the others still step, as each robot's own step would."""
+    ring = len(samples[0][0].angles_rad) if samples else 0
+    config = pilots[0].config if pilots else None
+    together = [
+        i
+        for i, (pilot, (sensors, _)) in enumerate(zip(pilots, samples, strict=True))
+        if config is not None and pilot.batchable(sensors, config, ring)
+    ]
+    ranges = [samples[i][0].ranges_list() for i in together]
+    if any(len(r) != ring for r in ranges):
+        together, ranges = [], []
+    elif together and (np.array(ranges) < 0).any():  # a ring that reads as none does: that robot fails alone
+        keep = [k for k, r in enumerate(ranges) if not any(x < 0 for x in r)]
+        together, ranges = [together[k] for k in keep], [ranges[k] for k in keep]
+    if len(together) < 2:
+        together, ranges = [], []
+    results: list[Result] = [None] * len(pilots)
+    chosen = set(together)
+    for i, (pilot, (sensors, sweep)) in enumerate(zip(pilots, samples, strict=True)):
+        if i not in chosen:
+            results[i] = _step_alone(pilot, sensors, sweep, now_s)
+    if together:
+        stepped = step_together([pilots[i] for i in together], [samples[i] for i in together], ranges, now_s)
+        for i, result in zip(together, stepped, strict=True):
+            results[i] = result
+    return results
+
+
+def _step_alone(pilot: SurroundPilot, sensors: OwnSensors, sweep: BeaconSweep, now_s: float) -> Result:
+    """``pilot.step``, its error as its result."""
+    try:
+        return pilot.step(sensors, sweep, now_s)
+    except Exception as err:  # one robot's bad sample fails that robot's step only
+        return err
 
 
 def step_together(
     pilots: list[SurroundPilot], samples: list[tuple[OwnSensors, BeaconSweep]], ranges: list[list[float]], now_s: float
 ) -> list[Result]:
     """``SurroundPilot.step`` of each pilot (the paper's law, one config, rings of one size and no negative
-    range, checked by ``SurroundPilot.step_all``) on its sample and sweep, all at once; ``ranges``: each
+    range, checked by ``step_pilots``) on its sample and sweep, all at once; ``ranges``: each
     sample's ``ranges_list()``."""
     results: list[Result] = [None] * len(pilots)
     live, dts, own = _track(pilots, samples, now_s, results)

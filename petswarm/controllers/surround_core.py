@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 from petswarm.controllers.driving_core import Drive, Log, Telemetry
 from petswarm.controllers.motion import MotorCommand
+from petswarm.controllers.surround_batch import step_pilots
 from petswarm.controllers.surround_pilot import SurroundDriverConfig, SurroundPilot
 from radio_hub.interface import BeaconSweep, OwnSensors
 
@@ -88,11 +89,11 @@ class SurroundCore:
         cores: list[SurroundCore], samples: list[tuple[OwnSensors, BeaconSweep]], now: float
     ) -> list[Exception | None]:
         """``sensors_sample`` of many cores at one instant, their pilots stepped together
-        (``SurroundPilot.step_all``); each core's error (its pilot's step's), or None."""
+        (``surround_batch.step_pilots``); each core's error (its pilot's step's), or None."""
         stepping = [k for k, core in enumerate(cores) if core.beaconing]
         engaged = [cores[k].pilot.engaged for k in stepping]
         pilots = [cores[k].pilot for k in stepping]
-        results = SurroundPilot.step_all(pilots, [samples[k] for k in stepping], now)
+        results = step_pilots(pilots, [samples[k] for k in stepping], now)
         errors: list[Exception | None] = [None] * len(cores)
         for k, was, result in zip(stepping, engaged, results, strict=True):
             if isinstance(result, Exception):

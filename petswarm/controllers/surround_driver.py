@@ -23,7 +23,7 @@ from petswarm.controllers.surround_pilot import SurroundDriverConfig, SurroundPi
 from petswarm.controllers.surround_sensing import SweepJob, beacon_fixes_batch
 from petswarm.managers.relative_location import IrModuleManager
 from petswarm.managers.sequence import EventLog
-from radio_hub.interface import BeaconSweep, HubUnavailable, OwnSensors, RadioClient, RadioError
+from radio_hub.interface import BeaconSweep, HubUnavailable, IrConfig, OwnSensors, RadioClient, RadioError
 
 __all__ = ["TELEMETRY_EVERY", "SurroundDriver"]
 
@@ -238,11 +238,17 @@ class SweepBatch:
     """
 
     def __init__(self) -> None:
-        self._members: dict[SurroundPilot, RadioClient] = {}
+        self._members: dict[SurroundPilot, tuple[RadioClient, int]] = {}
+        """Each member's radio and calibration (an index into ``_calibrations``)."""
+        self._calibrations: list[tuple[IrConfig, str]] = []
+        """The IR calibrations and estimators of the members, each once: sweeps of one are estimated together."""
 
     def join(self, pilot: SurroundPilot, radio: RadioClient) -> None:
         """``pilot`` steps on the sweeps that come to ``radio`` (its latest, ``radio.beacons``)."""
-        self._members[pilot] = radio
+        calibration = (pilot.config.ir, pilot.config.estimator)
+        if calibration not in self._calibrations:  # compared once here, not on every round
+            self._calibrations.append(calibration)
+        self._members[pilot] = (radio, self._calibrations.index(calibration))
 
     def leave(self, pilot: SurroundPilot) -> None:
         """``pilot`` steps no more."""
@@ -251,21 +257,16 @@ class SweepBatch:
     def prepare(self, pilot: SurroundPilot, sweep: BeaconSweep) -> None:
         """Before ``pilot`` steps on ``sweep``: if that sweep is new to it, estimate it together with every
         member's latest sweep that is new to its pilot, and give each pilot its fixes."""
-        if pilot.sweep_job(sweep) is None:
+        if not pilot.wants(sweep):
             return
-        groups: list[tuple[SurroundDriverConfig, list[tuple[SurroundPilot, BeaconSweep, SweepJob]]]] = []
-        for member, radio in self._members.items():
+        groups: dict[int, list[tuple[SurroundPilot, BeaconSweep, SweepJob]]] = {}
+        for member, (radio, calibration) in self._members.items():
             latest = sweep if member is pilot else radio.beacons
             job = member.sweep_job(latest)
-            if job is None:
-                continue
-            config = member.config
-            group = next((g for c, g in groups if c.ir == config.ir and c.estimator == config.estimator), None)
-            if group is None:
-                group = []
-                groups.append((config, group))
-            group.append((member, latest, job))
-        for config, group in groups:
-            fixes = beacon_fixes_batch([job for _, _, job in group], config.ir, config.estimator)
+            if job is not None:
+                groups.setdefault(calibration, []).append((member, latest, job))
+        for calibration, group in groups.items():
+            ir, estimator = self._calibrations[calibration]
+            fixes = beacon_fixes_batch([job for _, _, job in group], ir, estimator)
             for (member, latest, _), (seen, xy) in zip(group, fixes, strict=True):
                 member.give_fixes(latest, seen, xy)

@@ -147,10 +147,14 @@ class SurroundPilot:
         """The last motor command (vx, vy) sent, (0, 0) before the first."""
         return np.array(self._command)
 
+    def wants(self, sweep: BeaconSweep) -> bool:
+        """Whether the next step would estimate ``sweep`` (it is new, and its fixes were not given)."""
+        return sweep.t_us != self._sweep_t_us and (self._given is None or self._given[0] is not sweep)
+
     def sweep_job(self, sweep: BeaconSweep) -> SweepJob | None:
         """What the next step would estimate from ``sweep`` (None: nothing, the sweep is not new or its fixes
         were given): so that a runtime can estimate many robots' sweeps at once (``beacon_fixes_batch``)."""
-        if sweep.t_us == self._sweep_t_us or (self._given is not None and self._given[0] is sweep):
+        if not self.wants(sweep):
             return None
         names, readings, gains = sweep.arrays()
         return SweepJob(names, readings, gains, self.config.human_id)
@@ -171,43 +175,7 @@ class SurroundPilot:
         self._track(sensors, sweep, dt, now_s)
         return self._drive(sensors, dt)
 
-    @staticmethod
-    def step_all(
-        pilots: list[SurroundPilot], samples: list[tuple[OwnSensors, BeaconSweep]], now_s: float
-    ) -> list[tuple[float, float] | Exception | None]:
-        """``step`` of many pilots on their samples at once, each bit for bit as its own ``step``: what a model
-        run's robots do at one instant. Pilots of the paper's law with ordinary samples are stepped together
-        (``surround_batch``); the rest, and a lone one, step alone. A pilot's error is its result: the others
-        still step, as each robot's own step would."""
-        from petswarm.controllers.surround_batch import step_together  # numpy's stage, for many robots only
-
-        first = samples[0][0] if samples else None
-        ring = 0 if first is None else len(first.angles_rad)
-        together = [
-            i
-            for i, (pilot, (sensors, _)) in enumerate(zip(pilots, samples, strict=True))
-            if pilot._batchable(sensors, pilots[0].config, ring)
-        ]
-        ranges = [samples[i][0].ranges_list() for i in together]
-        if any(len(r) != ring for r in ranges):
-            together, ranges = [], []
-        elif together and (np.array(ranges) < 0).any():  # a ring that reads as none does: that robot fails alone
-            keep = [k for k, r in enumerate(ranges) if not any(x < 0 for x in r)]
-            together, ranges = [together[k] for k in keep], [ranges[k] for k in keep]
-        if len(together) < 2:
-            together, ranges = [], []
-        results: list[tuple[float, float] | Exception | None] = [None] * len(pilots)
-        chosen = set(together)
-        for i, (pilot, (sensors, sweep)) in enumerate(zip(pilots, samples, strict=True)):
-            if i not in chosen:
-                results[i] = _step_alone(pilot, sensors, sweep, now_s)
-        if together:
-            stepped = step_together([pilots[i] for i in together], [samples[i] for i in together], ranges, now_s)
-            for i, result in zip(together, stepped, strict=True):
-                results[i] = result
-        return results
-
-    def _batchable(self, sensors: OwnSensors, config: SurroundDriverConfig, ring: int) -> bool:
+    def batchable(self, sensors: OwnSensors, config: SurroundDriverConfig, ring: int) -> bool:
         """Whether this pilot's step may go with others' (``surround_batch``): the paper's law without the
         centroid filter, ``config`` as the rest, and a ring of ``ring`` sensors that reads as a robot's does
         (no negative range, finite odometry: the others fail alone, as they would)."""
@@ -330,13 +298,3 @@ class SurroundPilot:
             self._ring_angles = angles_rad
             self._ring_trig = (np.cos(angles_rad).tolist(), np.sin(angles_rad).tolist())
         return self._ring_trig
-
-
-def _step_alone(
-    pilot: SurroundPilot, sensors: OwnSensors, sweep: BeaconSweep, now_s: float
-) -> tuple[float, float] | Exception | None:
-    """``pilot.step``, its error as its result."""
-    try:
-        return pilot.step(sensors, sweep, now_s)
-    except Exception as err:  # one robot's bad sample fails that robot's step only
-        return err

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from petswarm.controllers.surround_batch import step_pilots
 from petswarm.controllers.surround_driver import SurroundTask
 from petswarm.controllers.surround_pilot import SurroundDriverConfig, SurroundPilot
 from radio_hub.interface import BeaconSweep, OwnSensors
@@ -70,7 +71,7 @@ def test_pilots_stepped_together_keep_each_ones_numbers_through_odd_samples() ->
             ranges = np.array([0.3, -0.1, *[np.nan] * 6]) if step == 50 and i == 3 else None
             samples.append((_sample(t_us, rng, ranges), sweeps[me]))
         now = t_us / 1e6
-        results = SurroundPilot.step_all(together, samples, now)
+        results = step_pilots(together, samples, now)
         for pilot, twin, (sensors, sweep), result in zip(together, alone, samples, results, strict=True):
             try:
                 expected = twin.step(sensors, sweep, now)
