@@ -556,25 +556,19 @@ def sense_all(
     finite = np.isfinite(ranges)
     counts = [len(t._names) for t in trackers]
     human_row = [t._names.index(human_id) if human_id in t._rows else -1 for t in trackers]  # as sense_lists
+    seen = np.array(human_row) >= 0
+    neighbours = np.array(counts, dtype=np.intp) - seen
     explained = np.zeros(ranges.shape, dtype=bool)
-    if sum(counts):
-        explained = _explained_all(trackers, counts, human_row, echoes, config)
-    kept = finite & ~explained
-    kept_count = np.add.reduce(kept, axis=1)
-    seen = np.array([row >= 0 for row in human_row], dtype=bool)
-    neighbours = np.array([c - (row >= 0) for c, row in zip(counts, human_row, strict=True)], dtype=np.intp)
-    count = neighbours + kept_count + seen
-    terms = np.zeros((n, int(count.max(initial=0)), 2))
     human = np.zeros((n, 2))
-    for i, (tracker, row) in enumerate(zip(trackers, human_row, strict=True)):
-        position = tracker._position
-        if row < 0:
-            terms[i, : neighbours[i]] = position
-            continue
-        terms[i, :row] = position[:row]
-        terms[i, row : neighbours[i]] = position[row + 1 :]
-        human[i] = position[row]
-        terms[i, count[i] - 1] = _surface_toward_me(position[row], config.person_radius_m)
+    bodies = None
+    if sum(counts):
+        bodies = _Bodies(trackers, counts, human_row)
+        explained = bodies.explained(echoes, config)
+    kept = finite & ~explained
+    count = neighbours + np.add.reduce(kept, axis=1) + seen
+    terms = np.zeros((n, int(count.max(initial=0)), 2))
+    if bodies is not None:
+        bodies.fill(terms, human, count, config.person_radius_m)
     rows, sensors = np.nonzero(kept)
     slots = neighbours[rows] + np.cumsum(kept, axis=1)[rows, sensors] - 1
     terms[rows, slots] = echoes[rows, sensors]
@@ -582,20 +576,47 @@ def sense_all(
     return SensedAll(terms, neighbours, count, human, seen, dropped)
 
 
-def _explained_all(
-    trackers: list[BeaconTracker], counts: list[int], human_row: list[int], echoes: np.ndarray, config: SensingConfig
-) -> np.ndarray:
-    """Per robot and echo (n, s), whether one of its tracked bodies explains the echo (``_explained``)."""
-    owner = np.repeat(np.arange(len(trackers)), counts)
-    centres = np.concatenate([t._position for t in trackers if t._names])
-    body = np.full(len(owner), config.robot_radius_m + config.echo_match_m)
-    start = np.cumsum([0, *counts[:-1]])
-    person = [start[i] + row for i, row in enumerate(human_row) if row >= 0]
-    body[person] = config.person_radius_m + config.echo_match_m
-    gx = echoes[owner, :, 0] - centres[:, 0:1]
-    gy = echoes[owner, :, 1] - centres[:, 1:2]
-    inside = np.sqrt(gx * gx + gy * gy) <= body[:, None]  # (rows, s); nan (no echo) is never inside
-    holders = [i for i, c in enumerate(counts) if c]
-    explained = np.zeros(echoes.shape[:2], dtype=bool)
-    explained[holders] = np.logical_or.reduceat(inside, start[holders], axis=0)
-    return explained
+class _Bodies:
+    """Every robot's tracked beacons, stacked (one row per beacon, robot by robot): ``sense_all``'s view."""
+
+    def __init__(self, trackers: list[BeaconTracker], counts: list[int], human_row: list[int]) -> None:
+        self.owner = np.repeat(np.arange(len(trackers)), counts)
+        self.centres = np.concatenate([t._position for t in trackers if t._names])
+        start = np.cumsum([0, *counts[:-1]])
+        self.start = start
+        self.local = np.arange(len(self.owner)) - start[self.owner]
+        row_of = np.array(human_row)[self.owner]
+        self.person = self.local == row_of  # the first row of the human's name, as names.index finds it
+        self.after_person = (row_of >= 0) & (self.local > row_of)
+        self.holders = [i for i, c in enumerate(counts) if c]
+
+    def explained(self, echoes: np.ndarray, config: SensingConfig) -> np.ndarray:
+        """Per robot and echo (n, s), whether one of its tracked bodies explains the echo (``_explained``)."""
+        owner, centres = self.owner, self.centres
+        body = np.where(
+            self.person, config.person_radius_m + config.echo_match_m, config.robot_radius_m + config.echo_match_m
+        )
+        gx = echoes[owner, :, 0] - centres[:, 0:1]
+        gy = echoes[owner, :, 1] - centres[:, 1:2]
+        inside = np.sqrt(gx * gx + gy * gy) <= body[:, None]  # (rows, s); nan (no echo) is never inside
+        explained = np.zeros(echoes.shape[:2], dtype=bool)
+        explained[self.holders] = np.logical_or.reduceat(inside, self.start[self.holders], axis=0)
+        return explained
+
+    def fill(self, terms: np.ndarray, human: np.ndarray, count: np.ndarray, person_radius_m: float) -> None:
+        """Put each robot's neighbours first in its row of ``terms``, in its tracker's order, and its human's
+        centre in ``human`` and his body's surface (``_surface_toward_me``) last in its row."""
+        others = ~self.person
+        terms[self.owner[others], (self.local - self.after_person)[others]] = self.centres[others]
+        if not self.person.any():
+            return
+        holders = self.owner[self.person]
+        centres = self.centres[self.person]
+        human[holders] = centres
+        # numpy's dot of each centre alone, as _surface_toward_me takes it: its rounding is the record's
+        distance = np.sqrt(np.array([centre.dot(centre) for centre in centres]))
+        near = distance <= 1e-9
+        reach = np.maximum(distance - person_radius_m, 0.01)
+        scale = reach / np.where(near, 1.0, distance)
+        surface = np.where(near[:, None], 0.0, centres * scale[:, None])
+        terms[holders, count[holders] - 1] = surface
