@@ -20,7 +20,16 @@ from petswarm.bench import organize as bench
 from petswarm.bench.hub import progress
 from petswarm.bench.organize_report import report, summarise, write_results
 from petswarm.clock import ModelClockLoop
-from petswarm.lab.model_run import ENDPOINT, MemoryAir, RunningRobot, cancel_leftovers, robot_config_of, start_robot
+from petswarm.lab.model_run import (
+    ENDPOINT,
+    MemoryAir,
+    RunningRobot,
+    cancel_leftovers,
+    robot_config_of,
+    start_robot,
+    unwind,
+)
+from petswarm.lab.processes import Interrupts
 from radio_hub.interface import EnvironmentConfig, HubUnavailable, apply_profile, load_config
 
 ATTACH_S = 0.1
@@ -71,12 +80,23 @@ def environment(config: Path | None, profile: str) -> EnvironmentConfig:
     return apply_profile(load_config(config) if config is not None else EnvironmentConfig(), profile)
 
 
-def measure_count(n: int, args: argparse.Namespace, config: Path | None) -> dict[str, Any]:
-    """n + 1 robots on a fresh environment in model time, ``runs`` organizations per protocol."""
+def measure_count(
+    n: int, args: argparse.Namespace, config: Path | None, interrupts: Interrupts | None = None
+) -> dict[str, Any]:
+    """n + 1 robots on a fresh environment in model time, ``runs`` organizations per protocol; ``interrupts``:
+    the bench's stop signals, raised between two passes of the loop (never lost in a weakref callback)."""
     loop = ModelClockLoop()
+    if interrupts is not None:
+        loop.checkpoint = interrupts.check
+    finished = False
     try:
-        return loop.run_until_complete(_measure(n, args, config))
+        result = loop.run_until_complete(_measure(n, args, config))
+        finished = True
+        return result
     finally:
+        if not finished:
+            loop.checkpoint = None  # the signal was raised: unwinding the robots is not cut short by it again
+            unwind(loop)
         loop.close()
 
 
@@ -168,7 +188,12 @@ def run_counts(args: argparse.Namespace, out: Path) -> dict[str, Any]:
     started = time.monotonic()
     load_average = os.getloadavg()[0]
     config = bench.write_no_ack_config(out) if args.mac_ack == "off" else None
-    per_count = [measure_count(n, args, config) for n in args.slaves]
+    interrupts = Interrupts(at_safe_points=True)
+    try:
+        per_count = [measure_count(n, args, config, interrupts) for n in args.slaves]
+    finally:
+        with interrupts.deferred():  # a second signal waits for the loop's unwinding
+            pass
     records = [r for count in per_count for r in count["records"]]
     return {
         "settings": bench.settings(args, per_count[0]["config"], load_average),

@@ -71,3 +71,21 @@ def test_a_signal_landing_in_a_weakref_callback_still_stops_the_model_run(
     finally:
         for signum, handler in before.items():
             signal.signal(signum, handler)
+
+
+def test_a_signal_landing_in_a_weakref_callback_stops_the_model_time_organize_bench(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # the bench's loop drops weakrefs as the run's does: a Ctrl-C there was lost and the bench went on
+    from cli.main import main
+    from petswarm.bench import organize_model
+
+    monkeypatch.setattr(organize_model, "ModelClockLoop", _SignalInAWeakrefCallback)
+    before = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        code = main(["bench", "organize", "--slaves", "2", "--runs", "500", "--out", str(tmp_path)])
+    finally:
+        for signum, handler in before.items():
+            signal.signal(signum, handler)
+    assert code == 130  # 500 organizations take far longer than the 2 s of model time the signal waits
+    assert not (tmp_path / "bench_organize.json").exists()
