@@ -422,6 +422,10 @@ def execute(opts: RunOptions, scenario: Scenario | None) -> dict[str, Any]:
             summary["model_time_s"] = round(model_time_s, 6)
             summary["wall_time_s"] = round(time.perf_counter() - started, 3)
             summary["speedup"] = round(model_time_s / max(summary["wall_time_s"], 1e-9), 1)
+            if finished and (interrupts.pending or interrupts.noted):  # after the last pass: the checks are cut
+                summary["interrupted"] = True
+                summary["ok"] = False
+                summary["problems"] = [*summary.get("problems", []), "interrupted"]
             record.finish(summary, {})
             if summary.get("interrupted") and opts.as_json:
                 _print(summary, as_json=True)  # --json promises a summary, interrupted too

@@ -89,3 +89,32 @@ def test_a_signal_landing_in_a_weakref_callback_stops_the_model_time_organize_be
             signal.signal(signum, handler)
     assert code == 130  # 500 organizations take far longer than the 2 s of model time the signal waits
     assert not (tmp_path / "bench_organize.json").exists()
+
+
+class _SignalAfterTheLastPass(ModelClockLoop):
+    """The run's loop, which takes a SIGINT just after the run's last pass."""
+
+    def run_until_complete(self, future: object) -> object:  # type: ignore[override]
+        result = super().run_until_complete(future)  # type: ignore[arg-type]
+        signal.raise_signal(signal.SIGINT)
+        return result
+
+
+def test_a_signal_after_the_runs_last_pass_still_leaves_an_interrupted_summary_and_prints_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setattr(model_run, "ModelClockLoop", _SignalAfterTheLastPass)
+    before = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    opts = RunOptions(
+        robots=2, seed=1, duration=2.0, ping_interval=0.5, record_dir=str(tmp_path / "run"), as_json=True, clock="model"
+    )
+    try:
+        assert model_run.run_model(opts, None) == 130
+    finally:
+        for signum, handler in before.items():
+            signal.signal(signum, handler)
+    printed = json.loads(capsys.readouterr().out)  # --json promises a summary, interrupted too
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    for told in (printed, summary):
+        assert told["interrupted"] and not told["ok"] and "interrupted" in told["problems"]
+        assert told["model_time_s"] == 2.0  # the run itself was whole
