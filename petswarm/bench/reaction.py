@@ -76,7 +76,7 @@ def bench_reaction(args: argparse.Namespace) -> int:
     results.update(profile=args.profile, paper=paper_rows(results))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    save(results, out, "reaction", plot_cdfs, {**results, "trials": trials})
+    save(results, out, "bench_reaction", plot_cdfs, {**results, "trials": trials})
     emit(table(results), results, args.json)
     return 0 if trials and not failures else 1
 
