@@ -596,29 +596,23 @@ def _sum_first(values: np.ndarray, count: np.ndarray) -> np.ndarray:
 def _surround_all(
     c: SurroundConfig, g: np.ndarray, human: np.ndarray, seen: np.ndarray, velocity: np.ndarray
 ) -> np.ndarray:
-    """``SurroundController._surround`` of many robots (n, 2), elementwise in its order."""
-    hx, hy = human[:, 0], human[:, 1]
-    human_distance = np.sqrt(hx * hx + hy * hy)
-    reach = np.maximum(human_distance, 1e-9)
-    tx, ty = hx / reach, hy / reach
-    gx, gy = g[:, 0], g[:, 1]
-    g_norm = np.maximum(np.sqrt(gx * gx + gy * gy), 1e-9)
-    ux, uy = gx / g_norm, gy / g_norm
-    vx, vy = velocity[:, 0], velocity[:, 1]
-    speed = np.sqrt(vx * vx + vy * vy)
-    moving = np.maximum(speed, 1e-9)
-    cos_human = tx * ux + ty * uy
-    cos_motion = np.where(speed > STILL_MPS, vx / moving * ux + vy / moving * uy, 0.0)
+    """``SurroundController._surround`` of many robots (n, 2), elementwise in its order (a row's x and y go
+    through one operation where the single robot does the same to each)."""
+    human_distance = _norm(human)
+    toward = human / np.maximum(human_distance, 1e-9)[:, None]
+    unit = g / np.maximum(_norm(g), 1e-9)[:, None]
+    speed = _norm(velocity)
+    moving = velocity / np.maximum(speed, 1e-9)[:, None]
+    cos_human = toward[:, 0] * unit[:, 0] + toward[:, 1] * unit[:, 1]
+    cos_motion = np.where(speed > STILL_MPS, moving[:, 0] * unit[:, 0] + moving[:, 1] * unit[:, 1], 0.0)
     pull = c.surround_force * ((1 + cos_human) * (1 + cos_motion) / 4)
-    active = (seen & (human_distance > 0))[:, None]
-    return np.where(active, np.stack([pull * tx, pull * ty], axis=1), 0.0)
+    active = seen & (human_distance > 0)
+    return np.where(active[:, None], pull[:, None] * toward, 0.0)
 
 
 def _clip_all(v: np.ndarray, limit: float) -> np.ndarray:
     """``_plain_clip`` of each row of ``v`` (n, 2)."""
-    x, y = v[:, 0], v[:, 1]
-    scale = np.minimum(1.0, limit / np.maximum(np.sqrt(x * x + y * y), 1e-12))
-    return np.stack([x * scale, y * scale], axis=1)
+    return v * np.minimum(1.0, limit / np.maximum(_norm(v), 1e-12))[:, None]
 
 
 def _plain_clip(x: float, y: float, limit: float) -> tuple[float, float]:
