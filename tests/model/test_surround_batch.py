@@ -3,6 +3,8 @@ each robot stepping alone does: the run's digest, every robot's record and comma
 
 from __future__ import annotations
 
+import math
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -86,3 +88,146 @@ def test_pilots_stepped_together_keep_each_ones_numbers_through_odd_samples() ->
             assert pilot.controller._forces == twin.controller._forces
     assert all(p.counters["steps"] > 80 for p in together)  # they drove
     assert together[3].counters["steps"] < together[0].counters["steps"] + 1  # the bad ring's step failed alone
+
+
+def _bits(value: object) -> object:
+    """``value`` with every float as its bytes (the sign of zero and nan's payload count) and every array as its
+    dtype, shape and bytes: two equal ``_bits`` are the same numbers bit for bit."""
+    if isinstance(value, float):
+        return struct.pack("<d", value)
+    if isinstance(value, np.ndarray):
+        return value.dtype.str, value.shape, np.ascontiguousarray(value).tobytes()
+    if isinstance(value, list | tuple):
+        return tuple(_bits(v) for v in value)
+    if isinstance(value, dict):
+        return tuple((k, _bits(v)) for k, v in value.items())
+    if isinstance(value, Exception):
+        return type(value), str(value)
+    return value
+
+
+def _state(pilot: SurroundPilot) -> object:
+    """Everything of ``pilot`` a step may change (the ring's history as its times and ranges)."""
+    tracker, controller = pilot.tracker, pilot.controller
+    return _bits(
+        (
+            tracker.names,
+            tracker.positions,
+            tracker.velocities,
+            tracker._since_fix,
+            controller._g,
+            controller._rate,
+            controller._count,
+            controller._differenced,
+            controller._forces,
+            [(t_us, ranges) for t_us, _, ranges in pilot._echoes._history],
+            pilot.counters,
+            pilot.engaged,
+            pilot._command,
+            pilot._last_us,
+        )
+    )
+
+
+def _step_both(
+    together: list[SurroundPilot],
+    alone: list[SurroundPilot],
+    samples: list[tuple[OwnSensors, BeaconSweep]],
+    now: float,
+) -> list[object]:
+    """``step_pilots`` on ``together`` and each of ``alone`` stepping alone on the same samples: asserts that
+    each result and each pilot's state are the same bit for bit; the results."""
+    results = step_pilots(together, samples, now)
+    for k, (twin, (sensors, sweep)) in enumerate(zip(alone, samples, strict=True)):
+        try:
+            expected: object = twin.step(sensors, sweep, now)
+        except Exception as err:
+            expected = err
+        assert _bits(results[k]) == _bits(expected), f"robot {k}: {results[k]!r} together, {expected!r} alone"
+        assert _state(together[k]) == _state(twin), f"robot {k}: its state"
+    return results
+
+
+_RING = np.radians(np.arange(8) * 45.0)
+_NO_ECHO = np.full(8, np.nan)
+
+
+def _pilots(n: int) -> tuple[list[SurroundPilot], list[SurroundPilot]]:
+    return [SurroundPilot(SurroundDriverConfig()) for _ in range(n)], [
+        SurroundPilot(SurroundDriverConfig()) for _ in range(n)
+    ]
+
+
+def _fixed_sweep(t_us: int, fixes: dict[str, list[float]], pilots: list[SurroundPilot]) -> BeaconSweep:
+    """A sweep whose fixes every one of ``pilots`` is given (``give_fixes``): beacons where the test puts them."""
+    sweep = BeaconSweep(t_us, {name: np.zeros(12) for name in fixes}, {})
+    for pilot in pilots:
+        pilot.give_fixes(sweep, list(fixes), np.array(list(fixes.values()), dtype=float))
+    return sweep
+
+
+def test_a_sample_again_at_the_instant_of_a_failed_step_fails_as_it_does_alone() -> None:
+    """A hub whose clock went back steps a robot again at an instant its ring already holds a sample of: its
+    ring reads that held sample's ranges (here a negative one), and the safety stage raises, as alone."""
+    together, alone = _pilots(3)
+    everyone = together + alone
+    sweep = _fixed_sweep(40_000, {"user": [0.8, 0.3], "robot-b": [0.5, -0.2]}, everyone)
+    odometry = (0.1, 0.0, 0.0)
+    _step_both(together, alone, [(OwnSensors(40_000, _NO_ECHO, _RING, 0.0, odometry), sweep)] * 3, 0.04)
+    bad = np.array([0.3, -0.1, *[np.nan] * 6])
+    samples = [(OwnSensors(80_000, bad, _RING, 0.0, odometry), sweep)]
+    samples += [(OwnSensors(80_000, _NO_ECHO, _RING, 0.0, odometry), sweep)] * 2
+    assert isinstance(_step_both(together, alone, samples, 0.08)[0], ValueError)  # robot 0's negative range
+    samples[0] = (OwnSensors(40_000, _NO_ECHO, _RING, 0.0, odometry), sweep)  # the hub's clock went back
+    _step_both(together, alone, samples, 0.12)
+    samples[0] = (OwnSensors(80_000, _NO_ECHO, _RING, 0.0, odometry), sweep)  # and on to where it was
+    _step_both(together, alone, samples, 0.16)
+
+
+def test_a_sample_again_at_the_instant_of_another_ring_fails_only_its_robot() -> None:
+    """As above, the held sample from a ring of another size (the hub attached the robot again in between):
+    alone the robot's safety stage raises; together that must not fail the other robots' steps."""
+    together, alone = _pilots(3)
+    everyone = together + alone
+    sweep = _fixed_sweep(40_000, {"user": [0.8, 0.3], "robot-b": [0.5, -0.2]}, everyone)
+    odometry = (0.1, 0.0, 0.0)
+    four = np.radians(np.arange(4) * 90.0)
+    samples = [(OwnSensors(40_000, np.full(4, 0.5), four, 0.0, odometry), sweep)]
+    samples += [(OwnSensors(40_000, _NO_ECHO, _RING, 0.0, odometry), sweep)] * 2
+    _step_both(together, alone, samples, 0.04)
+    samples = [(OwnSensors(20_000, _NO_ECHO, _RING, 0.0, odometry), sweep)]  # the clock went back
+    samples += [(OwnSensors(80_000, _NO_ECHO, _RING, 0.0, odometry), sweep)] * 2
+    _step_both(together, alone, samples, 0.08)
+    samples = [(OwnSensors(40_000, _NO_ECHO, _RING, 0.0, odometry), sweep)]  # at the 4-sensor sample's instant
+    samples += [(OwnSensors(120_000, _NO_ECHO, _RING, 0.0, odometry), sweep)] * 2
+    results = _step_both(together, alone, samples, 0.12)
+    assert isinstance(results[0], ValueError) and not isinstance(results[1], Exception)
+
+
+def test_robots_without_an_ultrasonic_ring_step_together_as_alone() -> None:
+    """A world whose robots have no ultrasonic sensors (``ultrasonic_angles_deg = []``, which its config takes):
+    each robot steps on its beacons alone, and so together."""
+    together, alone = _pilots(2)
+    sweep = _fixed_sweep(40_000, {"user": [0.8, 0.3], "robot-b": [0.5, -0.2]}, together + alone)
+    none = np.zeros(0)
+    samples = [(OwnSensors(40_000, none, none, 0.0, (0.1, 0.0, 0.0)), sweep)] * 2
+    results = _step_both(together, alone, samples, 0.04)
+    assert all(isinstance(r, tuple) for r in results)
+
+
+def test_a_track_driven_to_infinity_gives_the_command_it_gives_alone() -> None:
+    """Odometry the wire takes (finite, -1e308) over a 2 s gap in the hub's clock drives a neighbour's track to
+    infinity: alone the law's clip keeps the finite part of a half-nan force (``min(1.0, nan)`` is 1.0), and so
+    must the robots' clip together (``np.minimum(1.0, nan)`` is nan)."""
+    together, alone = _pilots(2)
+    everyone = together + alone
+    odometry = (0.1, 0.0, 0.0)
+    sweep = _fixed_sweep(40_000, {"user": [0.8, 0.3], "robot-b": [0.5, -0.2]}, everyone)
+    _step_both(together, alone, [(OwnSensors(40_000, _NO_ECHO, _RING, 0.0, odometry), sweep)] * 2, 0.04)
+    sweep = _fixed_sweep(80_000, {"robot-b": [0.5, -0.2]}, everyone)  # the human out of sight: still driving
+    _step_both(together, alone, [(OwnSensors(80_000, _NO_ECHO, _RING, 0.0, odometry), sweep)] * 2, 0.08)
+    samples = [(OwnSensors(2_080_000, _NO_ECHO, _RING, 0.0, (-1e308, 0.0, 0.0)), sweep)]
+    samples.append((OwnSensors(2_080_000, _NO_ECHO, _RING, 0.0, odometry), sweep))
+    with np.errstate(all="ignore"):
+        results = _step_both(together, alone, samples, 0.12)
+    assert math.isnan(results[0][0]) and results[0][1] == 0.0  # type: ignore[index]
