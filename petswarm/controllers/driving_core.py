@@ -925,6 +925,12 @@ class EchoRanges:
         receding = np.where(np.isnan(rate), 0.0, rate + along)
         return angles, now_m, receding, np.array(known)
 
+    def holds(self, t_us: int) -> bool:
+        """Whether the latest sample kept is of ``t_us``: ``observe`` would not take another of that instant, and
+        ``floats`` would read the one held (a hub whose clock went back and on again)."""
+        history = self._history
+        return bool(history) and history[-1][0] == t_us
+
     def observe(self, sensors: OwnSensors, ranges: list[float] | None = None) -> None:
         """Keep ``sensors`` in the history the range rates are taken over (once per sample); ``ranges``: its
         ranges as floats, if the caller has them."""

@@ -281,7 +281,7 @@ class SafetyStage:
         case) goes on as it is, the others through ``_nearest_allowed`` one by one."""
         cfg = stages[0].cfg  # every stage's (the caller's word)
         trig_rows = [stage._ring_trig(ring) for stage, ring in zip(stages, angles, strict=True)]
-        trig = np.array(trig_rows)  # (n, s, 2)
+        trig = np.array(trig_rows, dtype=float).reshape(len(stages), -1, 2)  # (n, s, 2), s = 0 too
         gap = ranges - cfg.stop_distance_m
         gap = np.where(gap > 0.0, gap, 0.0)
         approach, braking = cfg.k_approach * gap, np.sqrt(2 * cfg.brake_decel_mps2 * gap)

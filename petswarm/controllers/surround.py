@@ -611,8 +611,10 @@ def _surround_all(
 
 
 def _clip_all(v: np.ndarray, limit: float) -> np.ndarray:
-    """``_plain_clip`` of each row of ``v`` (n, 2)."""
-    return v * np.minimum(1.0, limit / np.maximum(_norm(v), 1e-12))[:, None]
+    """``_plain_clip`` of each row of ``v`` (n, 2); ``min(1.0, r)`` as Python picks it: 1.0 unless r < 1.0, so a
+    nan norm (a half-nan force) scales by 1.0 and keeps the finite half, where ``np.minimum`` gives nan."""
+    ratio = limit / np.maximum(_norm(v), 1e-12)
+    return v * np.where(ratio < 1.0, ratio, 1.0)[:, None]
 
 
 def _plain_clip(x: float, y: float, limit: float) -> tuple[float, float]:

@@ -178,7 +178,8 @@ class SurroundPilot:
     def batchable(self, sensors: OwnSensors, config: SurroundDriverConfig, ring: int) -> bool:
         """Whether this pilot's step may go with others' (``surround_batch``): the paper's law without the
         centroid filter, ``config`` as the rest, and a ring of ``ring`` sensors that reads as a robot's does
-        (no negative range, finite odometry: the others fail alone, as they would)."""
+        (no negative range, finite odometry: the others fail alone, as they would), whose ring holds no sample of
+        this instant already (its safety stage would read that one's ranges: another ring's, or a negative one)."""
         if type(self.controller) is not SurroundController or config.law.centroid_filter_s != 0:
             return False
         if config is not self._batched_with:  # the configs of a run's robots are equal, not one object
@@ -188,6 +189,7 @@ class SurroundPilot:
         odometry = sensors.odometry
         return (
             len(sensors.angles_rad) == ring
+            and not self._echoes.holds(sensors.t_us)
             and len(odometry) == 3
             and math.isfinite(odometry[0])
             and math.isfinite(odometry[1])
