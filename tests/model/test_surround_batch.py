@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from petswarm.controllers.surround import SurroundConfig
 from petswarm.controllers.surround_batch import step_pilots
 from petswarm.controllers.surround_driver import SurroundTask
 from petswarm.controllers.surround_pilot import SurroundDriverConfig, SurroundPilot
@@ -231,3 +232,15 @@ def test_a_track_driven_to_infinity_gives_the_command_it_gives_alone() -> None:
     with np.errstate(all="ignore"):
         results = _step_both(together, alone, samples, 0.12)
     assert math.isnan(results[0][0]) and results[0][1] == 0.0  # type: ignore[index]
+
+
+def test_pilots_of_configs_equal_but_for_the_sign_of_zero_keep_each_ones_forces() -> None:
+    """``SurroundDriverConfig`` equality takes -0.0 for 0.0, but a law of ``surround_force = -0.0`` gives f_G of -0.0
+    where 0.0 gives 0.0: a pilot stepped with another's config must not get that one's signs."""
+    zero, negative = SurroundConfig(surround_force=0.0), SurroundConfig(surround_force=-0.0)
+    configs = [SurroundDriverConfig(law=negative), SurroundDriverConfig(law=zero)]
+    assert configs[0] == configs[1]
+    together = [SurroundPilot(c) for c in configs]
+    alone = [SurroundPilot(c) for c in configs]
+    sweep = _fixed_sweep(40_000, {"user": [0.8, 0.3]}, together + alone)
+    _step_both(together, alone, [(OwnSensors(40_000, _NO_ECHO, _RING, 0.0, (0.0, 0.0, 0.0)), sweep)] * 2, 0.04)
