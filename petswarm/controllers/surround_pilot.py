@@ -183,7 +183,8 @@ class SurroundPilot:
         if type(self.controller) is not SurroundController or config.law.centroid_filter_s != 0:
             return False
         if config is not self._batched_with:  # the configs of a run's robots are equal, not one object
-            if self.config != config:
+            # equal to the bit: == takes -0.0 for 0.0 (and 1 for 1.0), and the batch steps all with one config
+            if self.config != config or repr(self.config) != repr(config):
                 return False
             self._batched_with = config
         odometry = sensors.odometry
