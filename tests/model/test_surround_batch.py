@@ -244,3 +244,22 @@ def test_pilots_of_configs_equal_but_for_the_sign_of_zero_keep_each_ones_forces(
     alone = [SurroundPilot(c) for c in configs]
     sweep = _fixed_sweep(40_000, {"user": [0.8, 0.3]}, together + alone)
     _step_both(together, alone, [(OwnSensors(40_000, _NO_ECHO, _RING, 0.0, (0.0, 0.0, 0.0)), sweep)] * 2, 0.04)
+
+
+def test_an_overflow_in_one_robots_safety_stage_fails_only_that_robot() -> None:
+    """A hub's absurd odometry (1e150 m/s, finite, so the wire takes it) on a ring with two sensors 1e-5 degrees
+    apart: the safety stage's corner of their limits overflows ``** 2`` (OverflowError). Alone it fails that
+    robot's step; together the others must still step, as each would alone."""
+    together, alone = _pilots(2)
+    ring = np.radians([0.0, 1e-5, 90.0, 135.0, 180.0, -135.0, -90.0, -45.0])
+    sweep = _fixed_sweep(40_000, {"user": [0.8, 0.3]}, together + alone)
+    before = np.array([np.nan, 0.5, *[np.nan] * 6])
+    for step in range(1, 6):  # 0.2 s of ring history: the echoes' receding speeds are known
+        samples = [(OwnSensors(step * 40_000, before, ring, 0.0, (0.1, 0.0, 0.0)), sweep)] * 2
+        _step_both(together, alone, samples, step * 0.04)
+    sweep = BeaconSweep(240_000, {}, {})  # nothing seen: the tracks go (and do not run off to infinity)
+    after = np.array([0.05, 0.5, *[np.nan] * 6])  # an echo ahead, new: the command is over its limit
+    samples = [(OwnSensors(240_000, after, ring, 0.0, (1e150, 0.0, 0.0)), sweep)]
+    samples.append((OwnSensors(240_000, before, ring, 0.0, (0.1, 0.0, 0.0)), sweep))
+    results = _step_both(together, alone, samples, 0.24)
+    assert isinstance(results[0], OverflowError) and isinstance(results[1], tuple)
