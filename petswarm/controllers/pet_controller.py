@@ -274,11 +274,13 @@ class SafetyStage:
         ranges: np.ndarray,
         receding: np.ndarray,
         has_receding: np.ndarray,
-    ) -> list[tuple[float, float]]:
+    ) -> list[tuple[float, float] | Exception]:
         """``translation`` of many robots' stages (of one config) at once, bit for bit as each alone: ``commands``
         (n, 2), their rings' ``angles``, ``ranges`` (n, s) with no negative one, ``receding`` (n, s) where
         ``has_receding``. Each sensor's limit is worked out elementwise; a command within every limit (the usual
-        case) goes on as it is, the others through ``_nearest_allowed`` one by one."""
+        case) goes on as it is, the others through ``_nearest_allowed`` one by one. A robot whose own stage
+        raises (``_nearest_allowed``'s ``** 2`` overflows on limits a hub's absurd odometry gives) has that error
+        as its result: the others' go on."""
         cfg = stages[0].cfg  # every stage's (the caller's word)
         trig_rows = [stage._ring_trig(ring) for stage, ring in zip(stages, angles, strict=True)]
         trig = np.array(trig_rows, dtype=float).reshape(len(stages), -1, 2)  # (n, s, 2), s = 0 too
@@ -291,13 +293,17 @@ class SafetyStage:
         seen = ~np.isnan(ranges)
         vx, vy = commands[:, 0:1], commands[:, 1:2]
         within = ~seen | (trig[..., 0] * vx + trig[..., 1] * vy <= limit + 1e-12)
-        out = []
+        out: list[tuple[float, float] | Exception] = []
         limits, seen_rows = limit.tolist(), seen.tolist()
         rows = zip(commands.tolist(), np.logical_and.reduce(within, axis=1).tolist(), strict=True)
         for i, ((x, y), free) in enumerate(rows):
             if not free:
                 sensors = zip(trig_rows[i], limits[i], seen_rows[i], strict=True)
-                x, y = _nearest_allowed((x, y), [(c, s, lim) for (c, s), lim, ok in sensors if ok])
+                try:
+                    x, y = _nearest_allowed((x, y), [(c, s, lim) for (c, s), lim, ok in sensors if ok])
+                except Exception as err:  # as that robot's own translation raises it
+                    out.append(err)
+                    continue
             speed = math.hypot(x, y)  # MotorCommand.limited
             scale = min(1.0, cfg.limits.max_speed / speed) if speed > 0 else 1.0
             out.append((x * scale, y * scale))

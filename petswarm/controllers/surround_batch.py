@@ -115,6 +115,9 @@ def step_together(
     for k, command in zip(driving, safe, strict=True):
         pilot = chosen[k]
         pilot.engaged = True
+        if isinstance(command, Exception):  # its safety stage raised, as in its own step: engaged, no command
+            results[live[k]] = command
+            continue
         pilot._command = command
         counters = pilot.counters
         counters["steps"] += 1
