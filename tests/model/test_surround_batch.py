@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import struct
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -263,3 +264,18 @@ def test_an_overflow_in_one_robots_safety_stage_fails_only_that_robot() -> None:
     samples.append((OwnSensors(240_000, before, ring, 0.0, (0.1, 0.0, 0.0)), sweep))
     results = _step_both(together, alone, samples, 0.24)
     assert isinstance(results[0], OverflowError) and isinstance(results[1], tuple)
+
+
+def test_an_infinite_range_steps_together_without_a_warning_a_robot_alone_never_gives() -> None:
+    """A range of +inf (float32 on the wire: a hub may send it) is no echo to a robot alone, in plain floats and
+    silent; together numpy must not warn of it either (0 * inf in the echo's point, inf - inf in its rate): under
+    ``-W error`` a warning is an exception, and it would fail every robot of the batch."""
+    together, alone = _pilots(2)
+    sweep = _fixed_sweep(40_000, {"user": [0.8, 0.3]}, together + alone)
+    ranges = np.array([np.inf, 0.5, *[np.nan] * 6])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for step in range(1, 6):
+            samples = [(OwnSensors(step * 40_000, ranges, _RING, 0.0, (0.1, 0.0, 0.0)), sweep)] * 2
+            results = _step_both(together, alone, samples, step * 0.04)
+            assert all(isinstance(r, tuple) for r in results)
