@@ -84,8 +84,25 @@ def step_together(
     sample's ``ranges_list()``."""
     results: list[Result] = [None] * len(pilots)
     live, dts, own = _track(pilots, samples, now_s, results)
-    if not live:
-        return results
+    if live:
+        # the sensing, law and ring stages redo plain-float code, which never warns (inf - inf is nan, silently):
+        # their numpy must not either (under -W error a warning would fail every robot of the batch)
+        with np.errstate(all="ignore"):
+            _drive(pilots, samples, ranges, live, dts, own, results)
+    return results
+
+
+def _drive(
+    pilots: list[SurroundPilot],
+    samples: list[tuple[OwnSensors, BeaconSweep]],
+    ranges: list[list[float]],
+    live: list[int],
+    dts: list[float],
+    own: np.ndarray,
+    results: list[Result],
+) -> None:
+    """``SurroundPilot._drive`` of the pilots ``live`` (their time steps ``dts`` and own velocities ``own``):
+    each one's command, or error, in ``results``."""
     chosen = [pilots[i] for i in live]
     sensors = [samples[i][0] for i in live]
     ranges = [ranges[i] for i in live]
@@ -96,7 +113,7 @@ def step_together(
     # a robot drives from the first step that sees its human on (the rest of its step is skipped until then)
     driving = [k for k, pilot in enumerate(chosen) if pilot.engaged or seen[k]]
     if not driving:
-        return results
+        return
     rows = np.array(driving)
     commands = SurroundController.step_all(
         [chosen[k].controller for k in driving],  # type: ignore[misc]  # the paper's law: _batchable
@@ -125,7 +142,6 @@ def step_together(
         counters["echoes_dropped"] += sensed.dropped[k]
         counters["beacons"] = len(pilot.tracker._names)
         results[live[k]] = command
-    return results
 
 
 def _track(
