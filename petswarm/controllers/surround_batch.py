@@ -12,7 +12,7 @@ IEEE operations in the single robot's order, elementwise across robots; a sum ru
 (``np.add.accumulate``, never numpy's pairwise ``sum``); functions whose libm and numpy versions may round
 differently (``math.hypot``, ``np.dot``) are left to the single robot's own code; and anything out of the
 ordinary (another law, a filter, a bad sample, a sweep that changes the tracked beacons) goes the single
-robot's way. ``tests/unit/test_surround_batch.py`` holds the two equal.
+robot's way. ``tests/model/test_surround_batch.py`` holds the two equal.
 """
 
 from __future__ import annotations

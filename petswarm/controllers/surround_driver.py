@@ -207,7 +207,12 @@ class SurroundTask:
                 continue
             ready.append((driver, sensors, sweep))
         samples = [(sensors, sweep) for _, sensors, sweep in ready]
-        errors = SurroundCore.sensors_samples([driver.core for driver, _, _ in ready], samples, now)
+        try:
+            errors: list[Exception | None] = SurroundCore.sensors_samples(
+                [driver.core for driver, _, _ in ready], samples, now
+            )
+        except Exception as err:  # a fault of the shared step: this round's robots fail, the task steps on
+            errors = [err] * len(ready)
         for (driver, _, _), error in zip(ready, errors, strict=True):
             try:
                 if error is not None:

@@ -360,6 +360,8 @@ class BeaconTracker:
     ) -> None:
         """``update_many`` of many trackers at once, bit for bit as each alone: those whose sweep holds the
         beacons they track (the usual sweep) are corrected together, the others one by one."""
+        if any(t.alpha != trackers[0].alpha or t.beta != trackers[0].beta for t in trackers):
+            raise ValueError("update_all takes trackers of one alpha and beta")  # before any tracker changes
         steady: list[tuple[BeaconTracker, np.ndarray, float]] = []
         for tracker, (names, xy), own in zip(trackers, fixes, own_velocities, strict=True):
             period = tracker._since_fix
@@ -380,8 +382,6 @@ class BeaconTracker:
         period = np.repeat(np.array([p for _, _, p in steady]), counts)[:, None]
         innovation = np.concatenate([fixed for _, fixed, _ in steady]) - position
         alpha, beta = steady[0][0].alpha, steady[0][0].beta
-        if any(t.alpha != alpha or t.beta != beta for t, _, _ in steady):
-            raise ValueError("update_all takes trackers of one alpha and beta")
         position = position + alpha * innovation
         velocity = velocity + beta * innovation / period
         BeaconTracker._spread([tracker for tracker, _, _ in steady], counts, position, velocity)

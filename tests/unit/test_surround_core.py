@@ -274,3 +274,45 @@ def test_the_stepping_task_lets_its_loop_go_and_fails_members_left_when_it_is_ca
     for _ in range(3):
         asyncio.run(one_run())
     assert isinstance(asyncio.run(cancelled()), RuntimeError)
+
+
+def test_a_fault_of_the_shared_step_fails_that_rounds_robots_and_the_task_steps_on(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from petswarm.controllers.surround_driver import SurroundTask
+
+    calls: list[int] = []
+
+    def shared_step(cores: list[Any], samples: list[Any], now: float) -> list[Exception | None]:
+        calls.append(len(cores))
+        if len(calls) == 1:
+            raise RuntimeError("the shared step broke")
+        return [None] * len(cores)
+
+    monkeypatch.setattr(SurroundCore, "sensors_samples", staticmethod(shared_step))
+
+    async def scenario() -> tuple[list[BaseException | None], list[bool]]:
+        drivers = [_StepDriver(f"robot-{i}", []) for i in (1, 2, 3, 4)]
+        for driver in drivers:
+            driver.radio.sensors = sample(0.04)  # type: ignore[attr-defined]
+            driver.core = SurroundCore(SurroundDriverConfig())  # type: ignore[attr-defined]
+        surround = SurroundTask.of_loop(asyncio.get_running_loop())
+        futures = [surround.join(d) for d in drivers]  # type: ignore[arg-type]
+        for driver in drivers[:2]:  # a round of robots 1 and 2: the shared step fails
+            driver.radio.sample_comes()
+        for _ in range(3):
+            await asyncio.sleep(0)
+        for driver in drivers[2:]:  # then a round of robots 3 and 4: it steps them
+            driver.radio.sample_comes()
+        for _ in range(3):
+            await asyncio.sleep(0)
+        errors = [f.exception() if f.done() else None for f in futures]
+        alive = [not f.done() for f in futures]
+        for driver in drivers:
+            surround.leave(driver)  # type: ignore[arg-type]
+        await asyncio.sleep(0)
+        return errors, alive
+
+    errors, alive = asyncio.run(scenario())
+    assert [str(e) if e else None for e in errors] == ["the shared step broke"] * 2 + [None, None]
+    assert alive == [False, False, True, True] and calls == [2, 2]
