@@ -449,7 +449,9 @@ class World:
         odometry_noise = 0.0 + cfg.odometry_noise * z[(starts + echoes + 1)[:, None] + np.arange(3)]
         c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
         vx, vy, omega = velocity.T
-        odometry = np.stack([c * vx + s * vy, -s * vx + c * vy, omega], axis=1) * (1.0 + odometry_noise)
+        odometry = np.empty((n, 3))
+        odometry[:, 0], odometry[:, 1], odometry[:, 2] = c * vx + s * vy, -s * vx + c * vy, omega
+        odometry *= 1.0 + odometry_noise
         return ranges, yaw.tolist(), odometry
 
     def ultrasonic(self, body_id: str) -> np.ndarray:
@@ -479,10 +481,10 @@ class World:
         origin = poses[:, :2]
         # ray directions (bodies, sensors, rays): heading + sensor angle + spread, as one sensor's cone
         directions = (poses[:, 2, None] + self._ultrasonic_rad)[:, :, None] + self._ultrasonic_spread
-        unit = np.stack([np.cos(directions), np.sin(directions)], axis=-1)  # (n, S, K, 2)
+        unit = _cos_sin(directions)  # (n, S, K, 2)
         best = np.full(directions.shape, np.inf)
         axis_angle = poses[:, 2, None] + self._ultrasonic_rad  # (n, S)
-        axis = np.stack([np.cos(axis_angle), np.sin(axis_angle)], axis=-1)  # (n, S, 2)
+        axis = _cos_sin(axis_angle)  # (n, S, 2)
         cone = np.full(axis_angle.shape, np.inf)  # (n, S): shapes' nearest points inside the cone
         circles = np.vstack([self._circles, self._bodies_xyr(rows)])
         if len(circles):
@@ -493,8 +495,8 @@ class World:
             perp2 = (rel[..., 0] * rel[..., 0] + rel[..., 1] * rel[..., 1])[:, None, None, :] - along**2
             r2 = circles[:, 2] ** 2
             hit = (perp2 <= r2) & (along > 0) & not_self[:, None, None, :]
-            with np.errstate(invalid="ignore"):
-                t = along - np.sqrt(r2 - perp2)
+            # only where a ray hits is r2 - perp2 >= 0 (and t kept): elsewhere 0, not a square root's nan
+            t = along - np.sqrt(np.maximum(r2 - perp2, 0.0))
             best = np.minimum(best, np.where(hit, np.maximum(t, 0.0), np.inf).min(axis=-1))
             # the obstacle circles' near sides between the rays (the bodies keep the three rays: see the docstring)
             fixed = rel[:, : len(self._circles)]
@@ -636,6 +638,14 @@ def _push_apart(a: Body, b: Body, gap: np.ndarray, dist: float, overlap: float) 
 def _unit(v: np.ndarray) -> np.ndarray:
     n = float(np.hypot(*v))
     return v / n if n > 1e-12 else np.array([1.0, 0.0])
+
+
+def _cos_sin(angles: np.ndarray) -> np.ndarray:
+    """cos and sin of every angle along a new last axis (``np.stack`` of the two, without its cost)."""
+    out = np.empty((*angles.shape, 2))
+    # each computed into an array of its own, as np.stack's were: a strided output may take another loop
+    out[..., 0], out[..., 1] = np.cos(angles), np.sin(angles)
+    return out
 
 
 def _clip_norms(v: np.ndarray, limit: float) -> np.ndarray:
