@@ -526,6 +526,11 @@ class Environment:
         return True
 
     def _take_up(self, node_id: str, msg: wire.Message) -> None:
+        if type(msg) is wire.Drive and self._kinds.get(node_id) == "robot" and msg.s == self._session_keys[node_id]:
+            # the bulk of the uplink (every robot's motor command, 25 Hz): the steps the branches below take for it
+            self._check_sequence(node_id, msg)
+            self._on_body(node_id, msg)
+            return
         if isinstance(msg, wire.Attach) and msg.exclusive and node_id in self._kinds:
             # a refused claim must not touch the live node's sequence numbering (its holder ignores the answer)
             self._send_down(node_id, wire.Error(reason=f"node id {node_id} is taken", instance=msg.instance))

@@ -268,7 +268,7 @@ class World:
         body = self.bodies[body_id]
         if body.kind != "robot":
             raise ValueError(f"{body_id} is a {body.kind}: only robots take motor commands")
-        if not all(math.isfinite(v) for v in (vx, vy, omega)):
+        if not (math.isfinite(vx) and math.isfinite(vy) and math.isfinite(omega)):
             raise ValueError("a motor command must be finite numbers")
         body.command[:] = (vx, vy, omega)  # in place: the body's row (``_Rows``) stays its array
         body.command_t = t
