@@ -494,10 +494,7 @@ class World:
             along = np.matmul(rel[:, None, None], unit[..., None])[..., 0]  # (n, S, K, M)
             perp2 = (rel[..., 0] * rel[..., 0] + rel[..., 1] * rel[..., 1])[:, None, None, :] - along**2
             r2 = circles[:, 2] ** 2
-            hit = (perp2 <= r2) & (along > 0) & not_self[:, None, None, :]
-            # only where a ray hits is r2 - perp2 >= 0 (and t kept): elsewhere 0, not a square root's nan
-            t = along - np.sqrt(np.maximum(r2 - perp2, 0.0))
-            best = np.minimum(best, np.where(hit, np.maximum(t, 0.0), np.inf).min(axis=-1))
+            best = np.minimum(best, _ray_hits(along, perp2, r2, not_self))
             # the obstacle circles' near sides between the rays (the bodies keep the three rays: see the docstring)
             fixed = rel[:, : len(self._circles)]
             centre = np.hypot(fixed[..., 0], fixed[..., 1])  # (n, C)
@@ -638,6 +635,23 @@ def _push_apart(a: Body, b: Body, gap: np.ndarray, dist: float, overlap: float) 
 def _unit(v: np.ndarray) -> np.ndarray:
     n = float(np.hypot(*v))
     return v / n if n > 1e-12 else np.array([1.0, 0.0])
+
+
+def _ray_hits(along: np.ndarray, perp2: np.ndarray, r2: np.ndarray, not_self: np.ndarray) -> np.ndarray:
+    """(n, S, K): each ray's nearest hit among the circles (inf: none), from the distances ``along`` each ray
+    to the circles' feet and the squared distances ``perp2`` of their centres from it, (n, S, K, M), and the
+    circles' squared radii ``r2``. The values of ``where(hit, max(along - sqrt(r2 - perp2), 0), inf)``, in
+    place in ``perp2``: a ray hits where r2 - perp2 >= 0 (as perp2 <= r2: a float difference is never 0 for
+    two different floats), ahead of it, and not its own body; elsewhere the root is of 0, not nan, and unused."""
+    gap = np.subtract(r2, perp2, out=perp2)
+    hit = gap >= 0
+    hit &= along > 0
+    hit &= not_self[:, None, None, :]
+    np.maximum(gap, 0.0, out=gap)
+    t = np.subtract(along, np.sqrt(gap, out=gap), out=gap)
+    np.maximum(t, 0.0, out=t)
+    np.copyto(t, np.inf, where=~hit)
+    return t.min(axis=-1)
 
 
 def _cos_sin(angles: np.ndarray) -> np.ndarray:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from radio_hub.physics.world import World, _clip_norms
+from radio_hub.physics.world import World, _clip_norms, _ray_hits
 
 
 def test_a_bodys_arrays_are_the_worlds_rows_however_they_are_changed() -> None:
@@ -36,3 +36,18 @@ def test_clipping_norms_without_errstate_gives_the_very_values_of_the_division()
             want = np.where((n > limit)[:, None], v * (limit / n)[:, None], v)
         with np.errstate(invalid="ignore"):  # the infinite row: nan either way, here with numpy's warning
             assert _clip_norms(v, limit).tobytes() == want.tobytes()
+
+
+def test_ray_hits_in_place_are_the_masked_formula_bit_for_bit() -> None:
+    rng = np.random.default_rng(6)
+    shape = (7, 8, 3, 9)
+    along = rng.normal(0.0, 2.0, shape)
+    r2 = rng.uniform(0.0, 1.0, shape[-1]) ** 2
+    perp2 = rng.uniform(0.0, 1.5, shape)
+    perp2[..., 0] = r2[0]  # grazing: r2 - perp2 exactly 0
+    along[..., 1] = 0.0
+    not_self = rng.random((shape[0], shape[-1])) > 0.2
+    hit = (perp2 <= r2) & (along > 0) & not_self[:, None, None, :]
+    with np.errstate(invalid="ignore"):
+        want = np.where(hit, np.maximum(along - np.sqrt(r2 - perp2), 0.0), np.inf).min(axis=-1)
+    assert _ray_hits(along, perp2.copy(), r2, not_self).tobytes() == want.tobytes()
