@@ -23,7 +23,7 @@ import sys
 import threading
 import tomllib
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
@@ -331,10 +331,17 @@ class Environment:
         for node_id, readings in self.ir.receive_sweep(poses, chaos).items():
             self._send_down(node_id, wire.IrSample(readings=readings.astype("<f4").tobytes(), t_us=now))
 
-    def _sweep_beacons(self, now: int) -> None:
-        for node_id, (sources, block, gains) in self.ir.beacon_sweep(self.world.poses(), self.medium.chaos).items():
-            readings = block.astype("<f4", copy=False).tobytes()
-            self._send_down(node_id, wire.IrBeacons(sources=sources, readings=readings, t_us=now, gains=gains))
+    def _sweep_beacons(self, now: int, poses: dict[str, tuple[float, float, float]]) -> None:
+        sweeps = self.ir.beacon_sweep(poses, self.medium.chaos)
+        self._send_all(
+            (
+                node_id,
+                wire.IrBeacons(
+                    sources=sources, readings=block.astype("<f4", copy=False).tobytes(), t_us=now, gains=gains
+                ),
+            )
+            for node_id, (sources, block, gains) in sweeps.items()
+        )
 
     def _tick_world(self, now: int) -> None:
         if now < self._next_tick_us:
@@ -344,14 +351,15 @@ class Environment:
         self._ticks += 1
         world = self.world
         world.step(now / 1e6)
+        poses = world.poses()  # as the tick left them: nothing below moves a body
         for node_id, node in self.medium.nodes.items():
-            body = world.bodies.get(node_id)
-            if body is not None:
-                node.position = (float(body.pose[0]), float(body.pose[1]))
+            pose = poses.get(node_id)
+            if pose is not None:
+                node.position = pose[:2]
         if self._ticks % SENSORS_EVERY == 0:
             self._send_sensors(now)
         if self._ticks % BEACONS_EVERY == 0:
-            self._sweep_beacons(now)
+            self._sweep_beacons(now, poses)
         if self._world_log is not None or self._ticks % PUBLISH_EVERY == 0:
             self._record_world(now)
 
@@ -362,10 +370,10 @@ class Environment:
         # every robot's sample converted at once: the same float32 bytes and floats as robot by robot
         ranges, yaws, odometry = self.world.sense_arrays(robots, self._body_rng)
         wire_ranges = ranges.astype("<f4")
-        for k, (node_id, yaw, own_odometry) in enumerate(zip(robots, yaws, odometry.tolist(), strict=True)):
-            self._send_down(
-                node_id, wire.Sensors(t_us=now, ranges=wire_ranges[k].tobytes(), yaw=yaw, odometry=own_odometry)
-            )
+        self._send_all(
+            (node_id, wire.Sensors(t_us=now, ranges=wire_ranges[k].tobytes(), yaw=yaw, odometry=own_odometry))
+            for k, (node_id, yaw, own_odometry) in enumerate(zip(robots, yaws, odometry.tolist(), strict=True))
+        )
 
     def _record_world(self, now: int) -> None:
         if self._world_log is not None:
@@ -856,6 +864,18 @@ class Environment:
                 self._hand_over(node_id, msg)
             else:
                 self.downlink.send(node_id, msg.encode())
+
+    def _send_all(self, messages: Iterable[tuple[str, wire.Message]]) -> None:
+        """``_send_down`` of a tick's ``HANDED_OVER`` messages (one per robot), in order, under one hold of the
+        lock and without asking each whether it may be handed over."""
+        hand_over = self._hand_over
+        with self._down_lock:
+            for node_id, msg in messages:
+                msg.n = self._next_down_seq(node_id)
+                if hand_over is not None:
+                    hand_over(node_id, msg)
+                else:
+                    self.downlink.send(node_id, msg.encode())
 
     def _next_down_seq(self, node_id: str) -> int:
         """The number of the next message to ``node_id`` (its stream starts at 1 on every attach)."""
