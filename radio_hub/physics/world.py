@@ -233,6 +233,7 @@ class World:
         self._cos_half_beam = math.cos(half)
         self._not_self_of: tuple[tuple[Any, ...], np.ndarray] = ((), np.zeros((0, 0), dtype=bool))
         self._rows_of: _Rows | None = None
+        self._reaches_of: tuple[Any, np.ndarray, np.ndarray] = ((None, None, None), np.zeros(0), np.zeros(0))
 
     def _rows(self) -> _Rows:
         """The bodies' state as arrays (``_Rows``), made again only when the bodies changed."""
@@ -332,16 +333,14 @@ class World:
         rows = self._rows()
         p, radius = rows.pose[:, :2], rows.radius
         slack = 1e-6
+        reach, circle_reach = self._reaches(rows, slack)
         gap = p[:, None, :] - p[None, :, :]
-        reach = radius[:, None] + radius[None, :] + slack
-        close = np.hypot(gap[..., 0], gap[..., 1]) < reach
-        np.fill_diagonal(close, False)
-        if close.any():
+        if (np.hypot(gap[..., 0], gap[..., 1]) < reach).any():
             return True
         circles = self._circles
         if len(circles):
             gap = p[:, None, :] - circles[None, :, :2]
-            if (np.hypot(gap[..., 0], gap[..., 1]) < radius[:, None] + circles[None, :, 2] + slack).any():
+            if (np.hypot(gap[..., 0], gap[..., 1]) < circle_reach).any():
                 return True
         segments = self._segments
         if len(segments):
@@ -357,6 +356,22 @@ class World:
             if o.kind == "rect" and ((o.x0 < p[:, 0]) & (p[:, 0] < o.x1) & (o.y0 < p[:, 1]) & (p[:, 1] < o.y1)).any():
                 return True
         return False
+
+    def _reaches(self, rows: _Rows, slack: float) -> tuple[np.ndarray, np.ndarray]:
+        """The distances within which two bodies (bodies, bodies), or a body and an obstacle circle (bodies,
+        circles), may touch: radii plus ``slack``, kept while the bodies and obstacles stay; a body and itself
+        never (-inf, as np.fill_diagonal's False did)."""
+        made_for = self._reaches_of[0]  # (by identity: an array's == is no truth value)
+        if not (made_for[0] is rows and made_for[1] is self._circles and made_for[2] == slack):
+            radius = rows.radius
+            reach = radius[:, None] + radius[None, :] + slack
+            np.fill_diagonal(reach, -np.inf)
+            self._reaches_of = (
+                (rows, self._circles, slack),
+                reach,
+                radius[:, None] + self._circles[None, :, 2] + slack,
+            )
+        return self._reaches_of[1], self._reaches_of[2]
 
     def _settled_contacts(self) -> set[tuple[str, str]]:
         """Push overlapping bodies apart and out of obstacles, pair by pair; the contacts found."""
