@@ -222,7 +222,6 @@ class Environment:
         self._next_tick_us = 0
         self._world_log = None if world_log is None else open(world_log, "w")  # noqa: SIM115 (closed in close())
         self._template_of: tuple[tuple[Any, ...], str, tuple[int, ...]] = ((), "", ())
-        self._reprs = _Reprs()
         """``_bodies_template``'s key, template and referenced bodies."""
         self._obstacles_text_of: tuple[tuple[Obstacle, ...], str] = ((), "[]")
         self._down_seq: dict[str, int] = {}
@@ -392,9 +391,8 @@ class Environment:
         """``world_state`` as compact JSON (``json.dumps`` with separators "," and ":"), the very same text,
         without building its dicts: the world log takes a line every tick (50 Hz), where the dicts and their
         encoding were a fifth of the world tick. The bodies' text is one %-template, made again only when a
-        body's unchanging fields do, filled with every pose and velocity in one formatting, each written as
-        ``repr`` writes it (``_Reprs``); a value that is not finite (which JSON writes as NaN or Infinity) takes
-        the encoder's own path."""
+        body's unchanging fields do, filled with every pose and velocity in one formatting; a value that is not
+        finite (which JSON writes as NaN or Infinity) takes the encoder's own path."""
         now = self._now if now is None else now
         world = self.world
         bodies = list(world.bodies.values())
@@ -403,22 +401,19 @@ class Environment:
         if not math.isfinite(sum(values)):  # a sum of finite values may overflow too: that path is only slower
             return json.dumps(self.world_state(now), separators=(",", ":"))
         template, referenced = self._bodies_template(bodies)
-        texts = list(map(self._reprs.__getitem__, values))
-        for k in _negative_zeros(values):
-            texts[k] = "-0.0"  # equal to 0.0, so _Reprs gave 0.0's text
         if referenced:
-            texts = self._with_references(bodies, rows, referenced, texts)
+            values = self._with_references(bodies, rows, referenced)
         counters = self.medium.node_counters.values()
         radio = [sum(map(count, counters)) for count in _RADIO_TOTALS]
         wall = round((self.wall_epoch_us + now) / 1e6, 4)
         return (
-            f'{{"v":1,"t_us":{_json_number(now)},"wall":{_json_number(wall)},"bodies":[{template % tuple(texts)}],'
+            f'{{"v":1,"t_us":{_json_number(now)},"wall":{_json_number(wall)},"bodies":[{template % tuple(values)}],'
             f'"obstacles":{self._obstacles_text()},"collisions":{_json_number(world.collisions)},'
             f'"radio":{{"delivered":{radio[0]},"collided":{radio[1]},"lost":{radio[2]}}}}}'
         )
 
     def _bodies_template(self, bodies: list[Body]) -> tuple[str, tuple[int, ...]]:
-        """The bodies' JSON as a %-template of their six truth values' texts each (the ``repr`` that
+        """The bodies' JSON as a %-template of their six truth values each (``%r``: the ``repr`` that
         ``json.dumps`` writes a finite float with), and the indices of the bodies whose reference is not
         null (a slave with a slot): theirs is a ``%s`` after the six. Made again only when an id, kind,
         radius, PAN, IR mode or telemetry changes (one comparison of a tuple per line)."""
@@ -453,19 +448,17 @@ class Environment:
             if tele.get("slot") is not None and tele.get("master", "") in names:
                 tail = tail[: -len("null}")] + "%s}"
                 referenced.append(k)
-            parts.append(f'{head}%s,"y":%s,"yaw":%s,"vx":%s,"vy":%s,"omega":%s{tail}')
+            parts.append(f'{head}%r,"y":%r,"yaw":%r,"vx":%r,"vy":%r,"omega":%r{tail}')
         return ",".join(parts), tuple(referenced)
 
-    def _with_references(
-        self, bodies: list[Body], rows: list[list[float]], referenced: tuple[int, ...], texts: list[str]
-    ) -> list[str]:
-        """The template's values: each body's six ``texts``, and after those of a referenced body its
-        reference's JSON (its slot placed by its master's true pose, rounded as ``world_state`` does)."""
+    def _with_references(self, bodies: list[Body], rows: list[list[float]], referenced: tuple[int, ...]) -> list[Any]:
+        """The template's values: each body's six, and after those of a referenced body its reference's JSON
+        (its slot placed by its master's true pose, rounded as ``world_state`` does)."""
         index = {b.body_id: k for k, b in enumerate(bodies)}
-        values: list[str] = []
+        values: list[Any] = []
         at = set(referenced)
-        for k in range(len(rows)):
-            values += texts[6 * k : 6 * k + 6]
+        for k, row in enumerate(rows):
+            values += row
             if k in at:
                 tele = self._telemetry[bodies[k].body_id]
                 x, y, yaw = rows[index[tele["master"]]][:3]
@@ -986,34 +979,6 @@ def _body_text(
         f'"state":{compact(state)},"role":{compact(role)},"reference":null}}'
     )
     return head, tail
-
-
-REPRS_KEPT = 1 << 17
-"""Texts of floats a world line keeps at most (a 22 s run of 20 robots writes 34,000 different values)."""
-
-
-class _Reprs(dict[float, str]):
-    """``repr`` of the floats world lines write, kept: three in four recur (a robot at rest, a heading held,
-    positions rounded to 0.1 mm), and a look-up costs a tenth of ``repr``. Finite floats that are equal have
-    one ``repr``, but for 0.0 and -0.0: 0.0 is a key from the start, so -0.0 never becomes one (and is looked
-    up as 0.0: its line writes it itself)."""
-
-    def __init__(self) -> None:
-        super().__init__({0.0: "0.0"})
-
-    def __missing__(self, value: float) -> str:
-        text = repr(value)
-        if len(self) >= REPRS_KEPT:
-            self.clear()
-            self[0.0] = "0.0"
-        self[value] = text
-        return text
-
-
-def _negative_zeros(values: list[float]) -> list[int]:
-    """Where ``values`` holds -0.0."""
-    array = np.array(values)
-    return np.flatnonzero((array == 0.0) & np.signbit(array)).tolist()
 
 
 def _json_number(value: Any) -> str:
