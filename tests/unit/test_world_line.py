@@ -60,6 +60,8 @@ def test_the_world_line_is_the_world_state_as_json_through_motion_telemetry_and_
     body = env.world.bodies["n-1"]
     body.pose[0], body.velocity[1] = -0.0, 1e-300  # a signed zero and a value that rounds to zero
     assert env.world_line() == _as_json(env)
+    body.pose[0], body.velocity[1] = 0.0, -1e-300  # and back
+    assert env.world_line() == _as_json(env) and '"vy":-0.0' in env.world_line()
     body.velocity[0] = math.inf  # JSON's Infinity: the encoder's own path
     assert "Infinity" in env.world_line() and env.world_line() == _as_json(env)
 
