@@ -215,7 +215,8 @@ class BeaconSweep:
     @classmethod
     def of_block(cls, t_us: int, sources: list[str], block: np.ndarray, gains: list[float]) -> BeaconSweep:
         """A sweep of distinct ``sources``, ``block[i]`` (12 readings) read at ``gains[i]``."""
-        sweep = cls(t_us, {}, {})
+        sweep = cls.__new__(cls)  # without __init__'s maps, made only to be dropped (one sweep a robot, 25 Hz)
+        sweep.t_us = t_us
         sweep._readings = sweep._gains = None
         sweep._sources, sweep._block, sweep._gain_list = sources, block, gains
         return sweep
