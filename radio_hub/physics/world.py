@@ -607,10 +607,14 @@ def round_places(values: np.ndarray, places: int) -> list[list[float]]:
     scale = 10.0**places
     scaled = values * scale
     k = np.rint(scaled)
+    rows = (k / scale).tolist()
+    if scaled.size and np.abs(scaled).max() < 2.0**40 and np.abs(scaled - k).max() <= 0.49:
+        # the usual line, told at once: size 2**-48 below 2**-8 and every k at least 0.01 from a half (nan and
+        # inf compare false on the size, so they take the way below)
+        return rows
     size = np.abs(scaled)
     with np.errstate(invalid="ignore"):  # inf - inf: not sure
         sure = (np.abs(np.abs(scaled - k) - 0.5) > size * 2.0**-48) & (size < 2.0**50)
-    rows = (k / scale).tolist()
     if not sure.all():
         exact = values.tolist()
         for i, j in zip(*np.nonzero(~sure), strict=True):

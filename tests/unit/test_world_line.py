@@ -104,3 +104,11 @@ def test_world_states_are_made_only_for_a_downlink_that_publishes_them() -> None
     count, _ = states_made(watched)
     assert count == 2 and len(seen) == 2
     assert states_made(None)[0] == 2
+
+
+def test_round_places_of_a_table_far_from_halves_is_round_too() -> None:
+    rng = np.random.default_rng(9)
+    for exponent in range(-6, 9):  # up to 1e8 m: its units 1e12, under the quick path's 2**40
+        table = rng.normal(size=(21, 6)) * 10.0**exponent
+        got = round_places(table, 4)
+        assert [[repr(v) for v in row] for row in got] == [[repr(round(v, 4)) for v in row] for row in table.tolist()]
