@@ -608,11 +608,12 @@ def round_places(values: np.ndarray, places: int) -> list[list[float]]:
     scaled = values * scale
     k = np.rint(scaled)
     rows = (k / scale).tolist()
-    if scaled.size and np.abs(scaled).max() < 2.0**40 and np.abs(scaled - k).max() <= 0.49:
-        # the usual line, told at once: size 2**-48 below 2**-8 and every k at least 0.01 from a half (nan and
-        # inf compare false on the size, so they take the way below)
-        return rows
     size = np.abs(scaled)
+    largest = size.max() if size.size else 0.0
+    if largest < 2.0**50 and (not size.size or np.abs(np.abs(scaled - k) - 0.5).min() > largest * 2.0**-48):
+        # every value sure at once, the largest's margin standing for all (nan and inf fail the first test, so
+        # they take the way below, as does a line with a value within a few ulps of a half)
+        return rows
     with np.errstate(invalid="ignore"):  # inf - inf: not sure
         sure = (np.abs(np.abs(scaled - k) - 0.5) > size * 2.0**-48) & (size < 2.0**50)
     if not sure.all():

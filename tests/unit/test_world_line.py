@@ -106,9 +106,11 @@ def test_world_states_are_made_only_for_a_downlink_that_publishes_them() -> None
     assert states_made(None)[0] == 2
 
 
-def test_round_places_of_a_table_far_from_halves_is_round_too() -> None:
+def test_round_places_of_whole_tables_is_round_too_with_or_without_a_value_at_a_half() -> None:
     rng = np.random.default_rng(9)
-    for exponent in range(-6, 9):  # up to 1e8 m: its units 1e12, under the quick path's 2**40
+    for exponent in range(-6, 13):  # past 2**50 units too
         table = rng.normal(size=(21, 6)) * 10.0**exponent
+        if exponent % 2:  # one value at a decimal half: the whole table takes the slow way
+            table[3, 2] = (np.round(table[3, 2] * 1e4) + 0.5) / 1e4
         got = round_places(table, 4)
         assert [[repr(v) for v in row] for row in got] == [[repr(round(v, 4)) for v in row] for row in table.tolist()]
