@@ -423,7 +423,8 @@ class Environment:
             ids,
             tuple(map(_KIND, bodies)),
             tuple(map(_RADIUS, bodies)),
-            tuple(None if node is None else node.pan_id for node in map(nodes.get, ids)),  # changed in place
+            tuple(nodes),  # the bodies with a radio, and their PANs (changed in place: kept as values)
+            tuple(map(_PAN_ID, nodes.values())),
             tuple(map(self.ir.counter.modes.get, ids)),
             tuple(map(self._telemetry.get, ids)),  # a new dict per telemetry message: compared by content
         )
@@ -963,7 +964,7 @@ def _tx_done(report: TxReport) -> wire.TxDone:
     )
 
 
-_KIND, _RADIUS = operator.attrgetter("kind"), operator.attrgetter("radius")
+_KIND, _RADIUS, _PAN_ID = (operator.attrgetter(name) for name in ("kind", "radius", "pan_id"))
 _RADIO_TOTALS = tuple(map(operator.attrgetter, ("delivered", "collided", "lost")))
 """The medium's counts a world line sums over nodes, in its order."""
 

@@ -57,6 +57,8 @@ def test_the_world_line_is_the_world_state_as_json_through_motion_telemetry_and_
         assert line == _as_json(env)
         referenced += '"reference":[' in line
     assert 0 < referenced < 60
+    env.receive("n-1", wire.Configure(token=1, pan_id=0x99, n=1000), now)  # a PAN changed in place
+    assert '"pan_id":153' in env.world_line() and env.world_line() == _as_json(env)
     body = env.world.bodies["n-1"]
     body.pose[0], body.velocity[1] = -0.0, 1e-300  # a signed zero and a value that rounds to zero
     assert env.world_line() == _as_json(env)
