@@ -175,6 +175,7 @@ class OwnSensors:
 
 _POSE, _VELOCITY, _COMMAND = (operator.attrgetter(name) for name in ("pose", "velocity", "command"))
 _STATE = operator.attrgetter("pose", "velocity", "command")
+_COMMAND_T = operator.attrgetter("command_t")
 
 
 class _Rows:
@@ -297,7 +298,7 @@ class World:
             # every robot at once, element by element the arithmetic of one
             at = rows.robots
             pose, velocity = rows.pose[at], rows.velocity[at]
-            fresh = np.array([t - b.command_t <= cfg.command_timeout_s for b in robots])
+            fresh = t - np.fromiter(map(_COMMAND_T, robots), float, len(robots)) <= cfg.command_timeout_s
             wanted = np.where(fresh[:, None], rows.command[at], 0.0)
             c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
             target = np.empty_like(wanted)
