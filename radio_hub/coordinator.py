@@ -49,7 +49,9 @@ class Coordinator:
         self.on_world: Callable[[dict[str, Any]], None] | None = None
         """Where world states for viewers go (10 Hz); None: nowhere."""
         self._downs: dict[str, list[bytes | wire.Message]] = {}
-        self._ups: list[tuple[str, int, bytes | wire.Message | None, str]] = []
+        self._ups: list[tuple[str, bool, int, bytes | wire.Message | None, str]] = []
+        """Held node messages: (node id, whether it is the node's departure, arrival order, message, instance),
+        so that their plain order is the order they are taken in."""
         self._order = itertools.count()
 
     # -- the environment's Downlink: held until the round ends ----------------------------------------------
@@ -80,11 +82,11 @@ class Coordinator:
 
     def up(self, node_id: str, data: bytes | wire.Message) -> None:
         """A node's message (bytes, or in memory one handed over as it is), held for the end of the round."""
-        self._ups.append((node_id, next(self._order), data, ""))
+        self._ups.append((node_id, False, next(self._order), data, ""))
 
     def leave(self, node_id: str, instance: str) -> None:
         """A node's presence ended (its link closed, its liveliness went): taken in order with its messages."""
-        self._ups.append((node_id, next(self._order), None, instance))
+        self._ups.append((node_id, True, next(self._order), None, instance))
 
     # -- the rounds ------------------------------------------------------------------------------------
 
@@ -99,10 +101,11 @@ class Coordinator:
         to ``now_us``; False when nothing was held."""
         if not self._ups:
             return False
-        # a node's departure comes after everything it sent (its liveliness may overtake its last messages)
-        ups, self._ups = sorted(self._ups, key=lambda u: (u[0], u[2] is None, u[1])), []
-        for node_id, _, data, instance in ups:
-            if data is None:
+        # a node's departure comes after everything it sent (its liveliness may overtake its last messages); the
+        # arrival order is unique, so the tuples' own order never compares messages (and needs no key function)
+        ups, self._ups = sorted(self._ups), []
+        for node_id, gone, _, data, instance in ups:
+            if gone:
                 self.env.node_gone(node_id, instance, now_us)
             else:
                 self.env.receive(node_id, data, now_us)

@@ -14,14 +14,16 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import itertools
 import json
 import math
+import operator
 import resource
 import sys
 import threading
 import tomllib
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
@@ -41,7 +43,7 @@ from radio_hub.physics.ble import BleAir, BleConfig
 from radio_hub.physics.ir_air import IrAir
 from radio_hub.physics.lf import LfConfig, antenna_positions, lf_rssi
 from radio_hub.physics.light import PERSON_BEACON_POWER, IrConfig
-from radio_hub.physics.world import Obstacle, World, WorldConfig, parse_obstacle
+from radio_hub.physics.world import Body, Obstacle, World, WorldConfig, parse_obstacle
 
 SENSORS_EVERY = 2
 """World ticks per robot sensor message (50 Hz ticks: sensors at 25 Hz)."""
@@ -219,8 +221,8 @@ class Environment:
         self._ticks = 0
         self._next_tick_us = 0
         self._world_log = None if world_log is None else open(world_log, "w")  # noqa: SIM115 (closed in close())
-        self._body_texts: dict[tuple[Any, ...], tuple[str, str]] = {}
-        """``_body_text``'s cache."""
+        self._template_of: tuple[tuple[Any, ...], str, tuple[int, ...]] = ((), "", ())
+        """``_bodies_template``'s key, template and referenced bodies."""
         self._obstacles_text_of: tuple[tuple[Obstacle, ...], str] = ((), "[]")
         self._down_seq: dict[str, int] = {}
         self._now = 0
@@ -329,10 +331,17 @@ class Environment:
         for node_id, readings in self.ir.receive_sweep(poses, chaos).items():
             self._send_down(node_id, wire.IrSample(readings=readings.astype("<f4").tobytes(), t_us=now))
 
-    def _sweep_beacons(self, now: int) -> None:
-        for node_id, (sources, block, gains) in self.ir.beacon_sweep(self.world.poses(), self.medium.chaos).items():
-            readings = block.astype("<f4", copy=False).tobytes()
-            self._send_down(node_id, wire.IrBeacons(sources=sources, readings=readings, t_us=now, gains=gains))
+    def _sweep_beacons(self, now: int, poses: dict[str, tuple[float, float, float]]) -> None:
+        sweeps = self.ir.beacon_sweep(poses, self.medium.chaos)
+        self._send_all(
+            (
+                node_id,
+                wire.IrBeacons(
+                    sources=sources, readings=block.astype("<f4", copy=False).tobytes(), t_us=now, gains=gains
+                ),
+            )
+            for node_id, (sources, block, gains) in sweeps.items()
+        )
 
     def _tick_world(self, now: int) -> None:
         if now < self._next_tick_us:
@@ -342,14 +351,15 @@ class Environment:
         self._ticks += 1
         world = self.world
         world.step(now / 1e6)
+        poses = world.poses()  # as the tick left them: nothing below moves a body
         for node_id, node in self.medium.nodes.items():
-            body = world.bodies.get(node_id)
-            if body is not None:
-                node.position = (float(body.pose[0]), float(body.pose[1]))
+            pose = poses.get(node_id)
+            if pose is not None:
+                node.position = pose[:2]
         if self._ticks % SENSORS_EVERY == 0:
             self._send_sensors(now)
         if self._ticks % BEACONS_EVERY == 0:
-            self._sweep_beacons(now)
+            self._sweep_beacons(now, poses)
         if self._world_log is not None or self._ticks % PUBLISH_EVERY == 0:
             self._record_world(now)
 
@@ -360,10 +370,10 @@ class Environment:
         # every robot's sample converted at once: the same float32 bytes and floats as robot by robot
         ranges, yaws, odometry = self.world.sense_arrays(robots, self._body_rng)
         wire_ranges = ranges.astype("<f4")
-        for k, (node_id, yaw, own_odometry) in enumerate(zip(robots, yaws, odometry.tolist(), strict=True)):
-            self._send_down(
-                node_id, wire.Sensors(t_us=now, ranges=wire_ranges[k].tobytes(), yaw=yaw, odometry=own_odometry)
-            )
+        self._send_all(
+            (node_id, wire.Sensors(t_us=now, ranges=wire_ranges[k].tobytes(), yaw=yaw, odometry=own_odometry))
+            for k, (node_id, yaw, own_odometry) in enumerate(zip(robots, yaws, odometry.tolist(), strict=True))
+        )
 
     def _record_world(self, now: int) -> None:
         if self._world_log is not None:
@@ -380,68 +390,82 @@ class Environment:
     def world_line(self, now: int | None = None) -> str:
         """``world_state`` as compact JSON (``json.dumps`` with separators "," and ":"), the very same text,
         without building its dicts: the world log takes a line every tick (50 Hz), where the dicts and their
-        encoding were a fifth of the world tick. Each body's unchanging fields are encoded once; a pose that is
-        not finite (which JSON writes as NaN or Infinity) takes the encoder's own path."""
+        encoding were a fifth of the world tick. The bodies' text is one %-template, made again only when a
+        body's unchanging fields do, filled with every pose and velocity in one formatting; a value that is not
+        finite (which JSON writes as NaN or Infinity) takes the encoder's own path."""
         now = self._now if now is None else now
         world = self.world
         bodies = list(world.bodies.values())
         rows = world.truth_rows()
-        modes = self.ir.counter.modes
-        nodes = self.medium.nodes
-        parts = []
-        truth: dict[str, list[float]] = {}
-        for body, row in zip(bodies, rows, strict=True):
-            x, y, yaw, vx, vy, omega = row
-            if not math.isfinite(x + y + yaw + vx + vy + omega):
-                return json.dumps(self.world_state(now), separators=(",", ":"))
-            truth[body.body_id] = row
-            tele = self._telemetry.get(body.body_id, {})
-            node = nodes.get(body.body_id)
-            head, tail = self._body_text(
-                body.body_id,
-                body.kind,
-                body.radius,
-                None if node is None else node.pan_id,
-                str(modes.get(body.body_id, "idle")),
-                tele.get("state") or None,
-                tele.get("role") or None,
-            )
-            parts.append(f'{head}{x!r},"y":{y!r},"yaw":{yaw!r},"vx":{vx!r},"vy":{vy!r},"omega":{omega!r}{tail}')
-        for k, body in enumerate(bodies):
-            tele = self._telemetry.get(body.body_id)
-            if tele is not None and tele.get("slot") is not None and tele.get("master", "") in truth:
-                x, y, yaw = truth[tele["master"]][:3]
-                reference = _reference({"x": x, "y": y, "yaw": yaw}, tele["slot"])
-                parts[k] = parts[k][: -len("null}")] + json.dumps(reference, separators=(",", ":")) + "}"
-        totals = {"delivered": 0, "collided": 0, "lost": 0}
-        for counters in self.medium.node_counters.values():
-            for name in totals:
-                totals[name] += getattr(counters, name, 0)
+        values = list(itertools.chain.from_iterable(rows))
+        if not math.isfinite(sum(values)):  # a sum of finite values may overflow too: that path is only slower
+            return json.dumps(self.world_state(now), separators=(",", ":"))
+        template, referenced = self._bodies_template(bodies)
+        if referenced:
+            values = self._with_references(bodies, rows, referenced)
+        counters = self.medium.node_counters.values()
+        radio = [sum(map(count, counters)) for count in _RADIO_TOTALS]
         wall = round((self.wall_epoch_us + now) / 1e6, 4)
         return (
-            f'{{"v":1,"t_us":{json.dumps(now)},"wall":{json.dumps(wall)},"bodies":[{",".join(parts)}],'
-            f'"obstacles":{self._obstacles_text()},"collisions":{json.dumps(world.collisions)},'
-            f'"radio":{json.dumps(totals, separators=(",", ":"))}}}'
+            f'{{"v":1,"t_us":{_json_number(now)},"wall":{_json_number(wall)},"bodies":[{template % tuple(values)}],'
+            f'"obstacles":{self._obstacles_text()},"collisions":{_json_number(world.collisions)},'
+            f'"radio":{{"delivered":{radio[0]},"collided":{radio[1]},"lost":{radio[2]}}}}}'
         )
 
-    def _body_text(
-        self, body_id: str, kind: str, radius: float, pan_id: int | None, ir: str, state: str | None, role: str | None
-    ) -> tuple[str, str]:
-        """The JSON of a body's fields but its pose and velocity, before and after them (its reference null),
-        made once per combination."""
-        key = (body_id, kind, radius, pan_id, ir, state, role)
-        text = self._body_texts.get(key)
-        if text is None:
-            if len(self._body_texts) > 4096:  # ids and telemetry come from nodes: keep the cache bounded
-                self._body_texts.clear()
-            compact = functools.partial(json.dumps, separators=(",", ":"))
-            head = f'{{"id":{compact(body_id)},"kind":{compact(kind)},"x":'
-            tail = (
-                f',"radius":{compact(radius)},"pan_id":{compact(pan_id)},"ir":{compact(ir)},'
-                f'"state":{compact(state)},"role":{compact(role)},"reference":null}}'
+    def _bodies_template(self, bodies: list[Body]) -> tuple[str, tuple[int, ...]]:
+        """The bodies' JSON as a %-template of their six truth values each (``%r``: the ``repr`` that
+        ``json.dumps`` writes a finite float with), and the indices of the bodies whose reference is not
+        null (a slave with a slot): theirs is a ``%s`` after the six. Made again only when an id, kind,
+        radius, PAN, IR mode or telemetry changes (one comparison of a tuple per line)."""
+        ids = tuple(self.world.bodies)
+        nodes = self.medium.nodes
+        key = (
+            ids,
+            tuple(map(_KIND, bodies)),
+            tuple(map(_RADIUS, bodies)),
+            tuple(nodes),  # the bodies with a radio, and their PANs (changed in place: kept as values)
+            tuple(map(_PAN_ID, nodes.values())),
+            tuple(map(self.ir.counter.modes.get, ids)),
+            tuple(map(self._telemetry.get, ids)),  # a new dict per telemetry message: compared by content
+        )
+        if key != self._template_of[0]:
+            self._template_of = (key, *self._make_template(bodies))
+        return self._template_of[1], self._template_of[2]
+
+    def _make_template(self, bodies: list[Body]) -> tuple[str, tuple[int, ...]]:
+        """``_bodies_template``'s template and referenced bodies, made from scratch."""
+        modes, nodes, telemetry = self.ir.counter.modes, self.medium.nodes, self._telemetry
+        names = {b.body_id for b in bodies}
+        parts, referenced = [], []
+        for k, body in enumerate(bodies):
+            tele = telemetry.get(body.body_id, {})
+            node = nodes.get(body.body_id)
+            state, role = tele.get("state") or None, tele.get("role") or None
+            ir = str(modes.get(body.body_id, "idle"))
+            head, tail = _body_text(
+                body.body_id, body.kind, body.radius, None if node is None else node.pan_id, ir, state, role
             )
-            text = self._body_texts[key] = (head, tail)
-        return text
+            head, tail = head.replace("%", "%%"), tail.replace("%", "%%")  # ids and telemetry come from nodes
+            if tele.get("slot") is not None and tele.get("master", "") in names:
+                tail = tail[: -len("null}")] + "%s}"
+                referenced.append(k)
+            parts.append(f'{head}%r,"y":%r,"yaw":%r,"vx":%r,"vy":%r,"omega":%r{tail}')
+        return ",".join(parts), tuple(referenced)
+
+    def _with_references(self, bodies: list[Body], rows: list[list[float]], referenced: tuple[int, ...]) -> list[Any]:
+        """The template's values: each body's six, and after those of a referenced body its reference's JSON
+        (its slot placed by its master's true pose, rounded as ``world_state`` does)."""
+        index = {b.body_id: k for k, b in enumerate(bodies)}
+        values: list[Any] = []
+        at = set(referenced)
+        for k, row in enumerate(rows):
+            values += row
+            if k in at:
+                tele = self._telemetry[bodies[k].body_id]
+                x, y, yaw = rows[index[tele["master"]]][:3]
+                reference = _reference({"x": x, "y": y, "yaw": yaw}, tele["slot"])
+                values.append(json.dumps(reference, separators=(",", ":")))
+        return values
 
     def _obstacles_text(self) -> str:
         """The obstacles' JSON, made again only when they change."""
@@ -511,6 +535,11 @@ class Environment:
         return True
 
     def _take_up(self, node_id: str, msg: wire.Message) -> None:
+        if type(msg) is wire.Drive and self._kinds.get(node_id) == "robot" and msg.s == self._session_keys[node_id]:
+            # the bulk of the uplink (every robot's motor command, 25 Hz): the steps the branches below take for it
+            self._check_sequence(node_id, msg)
+            self._on_body(node_id, msg)
+            return
         if isinstance(msg, wire.Attach) and msg.exclusive and node_id in self._kinds:
             # a refused claim must not touch the live node's sequence numbering (its holder ignores the answer)
             self._send_down(node_id, wire.Error(reason=f"node id {node_id} is taken", instance=msg.instance))
@@ -837,6 +866,18 @@ class Environment:
             else:
                 self.downlink.send(node_id, msg.encode())
 
+    def _send_all(self, messages: Iterable[tuple[str, wire.Message]]) -> None:
+        """``_send_down`` of a tick's ``HANDED_OVER`` messages (one per robot), in order, under one hold of the
+        lock and without asking each whether it may be handed over."""
+        hand_over = self._hand_over
+        with self._down_lock:
+            for node_id, msg in messages:
+                msg.n = self._next_down_seq(node_id)
+                if hand_over is not None:
+                    hand_over(node_id, msg)
+                else:
+                    self.downlink.send(node_id, msg.encode())
+
     def _next_down_seq(self, node_id: str) -> int:
         """The number of the next message to ``node_id`` (its stream starts at 1 on every attach)."""
         seq = self._down_seq.get(node_id)
@@ -921,6 +962,32 @@ def _tx_done(report: TxReport) -> wire.TxDone:
         done_us=report.done_us,
         reason=report.reason,
     )
+
+
+_KIND, _RADIUS, _PAN_ID = (operator.attrgetter(name) for name in ("kind", "radius", "pan_id"))
+_RADIO_TOTALS = tuple(map(operator.attrgetter, ("delivered", "collided", "lost")))
+"""The medium's counts a world line sums over nodes, in its order."""
+
+
+def _body_text(
+    body_id: str, kind: str, radius: float, pan_id: int | None, ir: str, state: str | None, role: str | None
+) -> tuple[str, str]:
+    """The JSON of a body's fields but its pose and velocity, before and after them (its reference null)."""
+    compact = functools.partial(json.dumps, separators=(",", ":"))
+    head = f'{{"id":{compact(body_id)},"kind":{compact(kind)},"x":'
+    tail = (
+        f',"radius":{compact(radius)},"pan_id":{compact(pan_id)},"ir":{compact(ir)},'
+        f'"state":{compact(state)},"role":{compact(role)},"reference":null}}'
+    )
+    return head, tail
+
+
+def _json_number(value: Any) -> str:
+    """``json.dumps`` of a number: an int's or a finite float's ``repr`` as it writes them, without the cost of
+    its call (microseconds, three times a line)."""
+    if type(value) is int or (type(value) is float and math.isfinite(value)):
+        return repr(value)
+    return json.dumps(value)
 
 
 def _reference(master: dict[str, Any] | None, slot: list[float] | None) -> list[float] | None:

@@ -79,6 +79,7 @@ __all__ = [
 _LAB_ENTRY_POINTS = {
     "Coordinator": "radio_hub.coordinator",
     "EnvironmentConfig": "radio_hub.environment",
+    "HANDED_OVER": "radio_hub.environment",
     "Faults": "radio_hub.guard",
     "LockstepLink": "radio_hub.shell.lockstep",
     "MODEL_EPOCH_US": "radio_hub.coordinator",

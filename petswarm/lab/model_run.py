@@ -48,6 +48,7 @@ from petswarm.robot import Robot, RobotConfig
 from petswarm.scenario import Scenario
 from petswarm.wearables.user import UserConfig, run_user
 from radio_hub.interface import (
+    HANDED_OVER,
     MODEL_EPOCH_US,
     Coordinator,
     EnvironmentConfig,
@@ -87,7 +88,7 @@ class MemoryAir:
             config, seed, wall_epoch_us=MODEL_EPOCH_US, pcap_path=pcap_path, world_log=world_log, in_memory=True
         )
         self.env = self.coordinator.env
-        self._nodes: dict[str, Callable[[bytes | Message], None]] = {}
+        self._nodes: dict[str, tuple[Callable[[bytes | Message], None], Callable[[Message], None] | None]] = {}
         self._settled: list[asyncio.Future[None]] = []
         self._wake: asyncio.TimerHandle | None = None
         self._wake_us = 0
@@ -102,9 +103,15 @@ class MemoryAir:
         """A new node's port to this environment."""
         return MemoryLink(self)
 
-    def opened(self, node_id: str, on_down: Callable[[bytes | Message], None]) -> None:
-        """A node's link is open: deliver to ``on_down`` from now on."""
-        self._nodes[node_id] = on_down
+    def opened(
+        self,
+        node_id: str,
+        on_down: Callable[[bytes | Message], None],
+        on_built: Callable[[Message], None] | None = None,
+    ) -> None:
+        """A node's link is open: deliver to ``on_down`` from now on, and the environment's ``HANDED_OVER``
+        messages to ``on_built`` if given (``RadioClient.on_built``: they are the environment's own)."""
+        self._nodes[node_id] = (on_down, on_built)
 
     def up(self, node_id: str, data: bytes | Message) -> None:
         """A node's message (bytes, or one handed over as it is), held until every node is idle."""
@@ -127,12 +134,12 @@ class MemoryAir:
         became ready."""
         delivered = False
         for node_id, messages in self.coordinator.take_downs().items():
-            on_down = self._nodes.get(node_id)
-            if on_down is None:  # a node that left meanwhile
+            handlers = self._nodes.get(node_id)
+            if handlers is None:  # a node that left meanwhile
                 continue
             # one callback per node for all its messages, in order: as a callback each, every one of them runs
             # before anything they make ready (that is queued behind every node's delivery either way)
-            self.loop.call_soon(self._deliver, on_down, messages)
+            self.loop.call_soon(self._deliver, *handlers, messages)
             delivered = True
         if delivered:
             return True
@@ -144,12 +151,22 @@ class MemoryAir:
             future.set_result(None)
         return bool(waiting)
 
-    def _deliver(self, on_down: Callable[[bytes | Message], None], messages: list[bytes | Message]) -> None:
+    def _deliver(
+        self,
+        on_down: Callable[[bytes | Message], None],
+        on_built: Callable[[Message], None] | None,
+        messages: list[bytes | Message],
+    ) -> None:
         """A node's messages of this round, one after another; a message whose handling fails is reported as
-        a callback's error is, and the next ones still come."""
+        a callback's error is, and the next ones still come. Only the environment holds messages for nodes
+        (``Coordinator.send_message``), so one of the ``HANDED_OVER`` types is its own: it goes to ``on_built``
+        when the node has one."""
         for data in messages:
             try:
-                on_down(data)
+                if on_built is not None and type(data) in HANDED_OVER:
+                    on_built(data)  # type: ignore[arg-type]
+                else:
+                    on_down(data)
             except (SystemExit, KeyboardInterrupt):
                 raise
             except BaseException as err:
@@ -185,6 +202,8 @@ class MemoryLink:
 
     def __init__(self, air: MemoryAir) -> None:
         self.air = air
+        self.on_built: Callable[[Message], None] | None = None
+        """Where the environment's own messages go (``RadioClient.on_built``, set before ``open``)."""
         self.node_id = ""
         self.instance = ""
         self.closed = False
@@ -199,7 +218,7 @@ class MemoryLink:
         """Register the node with the air (the hub is always present in memory); the body-sensor and beacon
         messages reach it as they are, without their bytes (``Coordinator(in_memory=True)``)."""
         self.node_id, self.instance = node_id, instance
-        self.air.opened(node_id, on_down)
+        self.air.opened(node_id, on_down, self.on_built)
 
     def put(self, data: bytes) -> None:
         """One message up, held until every node is idle; nothing once closed (a node that has gone sends

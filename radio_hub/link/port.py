@@ -215,7 +215,8 @@ class BeaconSweep:
     @classmethod
     def of_block(cls, t_us: int, sources: list[str], block: np.ndarray, gains: list[float]) -> BeaconSweep:
         """A sweep of distinct ``sources``, ``block[i]`` (12 readings) read at ``gains[i]``."""
-        sweep = cls(t_us, {}, {})
+        sweep = cls.__new__(cls)  # without __init__'s maps, made only to be dropped (one sweep a robot, 25 Hz)
+        sweep.t_us = t_us
         sweep._readings = sweep._gains = None
         sweep._sources, sweep._block, sweep._gain_list = sources, block, gains
         return sweep
@@ -353,6 +354,8 @@ class RadioClient:
         self._reattaching: asyncio.Task[None] | None = None
         if hasattr(link, "session_key"):  # a link that speaks for the node itself (a lockstep idle)
             link.session_key = self.session_key
+        if hasattr(link, "on_built"):  # a link in memory: the environment's own messages come to on_built
+            link.on_built = self.on_built
         link.open(node_id, self.instance, self._on_down, self._hub_seen)
 
     @classmethod
@@ -643,6 +646,18 @@ class RadioClient:
                 self._on_one(part)  # a part is one message: a batch inside a batch is malformed
         else:
             self._on_one(data)
+
+    def on_built(self, msg: wire.Message) -> None:
+        """One of the messages the environment built in this very process and handed over as it is (a model
+        run's body sensors and beacon sweeps, ``environment.HANDED_OVER``), taken without ``wire.check``: no
+        peer can put anything on a link in memory (a node process's messages come as bytes to ``_on_down``,
+        decoded and checked), and the environment makes every field of these a value the check passes (its
+        own names and numbering, float32 bytes, finite yaw, odometry and gains from finite, bounded poses and
+        speeds). A message handed to ``_on_down`` is still checked, whoever hands it. Never raises."""
+        try:
+            self._on_message(msg)
+        except Exception as err:
+            self.faults.record("downlink", err, msg.TYPE)
 
     def _on_one(self, data: bytes | wire.Message) -> None:
         try:

@@ -99,7 +99,7 @@ class IrAir:
         strength = self._beacon_strength(distance, names)
         seen = strength > 0
         out: dict[str, tuple[list[str], np.ndarray, list[float]]] = {}
-        counts = np.count_nonzero(seen, axis=1)
+        counts = np.add.reduce(seen, axis=1, dtype=np.intp)  # np.count_nonzero along an axis: its Python path
         lit_rows = np.flatnonzero(counts).tolist()
         if not lit_rows:
             return out

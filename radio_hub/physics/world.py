@@ -18,6 +18,7 @@ is the figure the experiments report, the push-back only keeps the geometry sane
 from __future__ import annotations
 
 import math
+import operator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -172,6 +173,47 @@ class OwnSensors:
     """vx, vy (body frame), omega, as the wheels measured them."""
 
 
+_POSE, _VELOCITY, _COMMAND = (operator.attrgetter(name) for name in ("pose", "velocity", "command"))
+_STATE = operator.attrgetter("pose", "velocity", "command")
+_COMMAND_T = operator.attrgetter("command_t")
+
+
+class _Rows:
+    """Every body's pose, velocity and command as (bodies, 3) arrays, a row per body in ``World.bodies`` order,
+    and each body's ``pose``, ``velocity`` and ``command`` a view of its row: a change made through either is
+    the other's, so the world's array computations take them without gathering them body by body (that was a
+    third of a tick). Made again when a body comes, goes or is given another array (``current``)."""
+
+    def __init__(self, bodies: list[Body]) -> None:
+        n = len(bodies)
+        self.bodies = bodies
+        self.ids = tuple(b.body_id for b in bodies)
+        self.index = {body_id: k for k, body_id in enumerate(self.ids)}
+        self.radius = np.array([b.radius for b in bodies], dtype=float)
+        """Radii as the bodies had them (a body's radius is fixed from ``World.add`` on)."""
+        self.robots = np.array([k for k, b in enumerate(bodies) if b.kind == "robot"], dtype=np.intp)
+        self.robot_bodies = [b for b in bodies if b.kind == "robot"]
+        self.pose, self.velocity, self.command = (
+            np.array([get(b) for b in bodies], dtype=float).reshape(n, 3) for get in (_POSE, _VELOCITY, _COMMAND)
+        )
+        for k, body in enumerate(bodies):
+            body.pose, body.velocity, body.command = self.pose[k], self.velocity[k], self.command[k]
+        self._views = list(map(_STATE, bodies))
+
+    def current(self, bodies: dict[str, Body]) -> bool:
+        """Whether these rows are still ``bodies``': the same bodies in the same order, each with its views
+        (compared as lists, which take the identical elements as equal without asking them)."""
+        try:
+            return list(bodies.values()) == self.bodies and list(map(_STATE, self.bodies)) == self._views
+        except ValueError:  # another body or array, compared by value (numpy's == is no truth value): not ours
+            return False
+
+    def at(self, body_ids: list[str]) -> list[int]:
+        """The rows of ``body_ids`` (KeyError for one that is not a body)."""
+        index = self.index
+        return [index[b] for b in body_ids]
+
+
 class World:
     """All bodies and obstacles of one world."""
 
@@ -191,6 +233,15 @@ class World:
         self._ultrasonic_spread = np.array((-half, 0.0, half) if half > 0 else (0.0,))
         self._cos_half_beam = math.cos(half)
         self._not_self_of: tuple[tuple[Any, ...], np.ndarray] = ((), np.zeros((0, 0), dtype=bool))
+        self._rows_of: _Rows | None = None
+        self._reaches_of: tuple[Any, np.ndarray, np.ndarray] = ((None, None, None), np.zeros(0), np.zeros(0))
+
+    def _rows(self) -> _Rows:
+        """The bodies' state as arrays (``_Rows``), made again only when the bodies changed."""
+        rows = self._rows_of
+        if rows is None or not rows.current(self.bodies):
+            rows = self._rows_of = _Rows(list(self.bodies.values()))
+        return rows
 
     def set_obstacles(self, obstacles: list[Obstacle]) -> None:
         """Replace the obstacles (a scenario loaded at run time)."""
@@ -219,9 +270,9 @@ class World:
         body = self.bodies[body_id]
         if body.kind != "robot":
             raise ValueError(f"{body_id} is a {body.kind}: only robots take motor commands")
-        if not all(math.isfinite(v) for v in (vx, vy, omega)):
+        if not (math.isfinite(vx) and math.isfinite(vy) and math.isfinite(omega)):
             raise ValueError("a motor command must be finite numbers")
-        body.command = np.array([vx, vy, omega], dtype=float)
+        body.command[:] = (vx, vy, omega)  # in place: the body's row (``_Rows``) stays its array
         body.command_t = t
 
     def place(
@@ -231,8 +282,8 @@ class World:
         if not all(math.isfinite(v) for v in (x, y, yaw, vx, vy, omega)) or max(abs(x), abs(y)) > MAX_COORDINATE_M:
             raise ValueError(f"a pose must be finite numbers within {MAX_COORDINATE_M:g} m")
         body = self.bodies[body_id]
-        body.pose = np.array([x, y, _wrap(yaw)], dtype=float)
-        body.velocity = np.array([vx, vy, omega], dtype=float)
+        body.pose[:] = (x, y, _wrap(yaw))  # in place: the body's rows (``_Rows``) stay its arrays
+        body.velocity[:] = (vx, vy, omega)
 
     def step(self, t: float) -> None:
         """Advance the robots to model time ``t`` (seconds), then settle contacts."""
@@ -241,27 +292,28 @@ class World:
         if dt <= 0:
             return
         cfg = self.config
-        robots = [b for b in self.bodies.values() if b.kind == "robot"]
+        rows = self._rows()
+        robots = rows.robot_bodies
         if robots:
             # every robot at once, element by element the arithmetic of one
-            pose = np.array([b.pose for b in robots], dtype=float)
-            velocity = np.array([b.velocity for b in robots], dtype=float)
-            fresh = np.array([t - b.command_t <= cfg.command_timeout_s for b in robots])
-            wanted = np.where(fresh[:, None], np.array([b.command for b in robots], dtype=float), 0.0)
+            at = rows.robots
+            pose, velocity = rows.pose[at], rows.velocity[at]
+            fresh = t - np.fromiter(map(_COMMAND_T, robots), float, len(robots)) <= cfg.command_timeout_s
+            wanted = np.where(fresh[:, None], rows.command[at], 0.0)
             c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
-            target = np.stack(
-                [c * wanted[:, 0] - s * wanted[:, 1], s * wanted[:, 0] + c * wanted[:, 1], wanted[:, 2]], axis=1
-            )
+            target = np.empty_like(wanted)
+            target[:, 0] = c * wanted[:, 0] - s * wanted[:, 1]
+            target[:, 1] = s * wanted[:, 0] + c * wanted[:, 1]
             target[:, :2] = _clip_norms(target[:, :2], cfg.max_speed_mps)
-            target[:, 2] = np.clip(target[:, 2], -cfg.max_omega_rps, cfg.max_omega_rps)
+            # np.clip's values, from the two ufuncs it is made of (without its checks, microseconds a call)
+            target[:, 2] = np.minimum(np.maximum(wanted[:, 2], -cfg.max_omega_rps), cfg.max_omega_rps)
             change = target - velocity
             change[:, :2] = _clip_norms(change[:, :2], cfg.max_accel_mps2 * dt)
-            change[:, 2] = np.clip(change[:, 2], -cfg.max_alpha_rps2 * dt, cfg.max_alpha_rps2 * dt)
+            change[:, 2] = np.minimum(np.maximum(change[:, 2], -cfg.max_alpha_rps2 * dt), cfg.max_alpha_rps2 * dt)
             velocity = velocity + change
             pose = pose + velocity * dt
             pose[:, 2] = (pose[:, 2] + math.pi) % (2 * math.pi) - math.pi
-            for k, body in enumerate(robots):
-                body.velocity, body.pose = velocity[k], pose[k]
+            rows.velocity[at], rows.pose[at] = velocity, pose  # the robots' own arrays are views of these rows
         self._settle_contacts()
 
     def _settle_contacts(self) -> None:
@@ -277,22 +329,19 @@ class World:
     def _may_touch(self) -> bool:
         """Whether any two bodies, or a body and an obstacle, are within a hair of touching (one array
         computation; when none is, settling would move nothing and find no contact)."""
-        bodies = list(self.bodies.values())
-        if not bodies:
+        if not self.bodies:
             return False
-        xyr = np.array([(b.pose[0], b.pose[1], b.radius) for b in bodies], dtype=float)
-        p, radius = xyr[:, :2], xyr[:, 2]
+        rows = self._rows()
+        p, radius = rows.pose[:, :2], rows.radius
         slack = 1e-6
+        reach, circle_reach = self._reaches(rows, slack)
         gap = p[:, None, :] - p[None, :, :]
-        reach = radius[:, None] + radius[None, :] + slack
-        close = np.hypot(gap[..., 0], gap[..., 1]) < reach
-        np.fill_diagonal(close, False)
-        if close.any():
+        if (np.hypot(gap[..., 0], gap[..., 1]) < reach).any():
             return True
         circles = self._circles
         if len(circles):
             gap = p[:, None, :] - circles[None, :, :2]
-            if (np.hypot(gap[..., 0], gap[..., 1]) < radius[:, None] + circles[None, :, 2] + slack).any():
+            if (np.hypot(gap[..., 0], gap[..., 1]) < circle_reach).any():
                 return True
         segments = self._segments
         if len(segments):
@@ -308,6 +357,22 @@ class World:
             if o.kind == "rect" and ((o.x0 < p[:, 0]) & (p[:, 0] < o.x1) & (o.y0 < p[:, 1]) & (p[:, 1] < o.y1)).any():
                 return True
         return False
+
+    def _reaches(self, rows: _Rows, slack: float) -> tuple[np.ndarray, np.ndarray]:
+        """The distances within which two bodies (bodies, bodies), or a body and an obstacle circle (bodies,
+        circles), may touch: radii plus ``slack``, kept while the bodies and obstacles stay; a body and itself
+        never (-inf, as np.fill_diagonal's False did)."""
+        made_for = self._reaches_of[0]  # (by identity: an array's == is no truth value)
+        if not (made_for[0] is rows and made_for[1] is self._circles and made_for[2] == slack):
+            radius = rows.radius
+            reach = radius[:, None] + radius[None, :] + slack
+            np.fill_diagonal(reach, -np.inf)
+            self._reaches_of = (
+                (rows, self._circles, slack),
+                reach,
+                radius[:, None] + self._circles[None, :, 2] + slack,
+            )
+        return self._reaches_of[1], self._reaches_of[2]
 
     def _settled_contacts(self) -> set[tuple[str, str]]:
         """Push overlapping bodies apart and out of obstacles, pair by pair; the contacts found."""
@@ -384,12 +449,12 @@ class World:
         if not n:
             return np.zeros((0, len(self._ultrasonic_rad))), [], np.zeros((0, 3))
         ranges = self.ultrasonic_many(body_ids)
-        bodies = [self.bodies[b] for b in body_ids]
-        pose = np.array([b.pose for b in bodies], dtype=float).reshape(n, 3)
-        velocity = np.array([b.velocity for b in bodies], dtype=float).reshape(n, 3)
+        rows = self._rows()
+        at = rows.at(body_ids)
+        pose, velocity = rows.pose[at], rows.velocity[at]
         # one draw of standard normals for all, cut as the draws body by body would have been
         seen = ~np.isnan(ranges)
-        echoes = np.count_nonzero(seen, axis=1)
+        echoes = np.add.reduce(seen, axis=1, dtype=np.intp)  # np.count_nonzero along an axis: its Python path
         ends = np.cumsum(echoes + 4)
         starts = ends - (echoes + 4)
         z = rng.standard_normal(int(ends[-1]))
@@ -400,7 +465,9 @@ class World:
         odometry_noise = 0.0 + cfg.odometry_noise * z[(starts + echoes + 1)[:, None] + np.arange(3)]
         c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
         vx, vy, omega = velocity.T
-        odometry = np.stack([c * vx + s * vy, -s * vx + c * vy, omega], axis=1) * (1.0 + odometry_noise)
+        odometry = np.empty((n, 3))
+        odometry[:, 0], odometry[:, 1], odometry[:, 2] = c * vx + s * vy, -s * vx + c * vy, omega
+        odometry *= 1.0 + odometry_noise
         return ranges, yaw.tolist(), odometry
 
     def ultrasonic(self, body_id: str) -> np.ndarray:
@@ -423,30 +490,27 @@ class World:
         takes its neighbours from IR, dropping their echoes."""
         cfg = self.config
         n = len(body_ids)
-        bodies = [self.bodies[b] for b in body_ids]
-        everyone = list(self.bodies.values())
-        poses = np.array([b.pose for b in bodies], dtype=float).reshape(n, 3)
-        skin = np.array([b.radius for b in bodies], dtype=float)
+        rows = self._rows()
+        at = rows.at(body_ids)
+        poses = rows.pose[at].reshape(n, 3)
+        skin = rows.radius[at]
         origin = poses[:, :2]
         # ray directions (bodies, sensors, rays): heading + sensor angle + spread, as one sensor's cone
         directions = (poses[:, 2, None] + self._ultrasonic_rad)[:, :, None] + self._ultrasonic_spread
-        unit = np.stack([np.cos(directions), np.sin(directions)], axis=-1)  # (n, S, K, 2)
+        unit = _cos_sin(directions)  # (n, S, K, 2)
         best = np.full(directions.shape, np.inf)
         axis_angle = poses[:, 2, None] + self._ultrasonic_rad  # (n, S)
-        axis = np.stack([np.cos(axis_angle), np.sin(axis_angle)], axis=-1)  # (n, S, 2)
+        axis = _cos_sin(axis_angle)  # (n, S, 2)
         cone = np.full(axis_angle.shape, np.inf)  # (n, S): shapes' nearest points inside the cone
-        circles = np.vstack([self._circles, self._bodies_xyr(everyone)])
+        circles = np.vstack([self._circles, self._bodies_xyr(rows)])
         if len(circles):
-            not_self = self._not_self(body_ids, everyone, len(circles))
+            not_self = self._not_self(body_ids, rows.ids, len(circles))
             rel = circles[None, :, :2] - origin[:, None, :]  # (n, M, 2)
             # one matrix-vector product per ray (as rel @ d for a single ray)
             along = np.matmul(rel[:, None, None], unit[..., None])[..., 0]  # (n, S, K, M)
             perp2 = (rel[..., 0] * rel[..., 0] + rel[..., 1] * rel[..., 1])[:, None, None, :] - along**2
             r2 = circles[:, 2] ** 2
-            hit = (perp2 <= r2) & (along > 0) & not_self[:, None, None, :]
-            with np.errstate(invalid="ignore"):
-                t = along - np.sqrt(r2 - perp2)
-            best = np.minimum(best, np.where(hit, np.maximum(t, 0.0), np.inf).min(axis=-1))
+            best = np.minimum(best, _ray_hits(along, perp2, r2, not_self))
             # the obstacle circles' near sides between the rays (the bodies keep the three rays: see the docstring)
             fixed = rel[:, : len(self._circles)]
             centre = np.hypot(fixed[..., 0], fixed[..., 1])  # (n, C)
@@ -475,22 +539,20 @@ class World:
         return np.where(reach <= cfg.ultrasonic_range_m, reach, np.nan)
 
     @staticmethod
-    def _bodies_xyr(everyone: list[Body]) -> np.ndarray:
+    def _bodies_xyr(rows: _Rows) -> np.ndarray:
         """(bodies, 3): every body's x, y and radius, as circles."""
-        if not everyone:
-            return np.zeros((0, 3))
-        xyr = np.empty((len(everyone), 3))
-        xyr[:, :2] = np.array([b.pose for b in everyone], dtype=float)[:, :2]
-        xyr[:, 2] = [b.radius for b in everyone]
+        xyr = np.empty((len(rows.ids), 3))
+        xyr[:, :2] = rows.pose[:, :2]
+        xyr[:, 2] = rows.radius
         return xyr
 
-    def _not_self(self, body_ids: list[str], everyone: list[Body], count: int) -> np.ndarray:
+    def _not_self(self, body_ids: list[str], everyone: tuple[str, ...], count: int) -> np.ndarray:
         """(sensing bodies, circles): False where the circle is the sensing body itself (no echo off oneself);
         the same bodies sense at every tick, so the last answer is kept."""
-        key = (tuple(body_ids), tuple(b.body_id for b in everyone), len(self._circles), count)
+        key = (tuple(body_ids), everyone, len(self._circles), count)
         if self._not_self_of[0] != key:
             not_self = np.ones((len(body_ids), count), dtype=bool)
-            index = {b.body_id: len(self._circles) + k for k, b in enumerate(everyone)}
+            index = {body_id: len(self._circles) + k for k, body_id in enumerate(everyone)}
             not_self[np.arange(len(body_ids)), [index[b] for b in body_ids]] = False
             not_self.flags.writeable = False
             self._not_self_of = (key, not_self)
@@ -505,20 +567,16 @@ class World:
 
     def poses(self) -> dict[str, tuple[float, float, float]]:
         """Every body's pose (x, y, yaw) as plain floats, by id (for the IR light and the radio ranges)."""
-        return {n: (float(b.pose[0]), float(b.pose[1]), float(b.pose[2])) for n, b in self.bodies.items()}
+        rows = self._rows()
+        return dict(zip(rows.ids, map(tuple, rows.pose.tolist()), strict=True))
 
     def truth_rows(self) -> list[list[float]]:
         """Every body's pose and velocity (x, y, yaw, vx, vy, omega), each ``round(value, 4)`` as records and
         viewers take them, in the order of ``bodies``."""
-        bodies = list(self.bodies.values())
-        if not bodies:
+        if not self.bodies:
             return []
-        return round_places(
-            np.hstack(
-                [np.array([b.pose for b in bodies], dtype=float), np.array([b.velocity for b in bodies], dtype=float)]
-            ),
-            4,
-        )
+        rows = self._rows()
+        return round_places(np.hstack([rows.pose, rows.velocity]), 4)
 
     def snapshot(self) -> list[dict[str, Any]]:
         """Every body's truth as plain values (for the world publication and records)."""
@@ -550,10 +608,15 @@ def round_places(values: np.ndarray, places: int) -> list[list[float]]:
     scale = 10.0**places
     scaled = values * scale
     k = np.rint(scaled)
+    rows = (k / scale).tolist()
     size = np.abs(scaled)
+    largest = size.max() if size.size else 0.0
+    if largest < 2.0**50 and (not size.size or np.abs(np.abs(scaled - k) - 0.5).min() > largest * 2.0**-48):
+        # every value sure at once, the largest's margin standing for all (nan and inf fail the first test, so
+        # they take the way below, as does a line with a value within a few ulps of a half)
+        return rows
     with np.errstate(invalid="ignore"):  # inf - inf: not sure
         sure = (np.abs(np.abs(scaled - k) - 0.5) > size * 2.0**-48) & (size < 2.0**50)
-    rows = (k / scale).tolist()
     if not sure.all():
         exact = values.tolist()
         for i, j in zip(*np.nonzero(~sure), strict=True):
@@ -595,11 +658,42 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return v / n if n > 1e-12 else np.array([1.0, 0.0])
 
 
+def _ray_hits(along: np.ndarray, perp2: np.ndarray, r2: np.ndarray, not_self: np.ndarray) -> np.ndarray:
+    """(n, S, K): each ray's nearest hit among the circles (inf: none), from the distances ``along`` each ray
+    to the circles' feet and the squared distances ``perp2`` of their centres from it, (n, S, K, M), and the
+    circles' squared radii ``r2``. The values of ``where(hit, max(along - sqrt(r2 - perp2), 0), inf)``, in
+    place in ``perp2``: a ray hits where r2 - perp2 >= 0 (as perp2 <= r2: a float difference is never 0 for
+    two different floats), ahead of it, and not its own body; elsewhere the root is of 0, not nan, and unused."""
+    gap = np.subtract(r2, perp2, out=perp2)
+    hit = gap >= 0
+    hit &= along > 0
+    hit &= not_self[:, None, None, :]
+    np.maximum(gap, 0.0, out=gap)
+    t = np.subtract(along, np.sqrt(gap, out=gap), out=gap)
+    np.maximum(t, 0.0, out=t)
+    np.copyto(t, np.inf, where=~hit)
+    return t.min(axis=-1)
+
+
+def _cos_sin(angles: np.ndarray) -> np.ndarray:
+    """cos and sin of every angle along a new last axis (``np.stack`` of the two, without its cost)."""
+    out = np.empty((*angles.shape, 2))
+    # each computed into an array of its own, as np.stack's were: a strided output may take another loop
+    out[..., 0], out[..., 1] = np.cos(angles), np.sin(angles)
+    return out
+
+
 def _clip_norms(v: np.ndarray, limit: float) -> np.ndarray:
     """Every row of an (n, 2) array scaled down to the norm ``limit`` where it is longer (as v (limit / |v|))."""
     n = np.hypot(v[:, 0], v[:, 1])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where((n > limit)[:, None], v * (limit / n)[:, None], v)
+    if not limit > 0:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where((n > limit)[:, None], v * (limit / n)[:, None], v)
+    # the same values without np.errstate (microseconds a use, four a tick): limit / max(n, limit) is limit / n
+    # where a row is longer and exactly 1 elsewhere (v times 1 is v), and never a division by zero (an infinite
+    # row, which no body has, is nan either way, here with numpy's warning)
+    scale = np.where(n > limit, limit / np.maximum(n, limit), 1.0)
+    return v * scale[:, None]
 
 
 def _wrap(angle: float) -> float:

@@ -57,9 +57,13 @@ def test_the_world_line_is_the_world_state_as_json_through_motion_telemetry_and_
         assert line == _as_json(env)
         referenced += '"reference":[' in line
     assert 0 < referenced < 60
+    env.receive("n-1", wire.Configure(token=1, pan_id=0x99, n=1000), now)  # a PAN changed in place
+    assert '"pan_id":153' in env.world_line() and env.world_line() == _as_json(env)
     body = env.world.bodies["n-1"]
     body.pose[0], body.velocity[1] = -0.0, 1e-300  # a signed zero and a value that rounds to zero
     assert env.world_line() == _as_json(env)
+    body.pose[0], body.velocity[1] = 0.0, -1e-300  # and back
+    assert env.world_line() == _as_json(env) and '"vy":-0.0' in env.world_line()
     body.velocity[0] = math.inf  # JSON's Infinity: the encoder's own path
     assert "Infinity" in env.world_line() and env.world_line() == _as_json(env)
 
@@ -102,3 +106,13 @@ def test_world_states_are_made_only_for_a_downlink_that_publishes_them() -> None
     count, _ = states_made(watched)
     assert count == 2 and len(seen) == 2
     assert states_made(None)[0] == 2
+
+
+def test_round_places_of_whole_tables_is_round_too_with_or_without_a_value_at_a_half() -> None:
+    rng = np.random.default_rng(9)
+    for exponent in range(-6, 13):  # past 2**50 units too
+        table = rng.normal(size=(21, 6)) * 10.0**exponent
+        if exponent % 2:  # one value at a decimal half: the whole table takes the slow way
+            table[3, 2] = (np.round(table[3, 2] * 1e4) + 0.5) / 1e4
+        got = round_places(table, 4)
+        assert [[repr(v) for v in row] for row in got] == [[repr(round(v, 4)) for v in row] for row in table.tolist()]
