@@ -14,6 +14,7 @@ import array
 import asyncio
 import contextlib
 import itertools
+import math
 import os
 import sys
 from collections import Counter, deque
@@ -652,8 +653,20 @@ class RadioClient:
         run's body sensors and beacon sweeps, ``environment.HANDED_OVER``), taken without ``wire.check``: no
         peer can put anything on a link in memory (a node process's messages come as bytes to ``_on_down``,
         decoded and checked), and the environment makes every field of these a value the check passes (its
-        own names and numbering, float32 bytes, finite yaw, odometry and gains from finite, bounded poses and
-        speeds). A message handed to ``_on_down`` is still checked, whoever hands it. Never raises."""
+        own names and numbering, float32 bytes). Its floats are not sure: a robot's finite but huge command
+        makes its velocity nan (the rotation into the world frame overflows), so its yaw, odometry and gains
+        are tested here, one sum each (nan and inf carry through a sum), and a message whose sum is not finite
+        takes the checked way (``_on_one``), counted as malformed and dropped as before where the check refuses
+        it. A message handed to ``_on_down`` is still checked, whoever hands it. Never raises."""
+        if type(msg) is wire.Sensors:
+            odometry = msg.odometry
+            sure = len(odometry) == 3 and math.isfinite(msg.yaw + odometry[0] + odometry[1] + odometry[2])
+        else:
+            gains = msg.gains  # type: ignore[attr-defined]
+            sure = len(gains) <= 1024 and math.isfinite(sum(gains))  # (wire: a gain per beacon, 1024 at most)
+        if not sure:
+            self._on_one(msg)
+            return
         try:
             self._on_message(msg)
         except Exception as err:
