@@ -116,3 +116,27 @@ def test_round_places_of_whole_tables_is_round_too_with_or_without_a_value_at_a_
             table[3, 2] = (np.round(table[3, 2] * 1e4) + 0.5) / 1e4
         got = round_places(table, 4)
         assert [[repr(v) for v in row] for row in got] == [[repr(round(v, 4)) for v in row] for row in table.tolist()]
+
+
+def test_the_world_line_takes_the_radio_counts_from_a_snapshot_as_world_state_does() -> None:
+    """The hub's medium thread may add or drop a node's counters (``_forget_gone``) while the world thread writes
+    a line: the line sums a snapshot of them, as ``world_state`` does, not the live map three times over."""
+    from radio_hub.air.medium import Counters
+
+    env = Environment(EnvironmentConfig(), 1, Quiet())
+    env.receive("n-1", wire.Attach(ext_addr=1, position=[0.0, 0.0], kind="robot", n=1), 0)
+    live = env.medium.node_counters
+
+    class Meanwhile(Counters):  # reading it stands for the other thread's change at that moment
+        @property
+        def lost(self) -> int:  # type: ignore[override]
+            live.pop("n-gone", None) if "n-gone" in live else live.setdefault("n-gone", Counters(delivered=5))
+            return 0
+
+        @lost.setter
+        def lost(self, value: int) -> None:
+            pass
+
+    live["n-1"] = Meanwhile(delivered=2, collided=1)
+    line = env.world_line()
+    assert '"radio":{"delivered":2,"collided":1,"lost":0}' in line
