@@ -403,7 +403,8 @@ class Environment:
         template, referenced = self._bodies_template(bodies)
         if referenced:
             values = self._with_references(bodies, rows, referenced)
-        counters = self.medium.node_counters.values()
+        # a snapshot, as world_state takes: the medium's thread may add or drop a node's counters meanwhile
+        counters = list(self.medium.node_counters.values())
         radio = [sum(map(count, counters)) for count in _RADIO_TOTALS]
         wall = round((self.wall_epoch_us + now) / 1e6, 4)
         return (
