@@ -149,7 +149,11 @@ def parse_obstacle(spec: dict[str, Any], where: str = "obstacle") -> Obstacle:
 
 @dataclass
 class Body:
-    """One body's truth: pose, velocity in the world frame, and its last motor command."""
+    """One body's truth: pose, velocity in the world frame, and its last motor command.
+
+    Once the world has stepped, ``pose``, ``velocity`` and ``command`` are views of the world's rows (``_Rows``):
+    they move with every tick, and a reference kept across a body's coming or going goes stale (read them
+    again from ``World.bodies``; copy what must stay as it was)."""
 
     body_id: str
     kind: str
