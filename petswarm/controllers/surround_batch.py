@@ -49,11 +49,9 @@ def step_pilots(
         if config is not None and pilot.batchable(sensors, config, ring)
     ]
     ranges = [samples[i][0].ranges_list() for i in together]
-    if any(len(r) != ring for r in ranges):
-        together, ranges = [], []
-    elif together and (np.array(ranges) < 0).any():  # a ring that reads as none does: that robot fails alone
-        keep = [k for k, r in enumerate(ranges) if not any(x < 0 for x in r)]
-        together, ranges = [together[k] for k in keep], [ranges[k] for k in keep]
+    # a ring that reads as no ring does (a negative range) fails alone; the others go on together
+    keep = [k for k, r in enumerate(ranges) if len(r) == ring and not any(x < 0 for x in r)]
+    together, ranges = [together[k] for k in keep], [ranges[k] for k in keep]
     if len(together) < 2:
         together, ranges = [], []
     results: list[Result] = [None] * len(pilots)
@@ -116,7 +114,7 @@ def _drive(
         return
     rows = np.array(driving)
     commands = SurroundController.step_all(
-        [chosen[k].controller for k in driving],  # type: ignore[misc]  # the paper's law: _batchable
+        [chosen[k].controller for k in driving],  # type: ignore[misc]  # the paper's law: batchable
         sensed.terms[rows],
         sensed.neighbours[rows],
         sensed.count[rows],
