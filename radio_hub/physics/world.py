@@ -31,6 +31,9 @@ KINDS = ("robot", "user")
 
 MAX_COORDINATE_M = 1e6
 """How far from the origin a body may be put (a forged pose of 1e300 m must not turn distances into inf)."""
+MAX_RATE = 1e3
+"""The largest speed (m/s) or turn rate (rad/s) a motor command or a placed body may carry: a forged command of
+1.5e308 m/s is finite, but turning it into the world's frame overflowed to inf and made the body nan for good."""
 
 
 @dataclass
@@ -274,8 +277,8 @@ class World:
         body = self.bodies[body_id]
         if body.kind != "robot":
             raise ValueError(f"{body_id} is a {body.kind}: only robots take motor commands")
-        if not (math.isfinite(vx) and math.isfinite(vy) and math.isfinite(omega)):
-            raise ValueError("a motor command must be finite numbers")
+        if not (abs(vx) <= MAX_RATE and abs(vy) <= MAX_RATE and abs(omega) <= MAX_RATE):  # nan fails too
+            raise ValueError(f"a motor command must be finite numbers within {MAX_RATE:g} (m/s, rad/s)")
         body.command[:] = (vx, vy, omega)  # in place: the body's row (``_Rows``) stays its array
         body.command_t = t
 
@@ -285,6 +288,8 @@ class World:
         """Set a body's pose and world velocity outright (a user walking, or a test teleporting a robot)."""
         if not all(math.isfinite(v) for v in (x, y, yaw, vx, vy, omega)) or max(abs(x), abs(y)) > MAX_COORDINATE_M:
             raise ValueError(f"a pose must be finite numbers within {MAX_COORDINATE_M:g} m")
+        if max(abs(vx), abs(vy), abs(omega)) > MAX_RATE:
+            raise ValueError(f"a placed body's velocity must be within {MAX_RATE:g} (m/s, rad/s)")
         body = self.bodies[body_id]
         body.pose[:] = (x, y, _wrap(yaw))  # in place: the body's rows (``_Rows``) stay its arrays
         body.velocity[:] = (vx, vy, omega)

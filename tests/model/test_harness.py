@@ -130,28 +130,32 @@ def test_a_nodes_messages_of_a_round_come_in_order_and_one_that_fails_does_not_s
     assert [type(e["exception"]) for e in errors] == [ValueError]
 
 
-def test_a_body_made_nan_by_a_finite_drive_sends_sensors_that_are_dropped_as_their_bytes_would_be() -> None:
-    """A finite but huge motor command overflows the world's rotation of it (inf, then nan once clipped): the
-    body's odometry is nan from then on, and its Sensors, handed over without their bytes, are counted as
-    malformed and dropped as the checked way and the hub's bytes drop them, not taken as a robot's truth."""
+def test_a_finite_but_huge_drive_is_refused_and_the_body_and_its_sensors_stay_finite() -> None:
+    """A finite but huge motor command (1.5e308 m/s) overflowed the world's rotation of it (inf, then nan once
+    clipped): the body's truth was nan from then on and its Sensors were dropped as malformed for good. The world
+    now refuses a command beyond ``MAX_RATE`` as it refuses a nan one: counted, answered with an error, and the
+    robot's own next command drives it on."""
     import math
-    import warnings
 
-    async def body(w: ModelWorld) -> tuple[int, int, bool]:
+    async def body(w: ModelWorld) -> tuple[int, int, int, bool]:
         await w.robot(1, (0.0, 0.0), heading_deg=45.0)
         await w.advance(0.2)
         radio = w[1].rf.radio
-        malformed = radio.malformed
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            for _ in range(10):  # the robot's own commands come too: one of these is the last before a tick
-                radio.drive(1.5e308, -1.5e308, 0.0)
-                await w.advance(0.01)
-            await w.advance(0.2)
+        malformed, refused = radio.malformed, w.air.env.counters.config_errors
+        for _ in range(10):  # the robot's own commands come too: one of these is the last before a tick
+            radio.drive(1.5e308, -1.5e308, 0.0)
+            await w.advance(0.01)
+        await w.advance(0.2)
         truth = w.air.env.world.bodies["robot-1"].velocity
-        odometry = radio.sensors.odometry if radio.sensors is not None else (0.0, 0.0, 0.0)
-        return radio.malformed - malformed, sum(math.isnan(v) for v in truth), all(map(math.isfinite, odometry))
+        odometry = radio.sensors.odometry if radio.sensors is not None else (math.nan,)
+        refused = w.air.env.counters.config_errors - refused
+        return (
+            radio.malformed - malformed,
+            refused,
+            sum(math.isnan(v) for v in truth),
+            all(map(math.isfinite, odometry)),
+        )
 
-    dropped, nan_in_truth, finite_odometry = run_model_time(body, config=LOSSLESS, seed=1)
-    assert nan_in_truth and dropped >= 4  # 25 Hz: every sample of the 0.2 s after the command
-    assert finite_odometry  # the robot kept its last sample it could take
+    dropped, refused, nan_in_truth, finite_odometry = run_model_time(body, config=LOSSLESS, seed=1)
+    assert refused == 10 and not nan_in_truth
+    assert dropped == 0 and finite_odometry  # every sample since came, and was taken

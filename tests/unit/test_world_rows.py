@@ -3,7 +3,10 @@ a body, in place or by giving it another array, is what the world's computations
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+import pytest
 
 from radio_hub.physics.world import World, _clip_norms, _ray_hits
 
@@ -51,3 +54,20 @@ def test_ray_hits_in_place_are_the_masked_formula_bit_for_bit() -> None:
     with np.errstate(invalid="ignore"):
         want = np.where(hit, np.maximum(along - np.sqrt(r2 - perp2), 0.0), np.inf).min(axis=-1)
     assert _ray_hits(along, perp2.copy(), r2, not_self).tobytes() == want.tobytes()
+
+
+def test_a_motor_command_or_a_placed_velocity_beyond_the_rate_bound_is_refused_and_changes_nothing() -> None:
+    from radio_hub.physics.world import MAX_RATE
+
+    world = World()
+    world.add("robot-1", "robot", 0.0, 0.0, math.pi / 4)
+    world.add("user", "user", 1.0, 0.0, 0.0)
+    world.command("robot-1", MAX_RATE, -MAX_RATE, 0.0, 0.0)  # at the bound: taken
+    for vx, vy, omega in ((1.5e308, -1.5e308, 0.0), (0.0, 0.0, 2 * MAX_RATE), (math.nan, 0.0, 0.0)):
+        with pytest.raises(ValueError, match="motor command"):
+            world.command("robot-1", vx, vy, omega, 0.1)
+    with pytest.raises(ValueError, match="velocity"):
+        world.place("user", 1.0, 0.0, 0.0, vx=1e300)
+    assert world.bodies["robot-1"].command.tolist() == [MAX_RATE, -MAX_RATE, 0.0]
+    world.step(0.04)
+    assert all(math.isfinite(v) for b in world.bodies.values() for v in (*b.pose, *b.velocity))
