@@ -260,11 +260,7 @@ class SafetyStage:
             away = receding[k] if receding else 0.0
             c, s = trig[k]
             constraints.append((c, s, allowed + away if away > 0.0 else allowed + 0.0))
-        vx, vy = _nearest_allowed((vx, vy), constraints)
-        # MotorCommand.limited
-        speed = math.hypot(vx, vy)
-        scale = min(1.0, cfg.limits.max_speed / speed) if speed > 0 else 1.0
-        return vx * scale, vy * scale
+        return _limited(*_nearest_allowed((vx, vy), constraints), cfg.limits.max_speed)
 
     @staticmethod
     def translation_all(
@@ -304,9 +300,7 @@ class SafetyStage:
                 except Exception as err:  # as that robot's own translation raises it
                     out.append(err)
                     continue
-            speed = math.hypot(x, y)  # MotorCommand.limited
-            scale = min(1.0, cfg.limits.max_speed / speed) if speed > 0 else 1.0
-            out.append((x * scale, y * scale))
+            out.append(_limited(x, y, cfg.limits.max_speed))
         return out
 
     def _ring_trig(self, angles: list[float]) -> list[tuple[float, float]]:
@@ -315,6 +309,13 @@ class SafetyStage:
             self._angles = angles
             self._trig = [(math.cos(a), math.sin(a)) for a in angles]
         return self._trig
+
+
+def _limited(vx: float, vy: float, max_speed: float) -> tuple[float, float]:
+    """``MotorCommand.limited``'s translation, in plain floats (the safety stage's last step)."""
+    speed = math.hypot(vx, vy)
+    scale = min(1.0, max_speed / speed) if speed > 0 else 1.0
+    return vx * scale, vy * scale
 
 
 def _nearest_allowed(v: tuple[float, float], constraints: list[tuple[float, float, float]]) -> tuple[float, float]:
