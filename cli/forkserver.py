@@ -32,13 +32,16 @@ def main() -> int:
     except OSError as err:
         print(f"fork server: no pidfds here ({err}); the supervisor starts robots the ordinary way", file=sys.stderr)
         return 3
+    # the command line, made here once: in every robot it cost about 0.1 s of CPU, most of it importing what the
+    # parser and the version line use (importlib.metadata, the bench and chaos commands' options)
+    parser = cli.main.build_parser()
     gc.freeze()  # what is imported stays shared with the children: the collector never touches it
     request = serve(socket.socket(fileno=int(sys.argv[1])))
     if request is None:
         return 0
     argv = become(request, server_pid)
     sys.argv[0] = str(Path(cli.main.__file__).with_name("__main__.py"))
-    return cli.main.main(argv)
+    return cli.main.main(argv, parser)
 
 
 raise SystemExit(main())

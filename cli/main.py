@@ -378,9 +378,10 @@ def _use_security(args: argparse.Namespace) -> str | None:
     return None
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``petswarm`` console script."""
-    args = build_parser().parse_args(argv)
+def main(argv: list[str] | None = None, parser: argparse.ArgumentParser | None = None) -> int:
+    """Entry point of the ``petswarm`` console script; ``parser``: ``build_parser()``'s, made already (the fork
+    server makes it once for all its robots)."""
+    args = (parser or build_parser()).parse_args(argv)
     commands = {"hub": _hub, "user": _user, "robot": _robot, "run": _run, "stats": _stats, "bench": _bench}
     commands.update(swarm=_swarm, watch=_watch)
     commands.update(report=_report, chaos=_chaos, experiment=_experiment, certs=_certs)
