@@ -208,6 +208,10 @@ class SurroundConfig:
     """Improved law: the share of the lead ``lead_s`` a robot level with the human (within ``lane_beside_m`` of him
     along his walk) keeps while the lane is on: with all of it, the robots beside him (the only ones linking those
     ahead of him to those behind, who keep 0.75 m back as he may stop at once) were drawn on ahead of him."""
+    lane_out_m: float = 0.0
+    """Improved law: with > ``lane_half_m``, a second lane outside the first: a robot further than halfway between
+    the two from the human's line (``lane_half_m`` and this) is pushed out to this instead of in, so while he walks
+    no robot stays between the two (where a wall's end at a corridor's mouth would meet it). 0: off."""
     lane_speed_mps: float = 0.3
     """Improved law: the lane holds while the human's tracked speed is above this."""
     lane_ramp_s: float = 1.0

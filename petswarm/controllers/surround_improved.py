@@ -327,11 +327,14 @@ class ImprovedSurroundController(SurroundController):
         assert human_velocity is not None
         nx, ny = -human_velocity[1] / speed, human_velocity[0] / speed
         across = -(human[0] * nx + human[1] * ny)  # the robot's offset from his line, along n
-        beyond = abs(across) - self._lane_half(human, human_velocity, speed)
-        if beyond <= 0:
+        half = self._lane_half(human, human_velocity, speed)
+        beyond = max(0.0, abs(across) - half)
+        if c.lane_out_m > half and abs(across) > (half + c.lane_out_m) / 2:
+            beyond = min(0.0, abs(across) - c.lane_out_m)  # the outer lane: pushed out to it (beyond < 0)
+        if beyond == 0:
             return 0.0, 0.0
         strength = c.lane_gain * self._lane_share * beyond
-        magnitude = -math.copysign(strength, across)
+        magnitude = -strength if across >= 0 else strength
         fx, fy = magnitude * nx, magnitude * ny
         ux, uy = human_velocity[0] / speed, human_velocity[1] / speed
         ahead = -(human[0] * ux + human[1] * uy)  # how far the robot is ahead of him along his walk
@@ -367,7 +370,10 @@ class ImprovedSurroundController(SurroundController):
         across = -(human[0] * nx + human[1] * ny)
         if across < 0:
             nx, ny, across = -nx, -ny, -across
-        half = self._lane_half(human, human_velocity, speed) + (1.0 - share) * LANE_SLACK_M
+        half = self._lane_half(human, human_velocity, speed)
+        if c.lane_out_m > half and across > (half + c.lane_out_m) / 2:
+            return None  # bound for the outer lane
+        half += (1.0 - share) * LANE_SLACK_M
         his = human_velocity[0] * nx + human_velocity[1] * ny
         return nx, ny, his + c.lane_rate * max(0.0, half - across)
 

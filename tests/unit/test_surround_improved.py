@@ -518,3 +518,21 @@ def test_the_walking_lane_draws_a_robot_to_his_line_while_he_walks_and_lets_go_o
     assert commands(lane, (0.0, 0.9), stopped, outward)[-1] == commands(off, (0.0, 0.9), stopped, outward)[-1]
     # standing all along, the lane never came in
     assert commands(lane, (0.0, 0.9), [standing] * 40) == commands(off, (0.0, 0.9), [standing] * 40)
+
+
+def test_with_an_outer_lane_a_robot_past_halfway_to_it_is_pushed_out_to_it_not_drawn_in() -> None:
+    """``lane_out_m``: while he walks no robot stays between the two lanes (where a corridor's wall would meet it)."""
+    outer = SurroundConfig(law="improved", lane_gain=4.0, lane_rate=3.0, lane_half_m=0.4, lane_out_m=0.8)
+    off = SurroundConfig(law="improved")
+    walking = [(1.0, 0.0)] * 40
+
+    def last(config: SurroundConfig, he: tuple[float, float], velocity: tuple[float, float]) -> tuple[float, float]:
+        law = ImprovedSurroundController(config)
+        return [law.step_plain([], [], he, velocity, DT, human_velocity=v) for v in walking][-1]
+
+    # 0.7 m to his right (past halfway, 0.6 m): pushed further out (-y), and free to move out
+    assert last(outer, (0.0, 0.7), (1.0, 0.0))[1] < last(off, (0.0, 0.7), (1.0, 0.0))[1] - 0.01
+    assert last(outer, (0.0, 0.7), (1.0, -0.3))[1] < -0.1
+    # 0.55 m to his right (short of halfway): drawn in, and held to no speed outward
+    assert last(outer, (0.0, 0.55), (1.0, 0.0))[1] > last(off, (0.0, 0.55), (1.0, 0.0))[1] + 0.01
+    assert last(outer, (0.0, 0.55), (1.0, -0.3))[1] >= -1e-9
