@@ -103,7 +103,7 @@ class ImprovedSurroundController(SurroundController):
         if c.surround_share > 0:
             f_g = self._surround(g, human, velocity)
             f_p = (f_p[0] + c.surround_share * f_g[0], f_p[1] + c.surround_share * f_g[1])
-        if c.lane_gain > 0 or c.lane_rate > 0:
+        if c.lane_gain > 0:
             f_l = self._lane(human, human_velocity, dt)
             f_p = (f_p[0] + f_l[0], f_p[1] + f_l[1])
         if commit is not None:
@@ -140,7 +140,7 @@ class ImprovedSurroundController(SurroundController):
         rules = [self._stop_rule(x, y, ux, uy, touching) for (x, y), (ux, uy) in zip(neighbours, moving, strict=True)]
         if commit is not None:  # with the neighbours' rules: dropped with them when no velocity keeps all
             rules.append(commit.lateral_rule())
-        if c.lane_rate > 0:  # likewise
+        if c.lane_gain > 0 and c.lane_rate > 0:  # likewise
             rules.append(self._lane_rule(human, human_velocity))
         his = None
         if human is not None:

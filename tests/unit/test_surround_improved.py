@@ -487,7 +487,7 @@ def test_the_walking_lane_draws_a_robot_to_his_line_while_he_walks_and_lets_go_o
     """The walking lane (docs/SURROUND.md, item 12): while the human walks, a robot further than the lane's half-width
     from his line (his tracked position along his tracked velocity) is drawn back in and may not move further out;
     inside the lane, or once he has stood still for the lane's ramp, the law is as without it."""
-    lane = SurroundConfig(law="improved", lane_gain=4.0, lane_rate=3.0, lane_half_m=0.2)
+    lane = SurroundConfig(law="improved", lane_gain=4.0, lane_rate=3.0, lane_half_m=0.2, lane_out_m=0.0)
     off = SurroundConfig(law="improved", lane_gain=0.0, lane_rate=0.0)
     walking, standing = (1.0, 0.0), (0.0, 0.0)
 
