@@ -185,8 +185,8 @@ class SurroundConfig:
     """Improved law: the walking lane (docs/SURROUND.md, item 12): while the human walks, a lateral spring (/s^2) on
     the part of a robot's offset from his line (his tracked position along his tracked velocity) beyond
     ``lane_half_m``, so the swarm walks as a narrow column. 0 (the default): off, the lane's other fields unused. 12
-    with the defaults below took the corridor's seeds 1-10 from 1 to 3 of 10 meeting all four bounds but the
-    cylinder's from 10 to 6 (docs/RESULTS.md): an experiment, not the default."""
+    with the defaults below: corridor seeds 1-20 9/20 meeting all four bounds (the law as shipped 3/20), but the
+    cylinder's 18/20 (20/20) (docs/SURROUND.md, item 12): an experiment, not the default."""
     lane_half_m: float = 0.32
     """Improved law: the walking lane's half-width: the offset from the human's line a robot keeps within."""
     lane_level_m: float = 0.0
@@ -208,11 +208,11 @@ class SurroundConfig:
     """Improved law: how far from level with the human, along his walk, the lane is ``lane_beside_half_m`` wide."""
     lane_beside_ramp_m: float = 0.4
     """Improved law: over how much further along his walk the lane narrows from ``lane_beside_half_m``."""
-    lane_level_lead: float = 1.0
+    lane_level_lead: float = 0.5
     """Improved law: the share of the lead ``lead_s`` a robot level with the human (within ``lane_beside_m`` of him
     along his walk) keeps while the lane is on: with all of it, the robots beside him (the only ones linking those
     ahead of him to those behind, who keep 0.75 m back as he may stop at once) were drawn on ahead of him."""
-    lane_out_m: float = 0.85
+    lane_out_m: float = 1.0
     """Improved law: with > ``lane_half_m``, a second lane outside the first: a robot further than halfway between
     the two from the human's line (``lane_half_m`` and this) is pushed out to this instead of in, so while he walks
     no robot stays between the two (where a wall's end at a corridor's mouth would meet it). 0: off."""
