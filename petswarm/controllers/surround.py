@@ -181,11 +181,52 @@ class SurroundConfig:
     """Improved law: with > 0, a committed robot not yet on its side has its speed along the human's walk held
     to what stops, braking at this, short of the wall point's line across his walk (0: the spring alone)."""
 
+    lane_gain: float = 0.0
+    """Improved law: the walking lane (docs/SURROUND.md, item 12): while the human walks, a lateral spring (/s^2) on
+    the part of a robot's offset from his line (his tracked position along his tracked velocity) beyond
+    ``lane_half_m``, so the swarm walks as a narrow column. 0 (the default): off, the lane's other fields unused. 12
+    with the defaults below: corridor seeds 1-20 9/20 meeting all four bounds (the law as shipped 3/20), but the
+    cylinder's 18/20 (20/20) (docs/SURROUND.md, item 12): an experiment, not the default."""
+    lane_half_m: float = 0.32
+    """Improved law: the walking lane's half-width: the offset from the human's line a robot keeps within."""
+    lane_level_m: float = 0.0
+    """Improved law: a robot outside the lane within this of the human along his walk (level with him, where his
+    body's repulsion holds it out of the lane) is pushed along his walk away from level with him as hard as
+    across (0: off)."""
+    lane_rate: float = 3.0
+    """Improved law: with > 0, the lane is also a rule with the neighbours' stop rules: a robot's speed out of the
+    lane's middle, relative to the human's, is at most this (/s) times its room left to the lane's edge (none
+    at its edge and beyond: it may not move further out; the spring draws it in). 0: the spring alone. Bound for the
+    outer lane (``lane_out_m``), a robot is free of it. (A rule that made a robot beyond the edge come back in at
+    this rate fought the human's stop rule for the robots beside him, and dropped the neighbours' rules with it.)"""
+    lane_beside_half_m: float = 0.0
+    """Improved law: with > ``lane_half_m``, the lane's half-width level with the human (within ``lane_beside_m``
+    of him along his walk), narrowing to ``lane_half_m`` over ``lane_beside_ramp_m`` further: robots beside him
+    link those ahead of him to those behind (his body keeps them 0.5 m off). 0: the lane is ``lane_half_m``
+    everywhere."""
+    lane_beside_m: float = 0.6
+    """Improved law: how far from level with the human, along his walk, the lane is ``lane_beside_half_m`` wide."""
+    lane_beside_ramp_m: float = 0.4
+    """Improved law: over how much further along his walk the lane narrows from ``lane_beside_half_m``."""
+    lane_level_lead: float = 0.5
+    """Improved law: the share of the lead ``lead_s`` a robot level with the human (within ``lane_beside_m`` of him
+    along his walk) keeps while the lane is on: with all of it, the robots beside him (the only ones linking those
+    ahead of him to those behind, who keep 0.75 m back as he may stop at once) were drawn on ahead of him."""
+    lane_out_m: float = 1.0
+    """Improved law: with > ``lane_half_m``, a second lane outside the first: a robot further than halfway between
+    the two from the human's line (``lane_half_m`` and this) is pushed out to this instead of in, so while he walks
+    no robot stays between the two (where a wall's end at a corridor's mouth would meet it). 0: off."""
+    lane_speed_mps: float = 0.3
+    """Improved law: the lane holds while the human's tracked speed is above this."""
+    lane_ramp_s: float = 1.0
+    """Improved law: the lane comes in and goes out over this long (he starts walking, he stops)."""
+
     def __post_init__(self) -> None:
         if self.law not in LAWS:
             raise ValueError(f"law must be one of {LAWS}, not {self.law!r}")
         positive = ("sight_m", "avoidance_m", "max_speed_mps", "max_accel_mps2", "robot_radius_m", "dt_s")
-        positive += ("body_mass", "stiffness", "pull_ramp_m", "brake_mps2", "escape_mps2")
+        positive += ("body_mass", "stiffness", "pull_ramp_m", "brake_mps2", "escape_mps2", "lane_ramp_s")
+        positive += ("lane_beside_ramp_m",)
         for name in dataclasses.fields(self):
             if name.name == "law":
                 continue

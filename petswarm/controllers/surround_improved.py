@@ -58,6 +58,9 @@ WALL_BRAKE_MPS2 = 1.2
 rules and the neighbours' escapes pull the command other ways too. With 5 cm, no lateness and 1.5 m/s^2, the
 corridor's seeds 1 and 2 had 2 robot-obstacle contacts each; with these values 1 (of any kind) each (both
 before the rule let a robot pass a point by)."""
+LANE_SLACK_M = 1.0
+"""How much wider the walking lane's rule is while the lane is ramped in or out (share 0), narrowing to
+``lane_half_m`` at share 1."""
 WALL_SECTORS = 16
 """Sectors (22.5 degrees) round the robot in each of which only the nearest wall point makes a stop rule."""
 
@@ -68,6 +71,7 @@ class ImprovedSurroundController(SurroundController):
     def __init__(self, config: SurroundConfig | None = None) -> None:
         super().__init__(config)
         self._human_velocity: tuple[float, float] | None = None
+        self._lane_share = 0.0
 
     def step_plain(
         self,
@@ -99,6 +103,9 @@ class ImprovedSurroundController(SurroundController):
         if c.surround_share > 0:
             f_g = self._surround(g, human, velocity)
             f_p = (f_p[0] + c.surround_share * f_g[0], f_p[1] + c.surround_share * f_g[1])
+        if c.lane_gain > 0:
+            f_l = self._lane(human, human_velocity, dt)
+            f_p = (f_p[0] + f_l[0], f_p[1] + f_l[1])
         if commit is not None:
             f_c = commit.force()
             f_p = (f_p[0] + f_c[0], f_p[1] + f_c[1])
@@ -133,6 +140,8 @@ class ImprovedSurroundController(SurroundController):
         rules = [self._stop_rule(x, y, ux, uy, touching) for (x, y), (ux, uy) in zip(neighbours, moving, strict=True)]
         if commit is not None:  # with the neighbours' rules: dropped with them when no velocity keeps all
             rules.append(commit.lateral_rule())
+        if c.lane_gain > 0 and c.lane_rate > 0:  # likewise
+            rules.append(self._lane_rule(human, human_velocity))
         his = None
         if human is not None:
             hvx, hvy = human_velocity if human_velocity is not None else (0.0, 0.0)
@@ -298,6 +307,76 @@ class ImprovedSurroundController(SurroundController):
         magnitude = c.repulsion / (reach * reach)
         return -magnitude * ux, -magnitude * uy
 
+    def _lane(
+        self, human: Sequence[float] | None, human_velocity: Sequence[float] | None, dt: float
+    ) -> tuple[float, float]:
+        """The walking lane's force: while the human walks (his track faster than ``lane_speed_mps``), a spring
+        ``lane_gain`` across his line (through his tracked position along his tracked velocity) on the part of the
+        robot's offset beyond ``lane_half_m``; it comes in and goes out over ``lane_ramp_s``. Beyond the paper:
+        a swarm walking as a column no wider than the lane never heads for a wall's end at a corridor's mouth."""
+        c = self.config
+        walking = False
+        speed = 0.0
+        if human is not None and human_velocity is not None:
+            speed = math.sqrt(human_velocity[0] ** 2 + human_velocity[1] ** 2)
+            walking = speed > c.lane_speed_mps
+        step = dt / c.lane_ramp_s
+        self._lane_share = min(1.0, self._lane_share + step) if walking else max(0.0, self._lane_share - step)
+        if self._lane_share <= 0 or c.lane_gain <= 0 or human is None or not speed > 0:
+            return 0.0, 0.0
+        assert human_velocity is not None
+        nx, ny = -human_velocity[1] / speed, human_velocity[0] / speed
+        across = -(human[0] * nx + human[1] * ny)  # the robot's offset from his line, along n
+        half = self._lane_half(human, human_velocity, speed)
+        beyond = max(0.0, abs(across) - half)
+        if c.lane_out_m > half and abs(across) > (half + c.lane_out_m) / 2:
+            beyond = min(0.0, abs(across) - c.lane_out_m)  # the outer lane: pushed out to it (beyond < 0)
+        if beyond == 0:
+            return 0.0, 0.0
+        strength = c.lane_gain * self._lane_share * beyond
+        magnitude = -strength if across >= 0 else strength
+        fx, fy = magnitude * nx, magnitude * ny
+        ux, uy = human_velocity[0] / speed, human_velocity[1] / speed
+        ahead = -(human[0] * ux + human[1] * uy)  # how far the robot is ahead of him along his walk
+        if abs(ahead) < c.lane_level_m:  # level with him: on ahead or back behind him
+            push = strength if ahead > 0 else -strength
+            fx, fy = fx + push * ux, fy + push * uy
+        return fx, fy
+
+    def _lane_half(self, human: Sequence[float], human_velocity: Sequence[float], speed: float) -> float:
+        """The walking lane's half-width where the robot is along the human's walk: ``lane_beside_half_m`` level
+        with him, narrowing to ``lane_half_m`` ahead and behind (``lane_beside_m``, ``lane_beside_ramp_m``)."""
+        c = self.config
+        if c.lane_beside_half_m <= c.lane_half_m:
+            return c.lane_half_m
+        along = abs(human[0] * human_velocity[0] + human[1] * human_velocity[1]) / speed
+        share = min(1.0, max(0.0, (along - c.lane_beside_m) / c.lane_beside_ramp_m))
+        return c.lane_beside_half_m + share * (c.lane_half_m - c.lane_beside_half_m)
+
+    def _lane_rule(
+        self, human: Sequence[float] | None, human_velocity: Sequence[float] | None
+    ) -> tuple[float, float, float] | None:
+        """``(nx, ny, limit)``: the robot's speed out of the walking lane's middle (n pointing away from his line)
+        at most his own that way plus ``lane_rate`` times its room to the lane's edge; the lane widens by
+        ``LANE_SLACK_M`` as it is ramped out (``_lane_share``). None when the lane is off."""
+        c = self.config
+        share = self._lane_share
+        if share <= 0 or human is None or human_velocity is None:
+            return None
+        speed = math.sqrt(human_velocity[0] ** 2 + human_velocity[1] ** 2)
+        if not speed > 0:
+            return None
+        nx, ny = -human_velocity[1] / speed, human_velocity[0] / speed
+        across = -(human[0] * nx + human[1] * ny)
+        if across < 0:
+            nx, ny, across = -nx, -ny, -across
+        half = self._lane_half(human, human_velocity, speed)
+        if c.lane_out_m > half and across > (half + c.lane_out_m) / 2:
+            return None  # bound for the outer lane
+        half += (1.0 - share) * LANE_SLACK_M
+        his = human_velocity[0] * nx + human_velocity[1] * ny
+        return nx, ny, his + c.lane_rate * max(0.0, half - across)
+
     def _aim(self, human: Sequence[float] | None, human_velocity: Sequence[float] | None) -> Sequence[float] | None:
         """Where the pull aims: the human, led by ``lead_s`` of his velocity when it is known, less of it the
         further the robot is ahead of him (``_lead_share``)."""
@@ -305,6 +384,11 @@ class ImprovedSurroundController(SurroundController):
         if human is None or human_velocity is None or lead <= 0:
             return human
         lead *= self._lead_share(human, human_velocity)
+        c = self.config
+        if c.lane_level_lead < 1.0 and self._lane_share > 0:
+            speed = math.sqrt(human_velocity[0] ** 2 + human_velocity[1] ** 2)
+            if speed > 0 and abs(human[0] * human_velocity[0] + human[1] * human_velocity[1]) < c.lane_beside_m * speed:
+                lead *= 1.0 - self._lane_share * (1.0 - c.lane_level_lead)
         return human[0] + lead * human_velocity[0], human[1] + lead * human_velocity[1]
 
     def _lead_share(self, human: Sequence[float], human_velocity: Sequence[float]) -> float:

@@ -481,3 +481,58 @@ def test_a_committed_robot_clears_the_echos_arc_with_arc_share() -> None:
     assert shortfalls[1] - shortfalls[0] == pytest.approx(math.sin(math.radians(15.0)))
     commitment.step([(0.6, 0.0), *nothing[1:]], [False] * 8, (0.0, -0.6), (1.0, 0.0), (0.0, 0.0), DT, 0.1)
     assert commitment.shortfall() - shortfalls[0] == pytest.approx(0.6 * math.sin(math.radians(15.0)))
+
+
+def test_the_walking_lane_draws_a_robot_to_his_line_while_he_walks_and_lets_go_once_he_stops() -> None:
+    """The walking lane (docs/SURROUND.md, item 12): while the human walks, a robot further than the lane's half-width
+    from his line (his tracked position along his tracked velocity) is drawn back in and may not move further out;
+    inside the lane, or once he has stood still for the lane's ramp, the law is as without it."""
+    lane = SurroundConfig(law="improved", lane_gain=4.0, lane_rate=3.0, lane_half_m=0.2, lane_out_m=0.0)
+    off = SurroundConfig(law="improved", lane_gain=0.0, lane_rate=0.0)
+    walking, standing = (1.0, 0.0), (0.0, 0.0)
+
+    def commands(
+        config: SurroundConfig,
+        he: tuple[float, float],
+        his: list[tuple[float, float]],
+        velocity: tuple[float, float] = (1.0, 0.0),
+    ) -> list[tuple[float, float]]:
+        law = ImprovedSurroundController(config)
+        return [law.step_plain([], [], he, velocity, DT, human_velocity=v) for v in his]
+
+    # 0.6 m to his right (he is at +y), walking level with him: drawn in toward his line, harder once the lane is
+    # in (its ramp, 1 s)
+    drawn = commands(lane, (0.0, 0.6), [walking] * 40)
+    free = commands(off, (0.0, 0.6), [walking] * 40)
+    assert drawn[-1][1] > free[-1][1] + 0.05
+    assert drawn[-1][1] - free[-1][1] > drawn[5][1] - free[5][1] + 0.03
+    # moving further out (-y) it is held to no speed outward; without the lane it keeps going out
+    outward = (1.0, -0.3)
+    assert commands(lane, (0.0, 0.9), [walking] * 40, outward)[-1][1] >= -1e-9
+    assert commands(off, (0.0, 0.9), [walking] * 40, outward)[-1][1] < -0.1
+    # behind him near his line, well inside the lane: nothing changes
+    assert commands(lane, (0.9, 0.05), [walking] * 40) == commands(off, (0.9, 0.05), [walking] * 40)
+    # he stops: the lane goes out over its ramp, then the law is as without it
+    stopped = [walking] * 40 + [standing] * 30
+    assert commands(lane, (0.0, 0.9), stopped)[-1] == commands(off, (0.0, 0.9), stopped)[-1]
+    assert commands(lane, (0.0, 0.9), stopped, outward)[-1] == commands(off, (0.0, 0.9), stopped, outward)[-1]
+    # standing all along, the lane never came in
+    assert commands(lane, (0.0, 0.9), [standing] * 40) == commands(off, (0.0, 0.9), [standing] * 40)
+
+
+def test_with_an_outer_lane_a_robot_past_halfway_to_it_is_pushed_out_to_it_not_drawn_in() -> None:
+    """``lane_out_m``: while he walks no robot stays between the two lanes (where a corridor's wall would meet it)."""
+    outer = SurroundConfig(law="improved", lane_gain=4.0, lane_rate=3.0, lane_half_m=0.4, lane_out_m=0.8)
+    off = SurroundConfig(law="improved")
+    walking = [(1.0, 0.0)] * 40
+
+    def last(config: SurroundConfig, he: tuple[float, float], velocity: tuple[float, float]) -> tuple[float, float]:
+        law = ImprovedSurroundController(config)
+        return [law.step_plain([], [], he, velocity, DT, human_velocity=v) for v in walking][-1]
+
+    # 0.7 m to his right (past halfway, 0.6 m): pushed further out (-y), and free to move out
+    assert last(outer, (0.0, 0.7), (1.0, 0.0))[1] < last(off, (0.0, 0.7), (1.0, 0.0))[1] - 0.01
+    assert last(outer, (0.0, 0.7), (1.0, -0.3))[1] < -0.1
+    # 0.55 m to his right (short of halfway): drawn in, and held to no speed outward
+    assert last(outer, (0.0, 0.55), (1.0, 0.0))[1] > last(off, (0.0, 0.55), (1.0, 0.0))[1] + 0.01
+    assert last(outer, (0.0, 0.55), (1.0, -0.3))[1] >= -1e-9
