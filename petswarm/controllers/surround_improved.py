@@ -315,18 +315,14 @@ class ImprovedSurroundController(SurroundController):
         robot's offset beyond ``lane_half_m``; it comes in and goes out over ``lane_ramp_s``. Beyond the paper:
         a swarm walking as a column no wider than the lane never heads for a wall's end at a corridor's mouth."""
         c = self.config
-        walking = False
-        speed = 0.0
-        if human is not None and human_velocity is not None:
-            speed = math.sqrt(human_velocity[0] ** 2 + human_velocity[1] ** 2)
-            walking = speed > c.lane_speed_mps
+        line = _his_line(human, human_velocity)
+        walking = line is not None and line[0] > c.lane_speed_mps
         step = dt / c.lane_ramp_s
         self._lane_share = min(1.0, self._lane_share + step) if walking else max(0.0, self._lane_share - step)
-        if self._lane_share <= 0 or c.lane_gain <= 0 or human is None or not speed > 0:
+        if self._lane_share <= 0 or c.lane_gain <= 0 or line is None:
             return 0.0, 0.0
-        assert human_velocity is not None
-        nx, ny = -human_velocity[1] / speed, human_velocity[0] / speed
-        across = -(human[0] * nx + human[1] * ny)  # the robot's offset from his line, along n
+        assert human is not None and human_velocity is not None
+        speed, nx, ny, across = line
         half = self._lane_half(human, human_velocity, speed)
         beyond = max(0.0, abs(across) - half)
         if c.lane_out_m > half and abs(across) > (half + c.lane_out_m) / 2:
@@ -361,13 +357,11 @@ class ImprovedSurroundController(SurroundController):
         ``LANE_SLACK_M`` as it is ramped out (``_lane_share``). None when the lane is off."""
         c = self.config
         share = self._lane_share
-        if share <= 0 or human is None or human_velocity is None:
+        line = _his_line(human, human_velocity)
+        if share <= 0 or line is None:
             return None
-        speed = math.sqrt(human_velocity[0] ** 2 + human_velocity[1] ** 2)
-        if not speed > 0:
-            return None
-        nx, ny = -human_velocity[1] / speed, human_velocity[0] / speed
-        across = -(human[0] * nx + human[1] * ny)
+        assert human is not None and human_velocity is not None
+        speed, nx, ny, across = line
         if across < 0:
             nx, ny, across = -nx, -ny, -across
         half = self._lane_half(human, human_velocity, speed)
@@ -477,3 +471,18 @@ def _clip(x: float, y: float, limit: float) -> tuple[float, float]:
     """The vector (x, y) shortened to ``limit`` if longer."""
     scale = min(1.0, limit / max(math.sqrt(x * x + y * y), 1e-12))
     return x * scale, y * scale
+
+
+def _his_line(
+    human: Sequence[float] | None, human_velocity: Sequence[float] | None
+) -> tuple[float, float, float, float] | None:
+    """The walking lane's frame (robot frame, from his track): his speed, the unit normal (nx, ny) to his line
+    (his tracked position along his tracked velocity) and the robot's offset from that line along it; None when he
+    or his velocity is unknown, or he stands still."""
+    if human is None or human_velocity is None:
+        return None
+    speed = math.sqrt(human_velocity[0] ** 2 + human_velocity[1] ** 2)
+    if not speed > 0:
+        return None
+    nx, ny = -human_velocity[1] / speed, human_velocity[0] / speed
+    return speed, nx, ny, -(human[0] * nx + human[1] * ny)
