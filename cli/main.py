@@ -128,6 +128,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_dead_after(hub, 10.0, "lockstep: wall seconds a granted node may stay silent before it is taken as gone")
     hub.add_argument(
+        "--floor",
+        action="store_true",
+        help="wall clock: answer every frame the moment it arrives, without modelling the air (no backoff, "
+        "airtime, range, loss or collision): the floor under a hub's cost, for 'petswarm bench hub --floor'; "
+        "not an emulation",
+    )
+    hub.add_argument(
         "--start-within",
         type=bounded(float, 1, 86400),
         default=None,
@@ -300,6 +307,12 @@ def build_parser() -> argparse.ArgumentParser:
     bhub.add_argument("--out", default="bench-results", help="directory for JSON and plots (default %(default)s)")
     bhub.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
     bhub.add_argument(
+        "--floor",
+        action="store_true",
+        help="also run both phases on a hub that carries frames without modelling the air (petswarm hub "
+        "--floor): the floor under any hub's figures on this machine, printed beside the real hub's",
+    )
+    bhub.add_argument(
         "--check",
         action="store_true",
         help="exit 1 (naming each on stderr) when a target is missed: round trip ratio p50 <= 1.5, "
@@ -419,6 +432,17 @@ def main(argv: list[str] | None = None, parser: argparse.ArgumentParser | None =
     return code
 
 
+def _wall_hub_class(floor: bool) -> type[Any]:
+    """The wall-clock hub, or with ``floor`` the one that answers frames without modelling them."""
+    if floor:
+        from radio_hub.shell.floor import FloorHub
+
+        return FloorHub
+    from radio_hub.shell.hub import RadioHub
+
+    return RadioHub
+
+
 def _add_dead_after(parser: argparse.ArgumentParser, default: float | None, what: str) -> None:
     """The lockstep hub's patience for a silent node (``LockstepHub.dead_after_s``), on the hub or a run."""
     parser.add_argument("--dead-after", type=bounded(float, 0.5, 3600), default=default, help=f"{what} (default 10)")
@@ -426,9 +450,12 @@ def _add_dead_after(parser: argparse.ArgumentParser, default: float | None, what
 
 def _hub(args: argparse.Namespace) -> int:
     from petswarm.scenario import ScenarioError, load
-    from radio_hub.shell.hub import RadioHub, environment_from_dict, load_config, ready_line
+    from radio_hub.shell.hub import environment_from_dict, load_config, ready_line
     from radio_hub.shell.stopping import end_closed, stop_on_signals
 
+    if args.floor and args.clock != "wall":
+        print("petswarm hub: --floor models nothing and keeps no lockstep time: use --clock wall", file=sys.stderr)
+        return 2
     try:
         environment = load_config(args.config) if args.config else None
     except (OSError, ValueError) as err:
@@ -467,7 +494,7 @@ def _hub(args: argparse.Namespace) -> int:
                 world_log=args.world_log,
             )
         else:
-            hub = RadioHub(
+            hub = _wall_hub_class(args.floor)(
                 args.listen,
                 args.world,
                 seed=args.seed,

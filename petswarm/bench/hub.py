@@ -115,10 +115,20 @@ class HubRun:
         return query_hub(self.session, self.keys.stats, timeout=5.0)
 
 
-def start_hub(sup: Supervisor, name: str, world: str, seed: int, config: Path | None, profile: str = "ideal") -> HubRun:
-    """Spawn ``petswarm hub`` (with ``profile``) on a free port and wait until it answers a stats query."""
+def start_hub(
+    sup: Supervisor,
+    name: str,
+    world: str,
+    seed: int,
+    config: Path | None,
+    profile: str = "ideal",
+    floor: bool = False,
+) -> HubRun:
+    """Spawn ``petswarm hub`` (with ``profile``; with ``floor`` the hub that models nothing, the floor) on a
+    free port and wait until it answers a stats query."""
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     args = ["hub", "--listen", endpoint, "--world", world, "--seed", str(seed), "--profile", profile]
+    args += ["--floor"] if floor else []
     proc = sup.spawn(name, args + (["--config", str(config)] if config else []))
     deadline = time.monotonic() + STARTUP_TIMEOUT_S
     while time.monotonic() < deadline:
@@ -200,15 +210,16 @@ def stopping(sup: Supervisor, names: list[str]) -> Iterator[list[str]]:
 # == phase 1: round trips ============================================================================
 
 
-def rtt_phase(sup: Supervisor, world: str, args: argparse.Namespace) -> dict[str, Any]:
-    """Hub, echo child, then interleaved round trips from this process."""
-    progress("round trips: starting a hub and the echo node")
+def rtt_phase(sup: Supervisor, world: str, args: argparse.Namespace, floor: bool = False) -> dict[str, Any]:
+    """Hub (``floor``: the floor's), echo child, then interleaved round trips from this process."""
+    tag = "floor-" if floor else ""
+    progress(f"round trips{' [floor]' if floor else ''}: starting a hub and the echo node")
     load_before = load_average()
-    hub = start_hub(sup, "hub-rtt", world, args.seed, None)
-    with stopping(sup, [hub.name, "echo"]):
+    hub = start_hub(sup, f"hub-{tag}rtt", world, args.seed, None, floor=floor)
+    with stopping(sup, [hub.name, f"{tag}echo"]):
         try:
-            sup.spawn_module("echo", MODULE, ["echo", "--hub", hub.endpoint, "--world", world])
-            wait_attached(sup, hub, 1, ["echo"])
+            sup.spawn_module(f"{tag}echo", MODULE, ["echo", "--hub", hub.endpoint, "--world", world])
+            wait_attached(sup, hub, 1, [f"{tag}echo"])
             progress(f"round trips: {WARMUP_ROUNDS} warm-up + {args.rounds} per path")
             samples = asyncio.run(
                 ping_rounds(hub.endpoint, world, args.rounds, WARMUP_ROUNDS, lambda n: progress(f"round trip {n}"))
@@ -308,13 +319,19 @@ def world_thread(pid: int) -> int | None:
 
 
 def load_phase(
-    sup: Supervisor, world: str, args: argparse.Namespace, label: str, config: Path | None
+    sup: Supervisor,
+    world: str,
+    args: argparse.Namespace,
+    label: str,
+    config: Path | None,
+    floor: bool = False,
 ) -> dict[str, Any]:
-    """A fresh hub, the load generators, a warm-up, then a measured window of ``load_seconds``."""
+    """A fresh hub (``floor``: the floor's), the load generators, a warm-up, then a measured window of
+    ``load_seconds``."""
     tag = world.rsplit("-", 1)[-1]
     progress(f"throughput [{label}]: starting a hub and {args.nodes} nodes")
     load_before = load_average()
-    hub = start_hub(sup, f"hub-{tag}", world, args.seed, config)
+    hub = start_hub(sup, f"hub-{tag}", world, args.seed, config, floor=floor)
     gens = [f"{tag}-gen{k}" for k in range(len(load_slices(args.nodes, LOAD_PROCESSES)))]
     with stopping(sup, [hub.name, *gens]):
         try:
@@ -489,7 +506,8 @@ def check_targets(results: dict[str, Any]) -> int:
 
 
 def run_phases(sup: Supervisor, args: argparse.Namespace, out: Path) -> dict[str, Any]:
-    """Round trips, then throughput with the defaults and, if the air was the limit, with min_be = 0."""
+    """Round trips, then throughput with the defaults and, if the air was the limit, with min_be = 0; with
+    ``--floor`` both again on the hub that models nothing (``petswarm hub --floor``)."""
     base = f"bench-{os.getpid()}-{args.seed}"
     load_at_start = load_average()
     rtt = rtt_phase(sup, f"{base}-rtt", args)
@@ -503,6 +521,11 @@ def run_phases(sup: Supervisor, args: argparse.Namespace, out: Path) -> dict[str
         "load": loads,
         "throughput_pass": any(load["pass"] for load in loads),
     }
+    if args.floor:
+        progress("the floor: the same two phases on a hub that carries frames without modelling the air")
+        floor_rtt = rtt_phase(sup, f"{base}-floor", args, floor=True)
+        floor_load = load_phase(sup, f"{base}-floorload", args, "floor", None, floor=True)
+        results["floor"] = {"rtt": floor_rtt, "load": floor_load}
     results["targets"] = targets(results)
     results["pass"] = all(t["pass"] for t in results["targets"])
     return results

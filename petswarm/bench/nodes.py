@@ -219,24 +219,30 @@ async def echo_main(endpoint: str, world: str) -> int:
     loop = asyncio.get_running_loop()
     rep = reliable_publisher(radio.session, bench_key(world, "echo/rep"))
     req = radio.session.declare_subscriber(bench_key(world, "echo/req"), _on_loop(loop, rep.put))
-    answering = asyncio.create_task(_answer_frames(radio))
+    radio.on_frame = _answer(radio)
     print(f"echo: attached as {ECHO_NODE}", file=sys.stderr, flush=True)
     try:
         await stop.wait()
     finally:
-        answering.cancel()
         req.undeclare()
         rep.undeclare()
         await radio.close()
     return 0
 
 
-async def _answer_frames(radio: RadioClient) -> None:
-    sending: set[asyncio.Task[Any]] = set()
-    async for rx in radio:
-        task = asyncio.create_task(radio.send(radio.data_frame(rx.frame.src, rx.frame.payload, ack=False)))
-        sending.add(task)
-        task.add_done_callback(lambda t: sending.discard(t) or t.cancelled() or t.exception())
+def _answer(radio: RadioClient) -> Callable[[RxFrame], None]:
+    """The echo's answer to a frame: the same payload back to its source, sent from the frame's own callback
+    (``on_frame`` and ``transmit``, no task or future), as the plain echo answers from its subscriber's: the
+    round trips compare the hub with the router, not two ways of writing a node."""
+
+    def on_frame(rx: RxFrame) -> None:
+        radio.transmit(radio.data_frame(rx.frame.src, rx.frame.payload, ack=False), _no_answer_needed)
+
+    return on_frame
+
+
+def _no_answer_needed(_: TxResult) -> None:
+    """The echo's frames are not retried: a round whose echo is lost is counted lost by the pinger."""
 
 
 async def load_main(endpoint: str, world: str, first: int, last: int, total: int) -> int:

@@ -30,8 +30,9 @@ def plot(results: dict[str, Any], path: Path) -> None:
         ("radio_adjusted_us", "radio via hub, air time removed"),
         ("radio_wall_us", "radio via hub, wall"),
     ):
-        values = np.sort(np.array(rtt["samples"][name]))
-        cdf.plot(values, np.arange(1, len(values) + 1) / max(len(values), 1), label=label)
+        _plot_cdf(cdf, rtt["samples"][name], label)
+    if "floor" in results:
+        _plot_cdf(cdf, results["floor"]["rtt"]["samples"]["radio_adjusted_us"], "radio via the floor hub, adjusted")
     cdf.set(xscale="log", xlabel="round trip (us)", ylabel="fraction of rounds", title="Round trip CDF")
     cdf.legend(fontsize=8)
     cdf.grid(alpha=0.3)
@@ -44,10 +45,15 @@ def plot(results: dict[str, Any], path: Path) -> None:
         ylabel="rounds",
         title=f"One pass through the hub (hub lag p50 {hub['lag_p50_us']:.0f} us, p99 {hub['lag_p99_us']:.0f} us)",
     )
-    _plot_throughput(thr, results["load"])
+    _plot_throughput(thr, results["load"] + ([results["floor"]["load"]] if "floor" in results else []))
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def _plot_cdf(ax: Any, samples: list[float], label: str) -> None:
+    values = np.sort(np.array(samples))
+    ax.plot(values, np.arange(1, len(values) + 1) / max(len(values), 1), label=label)
 
 
 def _plot_throughput(ax: Any, loads: list[dict[str, Any]]) -> None:
@@ -64,12 +70,21 @@ def _plot_throughput(ax: Any, loads: list[dict[str, Any]]) -> None:
 
 def report(results: dict[str, Any], as_json: bool) -> None:
     """The table on stdout; with ``as_json`` the JSON (without raw samples) on stdout and the table on stderr."""
-    emit(table(results), {**results, "rtt": {k: v for k, v in results["rtt"].items() if k != "samples"}}, as_json)
+    shown = {**results, "rtt": _without_samples(results["rtt"])}
+    if "floor" in results:
+        shown["floor"] = {**results["floor"], "rtt": _without_samples(results["floor"]["rtt"])}
+    emit(table(results), shown, as_json)
+
+
+def _without_samples(rtt: dict[str, Any]) -> dict[str, Any]:
+    return {k: v for k, v in rtt.items() if k != "samples"}
 
 
 def table(results: dict[str, Any]) -> list[str]:
     """Every figure as text lines."""
     lines = [*_settings_lines(results["settings"]), "", *_rtt_lines(results["rtt"]), "", *_load_lines(results)]
+    if "floor" in results:
+        lines += ["", *_floor_lines(results)]
     if "targets" in results:
         lines += ["", *_target_lines(results["targets"])]
     return lines
@@ -126,6 +141,25 @@ def _rtt_lines(rtt: dict[str, Any]) -> list[str]:
         f"p50 {hub['lag_p50_us']:.0f} us, p99 {hub['lag_p99_us']:.0f} us ({hub['lag_samples']} samples)",
     ]
     return lines
+
+
+def _floor_lines(results: dict[str, Any]) -> list[str]:
+    """The floor hub's figures beside the real hub's: what is left for a faster hub to win."""
+    rtt, load = results["floor"]["rtt"], results["floor"]["load"]
+    real_rtt, real_load = results["rtt"], results["load"][0]
+    return [
+        "the floor: a hub that answers each frame the moment it arrives and models nothing (petswarm hub "
+        "--floor), same nodes and generators",
+        f"  round trip ratio adjusted/plain p50: {rtt['ratio_p50']:.2f} (plain {rtt['plain_us']['p50']:.0f} us, "
+        f"radio {rtt['radio_adjusted_us']['p50']:.0f} us); the real hub's {real_rtt['ratio_p50']:.2f} is "
+        f"{real_rtt['ratio_p50'] / rtt['ratio_p50']:.2f}x the floor  ({_load(rtt['load_average'])})",
+        f"  throughput {load['frames_per_s']:.0f} frames/s, CPU per frame: hub {load['hub_cpu_us_per_frame']:.0f} us, "
+        f"load generators {load['load_gen_cpu_us_per_frame']:.0f} us; the real hub carries "
+        f"{real_load['frames_per_s'] / load['frames_per_s']:.2f}x the floor's frames/s  "
+        f"({_load(load['load_average'])})",
+        "  a target beyond the floor cannot be met by a faster model: the transport, the nodes' own work and "
+        "the machine's CPUs set it",
+    ]
 
 
 def _verdict(ok: bool) -> str:
