@@ -27,6 +27,7 @@ from petswarm.controllers.driving import Driver
 from petswarm.controllers.surround_driver import SurroundDriver
 from petswarm.controllers.surround_pilot import SurroundDriverConfig
 from petswarm.draws import Draws
+from petswarm.managers.decisions import WAITING_PAN
 from petswarm.managers.exchange import MessageProcessingManager
 from petswarm.managers.formation import RESPONSES, FormationConfig, FormationError, NetworkFormation, Swarm
 from petswarm.managers.messages import Blob, Ping, Pong, SwarmMessage
@@ -50,7 +51,7 @@ from radio_hub.interface import (
     open_session,
 )
 
-DEFAULT_PAN = 0x1000
+DEFAULT_PAN = WAITING_PAN
 """The PAN every waiting robot starts on."""
 EXT_ADDR_BASE = 0x00124B0000000000
 """Robot extended addresses: a fixed OUI-like prefix plus the robot id."""

@@ -21,7 +21,7 @@ from petswarm.lab.processes import Interrupts, Supervisor, free_tcp_port
 from petswarm.lab.records import RunRecord
 from petswarm.lab.supervision import RunAborted, Supervision
 from petswarm.lab.swarm import describe
-from petswarm.robot import DEFAULT_PAN
+from petswarm.managers.decisions import WAITING_PAN as DEFAULT_PAN
 from radio_hub.interface import HubUnavailable, Keys, describe_fault, open_session, query_hub
 
 

@@ -18,6 +18,9 @@ if TYPE_CHECKING:
 else:
     np = lazy_numpy(__name__)
 
+WAITING_PAN = 0x1000
+"""The PAN every waiting robot starts on (``petswarm.robot.DEFAULT_PAN``): here, so that a run's orchestrator
+knows it without loading the robot middleware."""
 SWARM_PANS = range(0x2000, 0xFFFE)
 """Swarm PAN IDs are drawn from here; the waiting PAN and the broadcast PAN lie outside it."""
 
