@@ -220,13 +220,33 @@ class SurroundConfig:
     """Improved law: the lane holds while the human's tracked speed is above this."""
     lane_ramp_s: float = 1.0
     """Improved law: the lane comes in and goes out over this long (he starts walking, he stops)."""
+    safety_tracked: float = 0.0
+    """Improved law: with > 0, the ultrasonic safety stage takes an echo a tracked body explains (a neighbour, the
+    human) to move away at least as fast as that body's track says (less ``brake_mps2`` times ``track_lag_s``),
+    not only at the ring's own range rate, which an echo new to its cone does not have (taken to stand still:
+    a robot between two neighbours stepping into its forward cones was slowed to 0.4 m/s ahead of the walking
+    human). 0 (the default): the ring's rate alone."""
+    still_centring: float = 0.0
+    """Improved law: more centring spring (/s^2, on top of ``centring``) once the human has stopped (his track
+    slower than ``still_speed_mps`` after it was once faster than ``still_walked_mps``), ramped in and out over
+    ``still_ramp_s``. The swarm's extent at rest is set by the repulsion (between robots, and from his body out to
+    ``avoidance_m`` beyond ``human_clearance_m``) against the springs: with ``centring`` alone it settles at r
+    0.70-0.72 m round him, above the paper's r* = 0.65 m (the robots cannot fill the disc his body takes). 0 (the
+    default): off."""
+    still_speed_mps: float = 0.3
+    """Improved law: the human counts as standing still for ``still_centring`` while his track is slower than this."""
+    still_walked_mps: float = 0.6
+    """Improved law: ``still_centring`` acts only once the human's track was faster than this (he walked): not
+    while the swarm gathers round him before his walk, nor on his track's noise then or his first slow steps."""
+    still_ramp_s: float = 2.0
+    """Improved law: ``still_centring`` comes in (he stops) and goes out (he walks) over this long."""
 
     def __post_init__(self) -> None:
         if self.law not in LAWS:
             raise ValueError(f"law must be one of {LAWS}, not {self.law!r}")
         positive = ("sight_m", "avoidance_m", "max_speed_mps", "max_accel_mps2", "robot_radius_m", "dt_s")
         positive += ("body_mass", "stiffness", "pull_ramp_m", "brake_mps2", "escape_mps2", "lane_ramp_s")
-        positive += ("lane_beside_ramp_m",)
+        positive += ("lane_beside_ramp_m", "still_ramp_s")
         for name in dataclasses.fields(self):
             if name.name == "law":
                 continue
