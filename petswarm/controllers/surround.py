@@ -212,6 +212,12 @@ class SurroundConfig:
     """Improved law: the share of the lead ``lead_s`` a robot level with the human (within ``lane_beside_m`` of him
     along his walk) keeps while the lane is on: with all of it, the robots beside him (the only ones linking those
     ahead of him to those behind, who keep 0.75 m back as he may stop at once) were drawn on ahead of him."""
+    lane_outer_level_lead: float = 1.0
+    """Improved law: a further share of the lead for a robot level with the walking human (as ``lane_level_lead``)
+    that is past halfway to the outer lane (``lane_out_m``): those robots are out of his way and, with the inner
+    file ahead of him and the one behind him 0.75 m back (he may stop at once), are what links the swarm across
+    him; drawn on ahead with the inner file's lead they left a gap of about the sight S (corridor seed 4, cylinder
+    seed 4 torn). 1 (the default): as the inner lane."""
     lane_out_m: float = 1.0
     """Improved law: with > ``lane_half_m``, a second lane outside the first: a robot further than halfway between
     the two from the human's line (``lane_half_m`` and this) is pushed out to this instead of in, so while he walks

@@ -381,11 +381,21 @@ class ImprovedSurroundController(SurroundController):
             return human
         lead *= self._lead_share(human, human_velocity)
         c = self.config
-        if c.lane_level_lead < 1.0 and self._lane_share > 0:
+        if (c.lane_level_lead < 1.0 or c.lane_outer_level_lead < 1.0) and self._lane_share > 0:
             speed = math.sqrt(human_velocity[0] ** 2 + human_velocity[1] ** 2)
             if speed > 0 and abs(human[0] * human_velocity[0] + human[1] * human_velocity[1]) < c.lane_beside_m * speed:
-                lead *= 1.0 - self._lane_share * (1.0 - c.lane_level_lead)
+                level = c.lane_level_lead
+                if c.lane_outer_level_lead < 1.0 and self._in_outer_lane(human, human_velocity, speed):
+                    level *= c.lane_outer_level_lead
+                lead *= 1.0 - self._lane_share * (1.0 - level)
         return human[0] + lead * human_velocity[0], human[1] + lead * human_velocity[1]
+
+    def _in_outer_lane(self, human: Sequence[float], human_velocity: Sequence[float], speed: float) -> bool:
+        """Whether the robot is past halfway to the walking lane's outer lane (``lane_out_m``) from his line."""
+        c = self.config
+        across = abs(human[0] * human_velocity[1] - human[1] * human_velocity[0]) / speed
+        half = self._lane_half(human, human_velocity, speed)
+        return c.lane_out_m > half and across > (half + c.lane_out_m) / 2
 
     def _lead_share(self, human: Sequence[float], human_velocity: Sequence[float]) -> float:
         """How much of the lead a robot gets: all of it up to ``lead_fade_from_m`` ahead of the walking human (along

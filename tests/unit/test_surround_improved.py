@@ -4,6 +4,7 @@ and snapshot instants drawn from world lines (petswarm/lab/surround_metrics.py, 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Any
 
 import pytest
@@ -596,3 +597,25 @@ def test_the_safety_stage_takes_an_echo_off_a_tracked_neighbour_to_move_at_its_t
         names=["robot-2"], positions=np.array([[0.33, 0.0]]), velocities=np.array([[0.9, 0.0]])
     )
     assert pilot._tracked_receding(sensors, ()) == (0.0,) * 8
+
+
+def test_a_robot_level_with_the_walking_human_in_the_outer_lane_keeps_less_of_the_lead() -> None:
+    """``lane_outer_level_lead``: past halfway to the outer lane and level with him, a robot aims less far ahead of
+    him (it links the file ahead of him to the one behind); in the inner lane, as before."""
+    base = dict(law="improved", lane_gain=12.0, lane_half_m=0.32, lane_out_m=1.0, lane_level_lead=0.5)
+    outer = SurroundConfig(**base, lane_outer_level_lead=0.0)  # type: ignore[arg-type]
+    same = SurroundConfig(**base)  # type: ignore[arg-type]
+    walking = (1.0, 0.0)
+
+    def aim(config: SurroundConfig, he: tuple[float, float]) -> Sequence[float] | None:
+        law = ImprovedSurroundController(config)
+        for _ in range(40):  # the lane ramped in
+            law.step_plain([], [], he, walking, DT, human_velocity=walking)
+        return law._aim(he, walking)
+
+    # 0.9 m to his side, level with him: half the lead (0.4 m ahead of him) without it, none with it
+    assert aim(same, (0.0, 0.9)) == pytest.approx((0.4, 0.9))
+    assert aim(outer, (0.0, 0.9)) == pytest.approx((0.0, 0.9))
+    # in the inner lane, or not level with him: unchanged
+    assert aim(outer, (0.0, 0.3)) == aim(same, (0.0, 0.3))
+    assert aim(outer, (-1.0, 0.9)) == aim(same, (-1.0, 0.9))
