@@ -186,7 +186,9 @@ class SurroundConfig:
     the part of a robot's offset from his line (his tracked position along his tracked velocity) beyond
     ``lane_half_m``, so the swarm walks as a narrow column. 0 (the default): off, the lane's other fields unused. 12
     with the defaults below: corridor seeds 1-20 9/20 meeting all four bounds (the law as shipped 3/20), but the
-    cylinder's 18/20 (20/20) (docs/SURROUND.md, item 12): an experiment, not the default."""
+    cylinder's 18/20 (20/20) (docs/SURROUND.md, item 12): an experiment, not the default. With ``lane_ramp_s`` 0.5,
+    ``still_centring`` 1.5, ``safety_tracked`` 1 and ``lane_outer_level_lead`` 0 besides: cylinder 20/20, corridor
+    17/20 (item 13)."""
     lane_half_m: float = 0.32
     """Improved law: the walking lane's half-width: the offset from the human's line a robot keeps within."""
     lane_level_m: float = 0.0
