@@ -186,7 +186,9 @@ class SurroundConfig:
     the part of a robot's offset from his line (his tracked position along his tracked velocity) beyond
     ``lane_half_m``, so the swarm walks as a narrow column. 0 (the default): off, the lane's other fields unused. 12
     with the defaults below: corridor seeds 1-20 9/20 meeting all four bounds (the law as shipped 3/20), but the
-    cylinder's 18/20 (20/20) (docs/SURROUND.md, item 12): an experiment, not the default."""
+    cylinder's 18/20 (20/20) (docs/SURROUND.md, item 12): an experiment, not the default. With ``lane_ramp_s`` 0.5,
+    ``still_centring`` 1.5, ``safety_tracked`` 1 and ``lane_outer_level_lead`` 0 besides: cylinder 20/20, corridor
+    17/20 (item 13)."""
     lane_half_m: float = 0.32
     """Improved law: the walking lane's half-width: the offset from the human's line a robot keeps within."""
     lane_level_m: float = 0.0
@@ -212,6 +214,12 @@ class SurroundConfig:
     """Improved law: the share of the lead ``lead_s`` a robot level with the human (within ``lane_beside_m`` of him
     along his walk) keeps while the lane is on: with all of it, the robots beside him (the only ones linking those
     ahead of him to those behind, who keep 0.75 m back as he may stop at once) were drawn on ahead of him."""
+    lane_outer_level_lead: float = 1.0
+    """Improved law: a further share of the lead for a robot level with the walking human (as ``lane_level_lead``)
+    that is past halfway to the outer lane (``lane_out_m``): those robots are out of his way and, with the inner
+    file ahead of him and the one behind him 0.75 m back (he may stop at once), are what links the swarm across
+    him; drawn on ahead with the inner file's lead they left a gap of about the sight S (corridor seed 4, cylinder
+    seed 4 torn). 1 (the default): as the inner lane."""
     lane_out_m: float = 1.0
     """Improved law: with > ``lane_half_m``, a second lane outside the first: a robot further than halfway between
     the two from the human's line (``lane_half_m`` and this) is pushed out to this instead of in, so while he walks
@@ -220,13 +228,33 @@ class SurroundConfig:
     """Improved law: the lane holds while the human's tracked speed is above this."""
     lane_ramp_s: float = 1.0
     """Improved law: the lane comes in and goes out over this long (he starts walking, he stops)."""
+    safety_tracked: float = 0.0
+    """Improved law: with > 0, the ultrasonic safety stage takes an echo a tracked body explains (a neighbour, the
+    human) to move away at least as fast as that body's track says (less ``brake_mps2`` times ``track_lag_s``),
+    not only at the ring's own range rate, which an echo new to its cone does not have (taken to stand still:
+    a robot between two neighbours stepping into its forward cones was slowed to 0.4 m/s ahead of the walking
+    human). 0 (the default): the ring's rate alone."""
+    still_centring: float = 0.0
+    """Improved law: more centring spring (/s^2, on top of ``centring``) once the human has stopped (his track
+    slower than ``still_speed_mps`` after it was once faster than ``still_walked_mps``), ramped in and out over
+    ``still_ramp_s``. The swarm's extent at rest is set by the repulsion (between robots, and from his body out to
+    ``avoidance_m`` beyond ``human_clearance_m``) against the springs: with ``centring`` alone it settles at r
+    0.70-0.72 m round him, above the paper's r* = 0.65 m (the robots cannot fill the disc his body takes). 0 (the
+    default): off."""
+    still_speed_mps: float = 0.3
+    """Improved law: the human counts as standing still for ``still_centring`` while his track is slower than this."""
+    still_walked_mps: float = 0.6
+    """Improved law: ``still_centring`` acts only once the human's track was faster than this (he walked): not
+    while the swarm gathers round him before his walk, nor on his track's noise then or his first slow steps."""
+    still_ramp_s: float = 2.0
+    """Improved law: ``still_centring`` comes in (he stops) and goes out (he walks) over this long."""
 
     def __post_init__(self) -> None:
         if self.law not in LAWS:
             raise ValueError(f"law must be one of {LAWS}, not {self.law!r}")
         positive = ("sight_m", "avoidance_m", "max_speed_mps", "max_accel_mps2", "robot_radius_m", "dt_s")
         positive += ("body_mass", "stiffness", "pull_ramp_m", "brake_mps2", "escape_mps2", "lane_ramp_s")
-        positive += ("lane_beside_ramp_m",)
+        positive += ("lane_beside_ramp_m", "still_ramp_s")
         for name in dataclasses.fields(self):
             if name.name == "law":
                 continue

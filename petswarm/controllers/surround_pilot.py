@@ -76,6 +76,10 @@ the human to what stops short of them; at 1.5 /s the ring also slowed a robot th
 reach from behind to 0.7 m/s, 3 cm in front of a neighbour going his pace (cylinder seeds 8, 9: he walked
 into it). Measured: cylinder seeds 8 and 9 from one robot-human contact each to none."""
 
+TRACKED_NEARER_M = 0.03
+"""``safety_tracked``: an echo nearer than a tracked body's estimated surface by more than this is not taken to move
+with it (it may be a wall's end the body stands next to; the IR estimate is a few cm off)."""
+
 
 @dataclass(frozen=True)
 class SurroundDriverConfig:
@@ -252,13 +256,53 @@ class SurroundPilot:
         else:
             vx, vy = controller.step_plain(neighbours, obstacles, human, velocity, dt)
         # the law's repulsion acts on IR estimates up to a sweep old; the ultrasonic ring is the last word
-        vx, vy = self._safety.translation(vx, vy, *self._echoes.floats(sensors, ranges))
+        angles, echo_ranges, receding = self._echoes.floats(sensors, ranges)
+        if isinstance(controller, ImprovedSurroundController) and config.law.safety_tracked > 0:
+            receding = self._tracked_receding(sensors, receding)
+        vx, vy = self._safety.translation(vx, vy, angles, echo_ranges, receding)
         self._command = (vx, vy)
         self.counters["steps"] += 1
         self.counters["human_seen"] += human is not None
         self.counters["echoes_dropped"] += dropped
         self.counters["beacons"] = len(tracker.names)
         return vx, vy
+
+    def _tracked_receding(self, sensors: OwnSensors, receding: tuple[float, ...]) -> tuple[float, ...]:
+        """The safety stage's receding speeds, each echo a tracked body explains (within its radius and
+        ``echo_match_m``: as ``explained_echoes`` decides) raised to that body's tracked speed away along the beam,
+        less what it may have lost since its track saw it (``brake_mps2`` times ``track_lag_s``). The ring's own
+        rate is over ~0.2 s and an echo that was not there then (a neighbour stepping into the cone) has none: the
+        stage took it to stand still, and slowed a robot just ahead of the walking human behind neighbours going
+        his pace (corridor seed 5: to 0.4 m/s, and he walked into it)."""
+        law = self.config.law
+        ranges = sensors.ranges_list()
+        cos, sin = self._ring(sensors.angles_rad)
+        tracker = self.tracker
+        names, rows, moving = tracker.names, tracker.positions.tolist(), tracker.velocities.tolist()
+        if not names:
+            return receding
+        match = self._sensing.echo_match_m
+        radii = [
+            self._sensing.person_radius_m if name == self.config.human_id else law.robot_radius_m for name in names
+        ]
+        lost = law.brake_mps2 * law.track_lag_s
+        out = list(receding) if receding else [0.0] * len(ranges)
+        for k, (r, c, s) in enumerate(zip(ranges, cos, sin, strict=True)):
+            if not math.isfinite(r):
+                continue
+            reach = law.robot_radius_m + r
+            px, py = c * reach, s * reach
+            for (bx, by), (ux, uy), radius in zip(rows, moving, radii, strict=True):
+                # within the body, and not nearer than its surface by more than TRACKED_NEARER_M (a wall's end
+                # next to a neighbour: its echo comes from in front of the neighbour's surface)
+                if math.hypot(px - bx, py - by) <= radius + match and reach >= math.hypot(bx, by) - radius - (
+                    TRACKED_NEARER_M
+                ):
+                    away = ux * c + uy * s - lost
+                    if away > out[k]:
+                        out[k] = away
+                    break
+        return tuple(out)
 
     def _remember(
         self, sensors: OwnSensors, names: list[str], positions: np.ndarray, velocity: tuple[float, float], dt: float

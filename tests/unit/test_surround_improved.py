@@ -4,6 +4,7 @@ and snapshot instants drawn from world lines (petswarm/lab/surround_metrics.py, 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Any
 
 import pytest
@@ -536,3 +537,85 @@ def test_with_an_outer_lane_a_robot_past_halfway_to_it_is_pushed_out_to_it_not_d
     # 0.55 m to his right (short of halfway): drawn in, and held to no speed outward
     assert last(outer, (0.0, 0.55), (1.0, 0.0))[1] > last(off, (0.0, 0.55), (1.0, 0.0))[1] + 0.01
     assert last(outer, (0.0, 0.55), (1.0, -0.3))[1] >= -1e-9
+
+
+def test_the_centring_stiffens_while_the_human_stands_still_and_eases_off_once_he_walks() -> None:
+    """``still_centring``: the swarm's extent at rest is the repulsion against the springs, above r* with
+    ``centring`` alone; once he has stopped (his track slower than ``still_speed_mps`` after he walked) the spring
+    toward him is stiffer by it, ramped in and out over ``still_ramp_s``."""
+    still = SurroundConfig(law="improved", still_centring=2.0, still_ramp_s=0.4)
+    off = SurroundConfig(law="improved")
+
+    def pulls(config: SurroundConfig, his: list[tuple[float, float]]) -> list[float]:
+        law = ImprovedSurroundController(config)
+        return [law.step_plain([], [], (0.7, 0.0), (0.0, 0.0), DT, human_velocity=v)[0] for v in his]
+
+    standing, walking = [(0.0, 0.0)] * 20, [(1.0, 0.0)] * 20
+    # 0.7 m from him, he has walked and stopped: pulled in harder once the ramp is in, by 2.0 * 0.7 m/s^2 over a step
+    stopped = pulls(still, walking + standing)
+    assert stopped[-1] == pytest.approx(pulls(off, walking + standing)[-1] + 2.0 * 0.7 * DT)
+    assert stopped[20] < stopped[-1]
+    # before he first walks, and while he walks, the law is as without it
+    assert pulls(still, standing + walking) == pulls(off, standing + walking)
+    # he walks on again: as without it once the ramp is out
+    assert pulls(still, walking + standing + walking)[-1] == pulls(off, walking + standing + walking)[-1]
+
+
+def test_the_safety_stage_takes_an_echo_off_a_tracked_neighbour_to_move_at_its_tracked_speed() -> None:
+    """``safety_tracked``: a neighbour new to a cone has no range rate yet, and the ring took it to stand still; a
+    robot following it at its pace 7 cm behind was slowed to 0.12 m/s. With the neighbour's track the echo moves
+    away at its tracked speed (less ``brake_mps2`` times ``track_lag_s``)."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from petswarm.controllers.pet_controller import SafetyStage
+    from petswarm.controllers.surround_pilot import SAFETY_IMPROVED
+    from radio_hub.interface import OwnSensors
+
+    angles = np.radians(np.arange(8) * 45.0)
+    ranges = np.full(8, math.nan)
+    ranges[0] = 0.07  # the neighbour's surface, 7 cm ahead
+    sensors = OwnSensors(1_000_000, ranges, angles, 0.0, (0.9, 0.0, 0.0))
+    tracked = SurroundDriverConfig(law=SurroundConfig(law="improved", safety_tracked=1.0))
+    pilot = SurroundPilot(tracked)
+    neighbour = SimpleNamespace(names=["robot-2"], positions=np.array([[0.28, 0.0]]), velocities=np.array([[0.9, 0.0]]))
+    pilot.tracker = neighbour  # type: ignore[assignment]
+    receding = pilot._tracked_receding(sensors, ())
+    assert receding[0] == pytest.approx(0.9 - 1.5 * 0.1)
+    assert receding[1:] == (0.0,) * 7
+    stage = SafetyStage(SAFETY_IMPROVED)
+    assert stage.translation(0.9, 0.0, angles.tolist(), ranges.tolist(), receding)[0] == pytest.approx(0.87)
+    assert stage.translation(0.9, 0.0, angles.tolist(), ranges.tolist(), ())[0] == pytest.approx(0.12)
+    # an echo no tracked body explains (a wall) keeps the ring's own rate
+    pilot.tracker = SimpleNamespace(  # type: ignore[assignment]
+        names=["robot-2"], positions=np.array([[0.6, 0.3]]), velocities=np.array([[0.9, 0.0]])
+    )
+    assert pilot._tracked_receding(sensors, ()) == (0.0,) * 8
+    # nor one 6 cm in front of the neighbour's surface (a wall's end beside it), though within its match
+    pilot.tracker = SimpleNamespace(  # type: ignore[assignment]
+        names=["robot-2"], positions=np.array([[0.33, 0.0]]), velocities=np.array([[0.9, 0.0]])
+    )
+    assert pilot._tracked_receding(sensors, ()) == (0.0,) * 8
+
+
+def test_a_robot_level_with_the_walking_human_in_the_outer_lane_keeps_less_of_the_lead() -> None:
+    """``lane_outer_level_lead``: past halfway to the outer lane and level with him, a robot aims less far ahead of
+    him (it links the file ahead of him to the one behind); in the inner lane, as before."""
+    base = dict(law="improved", lane_gain=12.0, lane_half_m=0.32, lane_out_m=1.0, lane_level_lead=0.5)
+    outer = SurroundConfig(**base, lane_outer_level_lead=0.0)  # type: ignore[arg-type]
+    same = SurroundConfig(**base)  # type: ignore[arg-type]
+    walking = (1.0, 0.0)
+
+    def aim(config: SurroundConfig, he: tuple[float, float]) -> Sequence[float] | None:
+        law = ImprovedSurroundController(config)
+        for _ in range(40):  # the lane ramped in
+            law.step_plain([], [], he, walking, DT, human_velocity=walking)
+        return law._aim(he, walking)
+
+    # 0.9 m to his side, level with him: half the lead (0.4 m ahead of him) without it, none with it
+    assert aim(same, (0.0, 0.9)) == pytest.approx((0.4, 0.9))
+    assert aim(outer, (0.0, 0.9)) == pytest.approx((0.0, 0.9))
+    # in the inner lane, or not level with him: unchanged
+    assert aim(outer, (0.0, 0.3)) == aim(same, (0.0, 0.3))
+    assert aim(outer, (-1.0, 0.9)) == aim(same, (-1.0, 0.9))
