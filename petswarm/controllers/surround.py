@@ -181,14 +181,13 @@ class SurroundConfig:
     """Improved law: with > 0, a committed robot not yet on its side has its speed along the human's walk held
     to what stops, braking at this, short of the wall point's line across his walk (0: the spring alone)."""
 
-    lane_gain: float = 0.0
+    lane_gain: float = 12.0
     """Improved law: the walking lane (docs/SURROUND.md, item 12): while the human walks, a lateral spring (/s^2) on
     the part of a robot's offset from his line (his tracked position along his tracked velocity) beyond
-    ``lane_half_m``, so the swarm walks as a narrow column. 0 (the default): off, the lane's other fields unused. 12
-    with the defaults below: corridor seeds 1-20 9/20 meeting all four bounds (the law as shipped 3/20), but the
-    cylinder's 18/20 (20/20) (docs/SURROUND.md, item 12): an experiment, not the default. With ``lane_ramp_s`` 0.5,
-    ``still_centring`` 1.5, ``safety_tracked`` 1 and ``lane_outer_level_lead`` 0 besides: cylinder 20/20, corridor
-    17/20 (item 13)."""
+    ``lane_half_m``, so the swarm walks as a narrow column; 0 turns it off (the lane's other fields then unused). 12,
+    the default, with ``lane_ramp_s`` 0.5, ``still_centring`` 1.5, ``safety_tracked`` 1 and ``lane_outer_level_lead``
+    0 (docs/SURROUND.md, items 12 and 13): seeds 1-30 in model time, cylinder 30/30 and corridor 25/30 meeting issue
+    17's four bounds (without the lane and the three: 20/20 and 3/20 on seeds 1-20)."""
     lane_half_m: float = 0.32
     """Improved law: the walking lane's half-width: the offset from the human's line a robot keeps within."""
     lane_level_m: float = 0.0
@@ -214,33 +213,33 @@ class SurroundConfig:
     """Improved law: the share of the lead ``lead_s`` a robot level with the human (within ``lane_beside_m`` of him
     along his walk) keeps while the lane is on: with all of it, the robots beside him (the only ones linking those
     ahead of him to those behind, who keep 0.75 m back as he may stop at once) were drawn on ahead of him."""
-    lane_outer_level_lead: float = 1.0
+    lane_outer_level_lead: float = 0.0
     """Improved law: a further share of the lead for a robot level with the walking human (as ``lane_level_lead``)
     that is past halfway to the outer lane (``lane_out_m``): those robots are out of his way and, with the inner
     file ahead of him and the one behind him 0.75 m back (he may stop at once), are what links the swarm across
     him; drawn on ahead with the inner file's lead they left a gap of about the sight S (corridor seed 4, cylinder
-    seed 4 torn). 1 (the default): as the inner lane."""
+    seed 4 torn). 0, the default: none; 1: as the inner lane."""
     lane_out_m: float = 1.0
     """Improved law: with > ``lane_half_m``, a second lane outside the first: a robot further than halfway between
     the two from the human's line (``lane_half_m`` and this) is pushed out to this instead of in, so while he walks
     no robot stays between the two (where a wall's end at a corridor's mouth would meet it). 0: off."""
     lane_speed_mps: float = 0.3
     """Improved law: the lane holds while the human's tracked speed is above this."""
-    lane_ramp_s: float = 1.0
+    lane_ramp_s: float = 0.5
     """Improved law: the lane comes in and goes out over this long (he starts walking, he stops)."""
-    safety_tracked: float = 0.0
+    safety_tracked: float = 1.0
     """Improved law: with > 0, the ultrasonic safety stage takes an echo a tracked body explains (a neighbour, the
     human) to move away at least as fast as that body's track says (less ``brake_mps2`` times ``track_lag_s``),
     not only at the ring's own range rate, which an echo new to its cone does not have (taken to stand still:
     a robot between two neighbours stepping into its forward cones was slowed to 0.4 m/s ahead of the walking
-    human). 0 (the default): the ring's rate alone."""
-    still_centring: float = 0.0
+    human). 1, the default: on; 0: the ring's rate alone."""
+    still_centring: float = 1.5
     """Improved law: more centring spring (/s^2, on top of ``centring``) once the human has stopped (his track
     slower than ``still_speed_mps`` after it was once faster than ``still_walked_mps``), ramped in and out over
     ``still_ramp_s``. The swarm's extent at rest is set by the repulsion (between robots, and from his body out to
     ``avoidance_m`` beyond ``human_clearance_m``) against the springs: with ``centring`` alone it settles at r
-    0.70-0.72 m round him, above the paper's r* = 0.65 m (the robots cannot fill the disc his body takes). 0 (the
-    default): off."""
+    0.70-0.72 m round him, above the paper's r* = 0.65 m (the robots cannot fill the disc his body takes). 1.5, the
+    default, takes r at the end to 0.67-0.70 m; 0: off."""
     still_speed_mps: float = 0.3
     """Improved law: the human counts as standing still for ``still_centring`` while his track is slower than this."""
     still_walked_mps: float = 0.6

@@ -39,8 +39,9 @@ def test_the_pilot_runs_the_law_its_config_names() -> None:
 
 
 def test_a_lone_robot_beside_a_walking_human_takes_up_his_pace() -> None:
-    """Velocity match: the paper's law has only the rear's surround force to move a robot level with him."""
-    improved = ImprovedSurroundController(IMPROVED)
+    """Velocity match: the paper's law has only the rear's surround force to move a robot level with him. Without
+    the walking lane, whose share of the lead for a robot level with him moves it on ahead (tested below)."""
+    improved = ImprovedSurroundController(SurroundConfig(law="improved", lane_gain=0.0))
     velocity = (0.0, 0.0)
     for _ in range(50):  # 2 s; the human walks at 1 m/s along x, 0.5 m to the robot's left
         velocity = improved.step_plain([], [], (0.0, 0.5), velocity, DT, human_velocity=(1.0, 0.0))
@@ -524,7 +525,7 @@ def test_the_walking_lane_draws_a_robot_to_his_line_while_he_walks_and_lets_go_o
 def test_with_an_outer_lane_a_robot_past_halfway_to_it_is_pushed_out_to_it_not_drawn_in() -> None:
     """``lane_out_m``: while he walks no robot stays between the two lanes (where a corridor's wall would meet it)."""
     outer = SurroundConfig(law="improved", lane_gain=4.0, lane_rate=3.0, lane_half_m=0.4, lane_out_m=0.8)
-    off = SurroundConfig(law="improved")
+    off = SurroundConfig(law="improved", lane_gain=0.0)
     walking = [(1.0, 0.0)] * 40
 
     def last(config: SurroundConfig, he: tuple[float, float], velocity: tuple[float, float]) -> tuple[float, float]:
@@ -544,7 +545,7 @@ def test_the_centring_stiffens_while_the_human_stands_still_and_eases_off_once_h
     ``centring`` alone; once he has stopped (his track slower than ``still_speed_mps`` after he walked) the spring
     toward him is stiffer by it, ramped in and out over ``still_ramp_s``."""
     still = SurroundConfig(law="improved", still_centring=2.0, still_ramp_s=0.4)
-    off = SurroundConfig(law="improved")
+    off = SurroundConfig(law="improved", still_centring=0.0)
 
     def pulls(config: SurroundConfig, his: list[tuple[float, float]]) -> list[float]:
         law = ImprovedSurroundController(config)
@@ -604,7 +605,7 @@ def test_a_robot_level_with_the_walking_human_in_the_outer_lane_keeps_less_of_th
     him (it links the file ahead of him to the one behind); in the inner lane, as before."""
     base = dict(law="improved", lane_gain=12.0, lane_half_m=0.32, lane_out_m=1.0, lane_level_lead=0.5)
     outer = SurroundConfig(**base, lane_outer_level_lead=0.0)  # type: ignore[arg-type]
-    same = SurroundConfig(**base)  # type: ignore[arg-type]
+    same = SurroundConfig(**base, lane_outer_level_lead=1.0)  # type: ignore[arg-type]
     walking = (1.0, 0.0)
 
     def aim(config: SurroundConfig, he: tuple[float, float]) -> Sequence[float] | None:
