@@ -59,7 +59,9 @@ def _plot_cdf(ax: Any, samples: list[float], label: str) -> None:
 def _plot_throughput(ax: Any, loads: list[dict[str, Any]]) -> None:
     for load in loads:
         line = ax.plot([s["t_s"] for s in load["series"]], [s["fps"] for s in load["series"]], marker="o")[0]
-        ax.axhline(load["model_capacity_fps"], ls=":", color=line.get_color(), label=f"{load['label']}: model capacity")
+        if load["label"] != "floor":  # the floor hub models no air: it has no capacity
+            capacity = f"{load['label']}: model capacity"
+            ax.axhline(load["model_capacity_fps"], ls=":", color=line.get_color(), label=capacity)
         line.set_label(f"{load['label']}: delivered")
     ax.axhline(loads[0]["target_fps"], ls="--", color="grey", label="target")
     ax.set(xlabel="s into the window", ylabel="frames/s", title=f"Delivered frames/s, {loads[0]['nodes']} nodes")
