@@ -327,7 +327,7 @@ class ImprovedSurroundController(SurroundController):
         speed, nx, ny, across = line
         half = self._lane_half(human, human_velocity, speed)
         beyond = max(0.0, abs(across) - half)
-        if c.lane_out_m > half and abs(across) > (half + c.lane_out_m) / 2:
+        if self._bound_out(abs(across), half):
             beyond = min(0.0, abs(across) - c.lane_out_m)  # the outer lane: pushed out to it (beyond < 0)
         if beyond == 0:
             return 0.0, 0.0
@@ -367,7 +367,7 @@ class ImprovedSurroundController(SurroundController):
         if across < 0:
             nx, ny, across = -nx, -ny, -across
         half = self._lane_half(human, human_velocity, speed)
-        if c.lane_out_m > half and across > (half + c.lane_out_m) / 2:
+        if self._bound_out(across, half):
             return None  # bound for the outer lane
         half += (1.0 - share) * LANE_SLACK_M
         his = human_velocity[0] * nx + human_velocity[1] * ny
@@ -392,10 +392,15 @@ class ImprovedSurroundController(SurroundController):
 
     def _in_outer_lane(self, human: Sequence[float], human_velocity: Sequence[float], speed: float) -> bool:
         """Whether the robot is past halfway to the walking lane's outer lane (``lane_out_m``) from his line."""
-        c = self.config
         across = abs(human[0] * human_velocity[1] - human[1] * human_velocity[0]) / speed
         half = self._lane_half(human, human_velocity, speed)
-        return c.lane_out_m > half and across > (half + c.lane_out_m) / 2
+        return self._bound_out(across, half)
+
+    def _bound_out(self, across: float, half: float) -> bool:
+        """Whether a robot ``across`` m off his line is past halfway from the inner lane (``half``) to the outer one
+        (``lane_out_m``): pushed out to the outer lane, not drawn in."""
+        out = self.config.lane_out_m
+        return out > half and across > (half + out) / 2
 
     def _lead_share(self, human: Sequence[float], human_velocity: Sequence[float]) -> float:
         """How much of the lead a robot gets: all of it up to ``lead_fade_from_m`` ahead of the walking human (along
