@@ -440,7 +440,7 @@ class Medium:
         assert job is not None
         channel_counters = self.channel_counters[tx.channel]
         for node in self._receivers(tx):
-            outcome = self._judge(tx, node, filtered=not _addressed_to(tx.frame, node))
+            outcome = self._judge(tx, node, filtered=not addressed_to(tx.frame, node))
             tx.outcomes[node.node_id] = outcome
             self.node_counters[node.node_id].count(outcome)
             channel_counters.count(outcome)
@@ -645,7 +645,8 @@ class Medium:
             self._air[channel] = [tx for tx in air if tx.end_us >= horizon]
 
 
-def _addressed_to(frame: Frame, node: RadioNode) -> bool:
+def addressed_to(frame: Frame, node: RadioNode) -> bool:
+    """The MAC's address filter: the frame's destination PAN and short address are the node's, or broadcast."""
     pan_ok = frame.dst_pan in (node.pan_id, BROADCAST)
     return pan_ok and frame.dst in (node.short_addr, BROADCAST)
 

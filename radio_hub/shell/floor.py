@@ -17,8 +17,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from radio_hub.air.mac import BROADCAST, Frame, FrameError, FrameType
-from radio_hub.air.medium import RadioNode
+from radio_hub.air.mac import Frame, FrameError, FrameType
+from radio_hub.air.medium import RadioNode, RxOutcome, addressed_to
 from radio_hub.link import wire
 from radio_hub.shell.hub import RadioHub
 
@@ -71,9 +71,7 @@ class FloorHub(RadioHub):
             for node in receivers:
                 n = env._next_down_seq(node.node_id)
                 down.send(node.node_id, wire.encode_received(n, msg.psdu, FLOOR_RSSI_DBM, FLOOR_LQI, now, now, now))
-                node_counters = counters[node.node_id]
-                node_counters.heard += 1
-                node_counters.delivered += 1
+                counters[node.node_id].count(RxOutcome.DELIVERED)
             n = env._next_down_seq(sender.node_id)
             down.send(sender.node_id, wire.encode_tx_done(n, msg.token, "success", 0, 0, now, now, ""))
             counters[sender.node_id].sent += 1
@@ -88,11 +86,6 @@ class FloorHub(RadioHub):
 
 
 def _hears(sender: RadioNode, node: RadioNode, frame: Frame) -> bool:
-    """Whether ``node`` gets the frame: another node on the sender's channel, in its PAN (or a broadcast PAN) and
-    its short address (or broadcast); no range, nothing lost."""
-    return (
-        node is not sender
-        and node.channel == sender.channel
-        and frame.dst_pan in (node.pan_id, BROADCAST)
-        and frame.dst in (node.short_addr, BROADCAST)
-    )
+    """Whether ``node`` gets the frame: another node on the sender's channel that the frame is addressed to (the
+    medium's own address filter); no range, nothing lost."""
+    return node is not sender and node.channel == sender.channel and addressed_to(frame, node)
