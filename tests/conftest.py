@@ -17,6 +17,8 @@ from pathlib import Path
 
 import pytest
 
+import radio_hub.determinism  # noqa: F401  (before any test module loads numpy: the digests every process computes)
+
 ROOT = Path(__file__).resolve().parents[1]
 SOURCES = ("petswarm", "radio_hub", "cli")
 
