@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 import os
+import platform
 from pathlib import Path
 
 import pytest
@@ -45,3 +47,12 @@ def test_a_named_record_keeps_files_it_does_not_own(tmp_path: Path, capsys: pyte
     RunRecord.create(opts, "w", "tcp/x:1")
     assert (tmp_path / "notes.txt").read_text() == "mine" and not (tmp_path / "summary.json").exists()
     assert "held an earlier run" in capsys.readouterr().err
+
+
+def test_the_manifest_says_which_numeric_paths_the_digest_was_made_on(tmp_path: Path) -> None:
+    opts = RunOptions(robots=1, seed=7, duration=1.0, ping_interval=0.5, record_dir=str(tmp_path / "r"))
+    record = RunRecord.create(opts, "w", "tcp/x:1")
+    numeric = json.loads((record.path / "manifest.json").read_text())["numeric"]
+    assert numeric["machine"] == platform.machine()
+    if platform.machine().lower() in ("x86_64", "amd64"):
+        assert numeric["numpy_dispatch"] == []  # held to the baseline (radio_hub/determinism.py)
