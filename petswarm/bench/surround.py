@@ -12,7 +12,10 @@ the same figures and the same ``digest`` as model time for the same seed, as pro
 says. Figures per run come from ``petswarm.lab.surround_metrics`` over the world's ground truth at 50 Hz (contacts
 by kind, connected share, centre to human while he walks, robots ahead of him, r at the end against r*, the time
 to pass the obstacle), with the older ``driving_metrics`` figures beside them; the plot draws r(t) (as the
-paper's Figs. 7 and 9) and the swarm centre's distance from its human, one colour per law.
+paper's Figs. 7 and 9) and the swarm centre's distance from its human, one colour per law. Each run also says
+which of issue 17's four bounds it meets (``surround_metrics.bounds_met``), and the bench counts them per scenario
+and law (``bounds_summary``): at 80 % a seed, ten in a row all pass one time in nine, so a rate needs many seeds,
+which ``--jobs`` spreads over worker processes.
 """
 
 from __future__ import annotations
@@ -79,6 +82,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="model: every robot in this process on a virtual clock (fast); lockstep: each robot and the user as "
         "its own process on the hub's model time, same figures and digest per seed (default %(default)s)",
     )
+    parser.add_argument(
+        "--jobs",
+        type=bounded(int, 1, 64),
+        default=1,
+        help="model-time runs at once, each in its own worker process (default %(default)s; the machine's cores "
+        "is the most that helps). Every run is a function of its seed: the same figures and digests whatever this is",
+    )
     parser.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
 
 
@@ -100,22 +110,28 @@ def bench_surround(args: argparse.Namespace) -> int:
         if not scenario.surround_enabled:
             print(f"petswarm bench surround: {path} is not a surround scenario ([surround] enabled)", file=sys.stderr)
             return 2
-    for scenario in scenarios:
-        results["runs"][scenario.name] = {}
-        for law in results["laws"]:
-            runs = []
-            for seed in range(args.seed, args.seed + args.seeds):
-                print(f"[bench surround] {scenario.name} law {law} seed {seed} ({args.clock})", file=sys.stderr)
-                world, run = scenario_run(with_law(scenario, law), seed, args.clock)
-                runs.append({"seed": seed, **run, **(summarise(world) if world else {})})
-            results["runs"][scenario.name][law] = runs
+    if args.jobs > 1 and args.clock != "model":
+        print(
+            "petswarm bench surround: --jobs applies to --clock model (a lockstep run is 21 processes already)",
+            file=sys.stderr,
+        )
+        return 2
+    jobs = [
+        (scenario, law, seed)
+        for scenario in scenarios
+        for law in results["laws"]
+        for seed in range(args.seed, args.seed + args.seeds)
+    ]
+    for (scenario, law, _), run in zip(jobs, _run_all(jobs, args.clock, args.jobs), strict=True):
+        results["runs"].setdefault(scenario.name, {}).setdefault(law, []).append(run)
+    results["summary"] = bounds_summary(results)
     if args.paper:
         print("[bench surround] the paper's setups, pure simulation", file=sys.stderr)
         results["pure_simulation"] = surround_figures(args.seed)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     save(results, out, "bench_surround", plot)
-    emit(table(results), results, args.json)
+    emit(table(results) + summary_lines(results["summary"]), results, args.json)
     failed = [run for laws in results["runs"].values() for runs in laws.values() for run in runs if not run["ok"]]
     if failed:
         print(f"petswarm bench surround: {len(failed)} run(s) not ok (the table says why)", file=sys.stderr)
@@ -179,6 +195,79 @@ def _execute(opts: RunOptions, scenario: Scenario, record: Path) -> dict[str, An
         raise KeyboardInterrupt
     summary = record / "summary.json"
     return json.loads(summary.read_text()) if summary.exists() else {"ok": False, "problems": ["no summary"]}
+
+
+def _run_all(jobs: list[tuple[Scenario, str, int]], clock: str, workers: int) -> list[dict[str, Any]]:
+    """Every job's run (``bench_run``) in the jobs' order: one after another, or on ``workers`` worker processes
+    (forked: each a copy of this one, which has read the scenario files). Progress goes to stderr."""
+    if workers <= 1:
+        return [bench_run(*job, clock) for job in jobs]
+    import concurrent.futures
+    import multiprocessing
+
+    context = multiprocessing.get_context("fork")
+    with concurrent.futures.ProcessPoolExecutor(workers, mp_context=context) as pool:
+        futures = [pool.submit(bench_run, *job, clock) for job in jobs]
+        try:
+            return [future.result() for future in futures]
+        except BaseException:  # Ctrl-C, or a worker that died: stop the others' queued runs too
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+
+
+def bench_run(scenario: Scenario, law: str, seed: int, clock: str) -> dict[str, Any]:
+    """One bench run of ``scenario`` under ``law``: its seed, digest, ok and problems, figures and issue 17's
+    bounds (``surround_metrics.bounds_met``)."""
+    from petswarm.lab.surround_metrics import bounds_met
+
+    print(f"[bench surround] {scenario.name} law {law} seed {seed} ({clock})", file=sys.stderr)
+    world, run = scenario_run(with_law(scenario, law), seed, clock)
+    figures = summarise(world) if world else {}
+    return {"seed": seed, **run, **figures, "bounds": bounds_met(figures)}
+
+
+def bounds_summary(results: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """Per scenario and law (``"<scenario> <law>"``): how many runs meet each of issue 17's bounds and all four,
+    the contacts by kind summed, the walking median's and r's ranges, and the seeds that miss."""
+    from petswarm.lab.surround_metrics import BOUNDS
+
+    out = {}
+    for name, laws in results["runs"].items():
+        for law, runs in laws.items():
+            measured = [run for run in runs if "contacts" in run]
+            medians = [
+                run["centre_to_human_walking_m"]["median"] for run in measured if run["centre_to_human_walking_m"]
+            ]
+            ends = [run["r_end_m"] for run in measured]
+            out[f"{name} {law}"] = {
+                "runs": len(runs),
+                "met": {bound: sum(run["bounds"][bound] for run in runs) for bound in (*BOUNDS, "all")},
+                "contacts": {
+                    kind: sum(run["contacts"][kind] for run in measured)
+                    for kind in ("robot_robot", "robot_obstacle", "robot_human", "unattributed")
+                },
+                "median_m": [min(medians), max(medians)] if medians else None,
+                "r_end_m": [min(ends), max(ends)] if ends else None,
+                "missed": [run["seed"] for run in runs if not run["bounds"]["all"]],
+            }
+    return out
+
+
+def summary_lines(summary: dict[str, dict[str, Any]]) -> list[str]:
+    """The bounds summary as lines: issue 17's four bounds, each met on how many of the runs."""
+    lines = ["issue 17's bounds (no contact, connected >= 0.99, walking median <= 0.5 m, r within 10 % of r*):"]
+    for key, row in summary.items():
+        met, n, c = row["met"], row["runs"], row["contacts"]
+        median = "-" if row["median_m"] is None else "{:.2f}-{:.2f} m".format(*row["median_m"])
+        r_end = "-" if row["r_end_m"] is None else "{:.3f}-{:.3f} m".format(*row["r_end_m"])
+        missed = ", ".join(map(str, row["missed"])) or "none"
+        lines.append(
+            f"  {key}: all four {met['all']}/{n}; no contact {met['no_contact']}/{n} "
+            f"(rr/ro/rh {c['robot_robot']}/{c['robot_obstacle']}/{c['robot_human']}), "
+            f"connected {met['connected']}/{n}, median {met['inside']}/{n} ({median}), r {met['r_end']}/{n} ({r_end}); "
+            f"missed: seeds {missed}"
+        )
+    return lines
 
 
 def summarise(world: list[dict[str, Any]]) -> dict[str, Any]:

@@ -36,6 +36,13 @@ TOUCH_M = 0.002
 SIGHT_M = 1.0
 END_S = 1.0
 """r 'at the end' is its mean over the last second (one tick's r jitters with every push)."""
+CONNECTED_AT_LEAST = 0.99
+"""Issue 17's bounds on a surround run: connected at least this share of the time, ..."""
+INSIDE_MEDIAN_M = 0.5
+"""... the swarm centre at most this far from the walking human at the median, ..."""
+EXTENT_OFF_AT_MOST = 0.10
+"""... r at the end within this share of r*, and no contact of any kind."""
+BOUNDS = ("no_contact", "connected", "inside", "r_end")
 
 
 def surround_metrics(world: list[dict[str, Any]], sight_m: float = SIGHT_M) -> dict[str, Any]:
@@ -61,6 +68,18 @@ def surround_metrics(world: list[dict[str, Any]], sight_m: float = SIGHT_M) -> d
         "obstacle_pass": obstacle_pass(world, ticks),
         "series": [[round(t["t"], 2), round(_extent(t["robots"]), 4), _centre_to_human(t)] for t in ticks[::25]],
     }
+
+
+def bounds_met(figures: dict[str, Any]) -> dict[str, bool]:
+    """Which of issue 17's four bounds a run's ``surround_metrics`` figures meet (``BOUNDS``), and ``all``."""
+    centre = figures.get("centre_to_human_walking_m") or {}
+    met = {
+        "no_contact": figures.get("contacts", {}).get("total", 1) == 0,
+        "connected": figures.get("connected_fraction", 0.0) >= CONNECTED_AT_LEAST,
+        "inside": centre.get("median", math.inf) <= INSIDE_MEDIAN_M,
+        "r_end": figures.get("r_end_off", math.inf) <= EXTENT_OFF_AT_MOST,
+    }
+    return {**met, "all": all(met.values())}
 
 
 def contacts(world: list[dict[str, Any]]) -> dict[str, int]:

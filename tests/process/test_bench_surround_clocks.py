@@ -48,3 +48,23 @@ def test_a_clock_the_bench_cannot_repeat_is_refused(capsys) -> None:
     with pytest.raises(SystemExit) as exit_:
         main(["bench", "surround", "--clock", "wall"])
     assert exit_.value.code == 2 and "invalid choice: 'wall'" in capsys.readouterr().err
+
+
+@pytest.mark.timeout(300)
+def test_runs_on_worker_processes_give_the_rows_of_runs_one_after_another(tmp_path: Path, capsys) -> None:
+    scenario = str(_short_scenario(tmp_path))
+    results = {}
+    for jobs in (1, 2):
+        argv = ["bench", "surround", scenario, "--law", "both", "--seeds", "2", "--jobs", str(jobs), "--json"]
+        assert main([*argv, "--out", str(tmp_path / f"jobs{jobs}")]) == 0
+        results[jobs] = json.loads(capsys.readouterr().out)
+    runs = results[2]["runs"]["surround-five"]
+    assert [run["seed"] for run in runs["paper"]] == [1, 2] and [run["seed"] for run in runs["improved"]] == [1, 2]
+    assert len({run["digest"] for law in runs.values() for run in law}) == 4  # four different runs, each whole
+    assert results[2]["runs"] == results[1]["runs"] and results[2]["summary"] == results[1]["summary"]
+
+
+def test_jobs_are_for_model_time(tmp_path: Path, capsys) -> None:
+    argv = ["bench", "surround", "--clock", "lockstep", "--jobs", "2", "--seeds", "1", "--out", str(tmp_path)]
+    assert main(argv) == 2
+    assert "--jobs applies to --clock model" in capsys.readouterr().err
