@@ -34,9 +34,11 @@ def pin_numeric_dispatch() -> bool:
     return True
 
 
-def numeric_dispatch() -> list[str]:
-    """numpy's SIMD dispatch targets enabled in this process (empty when held to its baseline)."""
-    import numpy  # noqa: F401  (loads the extension below)
+def numeric_dispatch() -> list[str] | None:
+    """numpy's SIMD dispatch targets enabled in this process (empty when held to its baseline); None when this
+    process has not loaded numpy (it is not loaded just to say: a wall-clock run's orchestrator never needs it)."""
+    if "numpy" not in sys.modules:
+        return None
     from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
 
     return [name for name in __cpu_dispatch__ if __cpu_features__.get(name)]

@@ -32,7 +32,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from radio_hub.determinism import numeric_dispatch
+from radio_hub.determinism import DISPATCH_VARIABLE, numeric_dispatch
 
 _PACKAGES = ("petswarm", "eclipse-zenoh", "numpy", "msgpack")
 RUNS_ENV = "PETSWARM_RUNS"
@@ -68,8 +68,13 @@ class RunRecord:
             "options": asdict(opts),
             "medium_config_file": _read(opts.config),
             "versions": {"python": platform.python_version(), **{p: _version(p) for p in _PACKAGES}},
-            # a digest is the same on another machine of this architecture and these numeric paths
-            "numeric": {"machine": platform.machine(), "numpy_dispatch": numeric_dispatch()},
+            # a digest is the same on another machine of this architecture and these numeric paths: the pin every
+            # process of the run inherits, and numpy's paths where this one has loaded it (null: not loaded here)
+            "numeric": {
+                "machine": platform.machine(),
+                "numpy_disabled": os.environ.get(DISPATCH_VARIABLE),
+                "numpy_dispatch": numeric_dispatch(),
+            },
         }
         record = cls(path)
         record.write("manifest.json", manifest)

@@ -29,7 +29,7 @@ def _python(code: str, **env: str) -> str:
 @pytest.mark.parametrize("first", ["cli.main", "petswarm.controllers.surround_improved", "radio_hub.environment"])
 def test_importing_any_package_first_holds_numpy_to_its_baseline(first: str) -> None:
     out = _python(
-        f"import {first}, os; from radio_hub.determinism import numeric_dispatch; "
+        f"import {first}, numpy, os; from radio_hub.determinism import numeric_dispatch; "
         f"print(os.environ['{DISPATCH_VARIABLE}'], '|', numeric_dispatch())"
     )
     assert out == f"{X86_ABOVE_BASELINE} | []"

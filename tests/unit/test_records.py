@@ -11,6 +11,7 @@ import pytest
 
 from petswarm.lab.records import RunRecord, runs_dir
 from petswarm.lab.run import RunOptions
+from radio_hub.determinism import X86_ABOVE_BASELINE
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -55,4 +56,8 @@ def test_the_manifest_says_which_numeric_paths_the_digest_was_made_on(tmp_path: 
     numeric = json.loads((record.path / "manifest.json").read_text())["numeric"]
     assert numeric["machine"] == platform.machine()
     if platform.machine().lower() in ("x86_64", "amd64"):
-        assert numeric["numpy_dispatch"] == []  # held to the baseline (radio_hub/determinism.py)
+        assert numeric["numpy_disabled"] == X86_ABOVE_BASELINE  # the pin every process of the run inherits
+        import numpy  # noqa: F401  (this process's own paths are said only where numpy is loaded)
+
+        again = RunRecord.create(opts, "w", "tcp/x:1")
+        assert json.loads((again.path / "manifest.json").read_text())["numeric"]["numpy_dispatch"] == []
