@@ -227,6 +227,17 @@ class SurroundConfig:
     """Improved law: the lane holds while the human's tracked speed is above this."""
     lane_ramp_s: float = 0.5
     """Improved law: the lane comes in and goes out over this long (he starts walking, he stops)."""
+    wake_rate: float = 3.0
+    """Improved law: the wake rule (docs/SURROUND.md, item 14): while the lane holds, a robot outside it with a
+    neighbour just ahead of it along his walk (within ``wake_reach_m``, overlapping its path) that is nearer his
+    line moves across toward that neighbour's offset at least this (/s) times the difference, relative to him:
+    the neighbour hides the way ahead from its forward cone, and where the neighbour went is the only space it
+    knows is free. 0: off."""
+    wake_reach_m: float = 0.7
+    """Improved law: how far ahead of a robot, along the human's walk, a neighbour makes the wake rule."""
+    wake_level_m: float = 0.8
+    """Improved law: the wake rule leaves alone a robot within this of level with the human along his walk: the
+    robots beside him link those ahead of him to those behind."""
     safety_tracked: float = 1.0
     """Improved law: with > 0, the ultrasonic safety stage takes an echo a tracked body explains (a neighbour, the
     human) to move away at least as fast as that body's track says (less ``brake_mps2`` times ``track_lag_s``),

@@ -47,9 +47,11 @@ from petswarm.controllers.surround import MIN_RANGE_M, SurroundConfig, SurroundC
 from petswarm.controllers.surround_commit import Commitment
 from petswarm.controllers.surround_free import FreeSpace
 
-WALL_MARGIN_M = 0.07
+WALL_MARGIN_M = 0.04
 """The wall rule's gap kept in hand beyond touching: a remembered point is an arc's, up to its chord off the
-wall's end (7.5 degrees apart at 0.45 m, 6 cm; 2 cm at the 0.15 m where it binds), and the odometry drifts."""
+wall's end (7.5 degrees apart at 0.45 m, 6 cm; 2 cm at the 0.15 m where it binds), and the odometry drifts.
+0.07 until 2026-11-24: with the rule passing a point it is aimed at (``_wall_rules``), the robots beside the
+human 0.45 m off his line in a 1.2 m corridor (5 cm from its wall) keep a way past its end at 0.04."""
 WALL_LATE_S = 0.06
 """The wall rule's lateness: a command acts a control step (40 ms) and up to a world tick (20 ms) after the
 echoes it was made from, in which the robot still closes at its old speed."""
@@ -144,11 +146,13 @@ class ImprovedSurroundController(SurroundController):
             rules.append(commit.lateral_rule())
         if c.lane_gain > 0 and c.lane_rate > 0:  # likewise
             rules.append(self._lane_rule(human, human_velocity))
+        if c.lane_gain > 0 and c.wake_rate > 0:  # likewise
+            rules.append(self._wake_rule(neighbours, human, human_velocity))
         his = None
         if human is not None:
             hvx, hvy = human_velocity if human_velocity is not None else (0.0, 0.0)
             his = self._stop_rule(
-                human[0], human[1], hvx, hvy, c.human_clearance_m + c.robot_radius_m, c.human_margin_m
+                human[0], human[1], hvx, hvy, c.human_clearance_m + c.robot_radius_m, c.human_margin_m, walker=True
             )
         fixed = self._wall_rules(walls, command)
         unknown = None
@@ -188,8 +192,9 @@ class ImprovedSurroundController(SurroundController):
 
         A command whose line passes the point further off than the robot's radius and ``WALL_MARGIN_M`` never
         touches it: the rule keeps it on that side of the point (the tangent from the robot's centre to the
-        disc of that radius round the point, on the command's side). A command aimed within that disc is held to
-        the speed toward the point that still stops short of it (``_late_stop``). A speed limit alone pushed a
+        disc of that radius round the point, on the command's side). A command aimed within that disc is turned to
+        that tangent when that changes it less than the stop would, and otherwise held to the speed toward the
+        point that still stops short of it (``_late_stop``). A speed limit alone pushed a
         robot moving along a wall 0.1 m off it (its points 60 degrees off its path) off the wall and slowed it
         (0.93 of 1 m/s in the unit test; with the arcs of that time, 4 of 10 corridor medians went over 0.5 m).
         Of the points in each of ``WALL_SECTORS`` sectors round the robot only the nearest counts (a remembered
@@ -210,36 +215,52 @@ class ImprovedSurroundController(SurroundController):
         speed = math.sqrt(cx * cx + cy * cy)
         for x, y, d in nearest.values():
             ux, uy = x / d, y / d
+            stop = (ux, uy, _late_stop(max(0.0, d - clear)))
             if clear < d and speed > 0:
                 # the tangent's angle off the point's bearing; the command's side of the point
                 sine = clear / d
                 cosine = math.sqrt(1 - sine * sine)
-                if (cx * ux + cy * uy) < cosine * speed:  # aimed outside the disc: it passes the point
-                    side = 1.0 if ux * cy - uy * cx >= 0 else -1.0
-                    # the unit normal of the tangent on that side, pointing to the point's side
-                    nx = ux * sine - side * -uy * cosine
-                    ny = uy * sine - side * ux * cosine
-                    rules.append((nx, ny, 0.0))
+                side = 1.0 if ux * cy - uy * cx >= 0 else -1.0
+                # the unit normal of the tangent on that side, pointing to the point's side
+                tangent = (ux * sine - side * -uy * cosine, uy * sine - side * ux * cosine, 0.0)
+                aimed_outside = (cx * ux + cy * uy) < cosine * speed
+                # aimed inside the disc but nearer passing than stopping: it passes (a robot sliding along a
+                # corridor's wall, its command a few degrees into an end point, braked to a stop there)
+                if aimed_outside or _excess(command, [tangent]) < _excess(command, [stop]):
+                    rules.append(tangent)
                     continue
-            gap = max(0.0, d - clear)
-            rules.append((ux, uy, _late_stop(gap)))
+            rules.append(stop)
         return rules
 
     def _stop_rule(
-        self, x: float, y: float, ux: float, uy: float, touching: float, margin: float | None = None
+        self,
+        x: float,
+        y: float,
+        ux: float,
+        uy: float,
+        touching: float,
+        margin: float | None = None,
+        walker: bool = False,
     ) -> tuple[float, float, float] | None:
         """``(nx, ny, limit)``: the robot's speed toward a body at (x, y) moving at (ux, uy), touching it at centre
         distance ``touching`` (and ``margin`` more, ``stop_margin_m`` if None), is at most ``limit`` along the
         unit (nx, ny) (see ``_stoppable``); None when the body is beyond the avoidance range (or on the robot's
-        own centre)."""
+        own centre). ``walker``: the body is the human, whose braking since his track last saw him slows him
+        along his walk only (a neighbour, pushed about, may have slowed any way)."""
         c = self.config
         d = math.sqrt(x * x + y * y)
         if not (0 < d <= touching + c.avoidance_m):
             return None
         nx, ny = x / d, y / d
         gap = max(0.0, d - touching - (c.stop_margin_m if margin is None else margin))
-        # its speed away from this robot, less what it may have lost since its track last saw it
-        away = ux * nx + uy * ny - c.brake_mps2 * c.track_lag_s
+        # its speed away from this robot, less what it may have lost since its track last saw it: for the human,
+        # only what his braking takes off his speed along this line. Counted in full, it made every robot level
+        # with him walking (his speed across the line 0) back off at 0.15 m/s inside his margin, out into the
+        # wall beside a corridor's mouth (docs/SURROUND.md, item 14)
+        lost = c.brake_mps2 * c.track_lag_s
+        if walker:
+            lost *= _along_share(ux, uy, nx, ny)
+        away = ux * nx + uy * ny - lost
         if away > 0:
             return nx, ny, math.sqrt(away * away + 2 * c.brake_mps2 * gap)
         # it comes at the robot: the robot must be getting away by the time the gap is gone, from a start a
@@ -373,6 +394,48 @@ class ImprovedSurroundController(SurroundController):
         his = human_velocity[0] * nx + human_velocity[1] * ny
         return nx, ny, his + c.lane_rate * max(0.0, half - across)
 
+    def _wake_rule(
+        self,
+        neighbours: Sequence[Sequence[float]],
+        human: Sequence[float] | None,
+        human_velocity: Sequence[float] | None,
+    ) -> tuple[float, float, float] | None:
+        """``(nx, ny, limit)``: a robot outside the walking lane, more than ``wake_level_m`` from level with him, with
+        a neighbour ahead of it along his walk (within ``wake_reach_m``, less than a robot's width across) that is
+        nearer his line, moves across toward that neighbour's offset at ``wake_rate`` times the difference,
+        relative to him (n pointing away from his line). None when no such neighbour, or the lane is off.
+
+        Why: such a robot's forward cone hears the neighbour, not what is beyond it (the ring reports each cone's
+        nearest echo), and a wall's end just outside the neighbour's path then reaches its 15-30 degree blind gap
+        unheard. The corridor's stragglers 0.52 m off his line, held out by a neighbour inside them, met the end
+        that way. Where the neighbour ahead went is the one space it knows is free."""
+        c = self.config
+        line = _his_line(human, human_velocity)
+        if self._lane_share <= 0 or line is None or line[0] < c.lane_speed_mps:
+            return None
+        assert human is not None and human_velocity is not None
+        speed, nx, ny, across = line
+        ux, uy = human_velocity[0] / speed, human_velocity[1] / speed
+        half = self._lane_half(human, human_velocity, speed)
+        if abs(across) <= half or self._bound_out(abs(across), half):
+            return None
+        if abs(human[0] * ux + human[1] * uy) < c.wake_level_m:
+            return None  # beside him
+        width = 2 * c.robot_radius_m
+        ahead = [
+            (x * ux + y * uy, x * nx + y * ny)
+            for x, y in neighbours
+            if 0 < x * ux + y * uy < c.wake_reach_m and abs(x * nx + y * ny) < width
+        ]
+        if not ahead:
+            return None
+        theirs = across + min(ahead)[1]  # the nearest one's offset from his line
+        if theirs * across <= 0 or abs(theirs) >= abs(across):
+            return None
+        sign = 1.0 if across > 0 else -1.0
+        his = (human_velocity[0] * nx + human_velocity[1] * ny) * sign
+        return sign * nx, sign * ny, his + c.wake_rate * (abs(theirs) - abs(across))
+
     def _aim(self, human: Sequence[float] | None, human_velocity: Sequence[float] | None) -> Sequence[float] | None:
         """Where the pull aims: the human, led by ``lead_s`` of his velocity when it is known, less of it the
         further the robot is ahead of him (``_lead_share``)."""
@@ -465,6 +528,15 @@ class ImprovedSurroundController(SurroundController):
             mx, my = c.velocity_match * (human_velocity[0] - vx), c.velocity_match * (human_velocity[1] - vy)
         ax, ay = _clip(force[0] + mx, force[1] + my, c.max_accel_mps2)
         return _clip(vx + ax * dt, vy + ay * dt, c.max_speed_mps)
+
+
+def _along_share(ux: float, uy: float, nx: float, ny: float) -> float:
+    """How much of a body's braking (against its velocity (ux, uy)) takes off its speed away along the unit
+    (nx, ny): the cosine between the two where the body moves away, else 0 (braking then only slows its coming)."""
+    speed = math.hypot(ux, uy)
+    if speed <= 1e-9:
+        return 0.0
+    return abs(ux * nx + uy * ny) / speed
 
 
 def _late_stop(gap: float) -> float:

@@ -620,3 +620,70 @@ def test_a_robot_level_with_the_walking_human_in_the_outer_lane_keeps_less_of_th
     # in the inner lane, or not level with him: unchanged
     assert aim(outer, (0.0, 0.3)) == aim(same, (0.0, 0.3))
     assert aim(outer, (-1.0, 0.9)) == aim(same, (-1.0, 0.9))
+
+
+def test_the_humans_track_lag_counts_along_his_walk_only() -> None:
+    """His braking since his track last saw him (``track_lag_s``) changes his speed along his walk: a robot level
+    with him (his walk across the line to it) is not made to back off, where a neighbour pushed about may have
+    slowed any way; ahead of him or behind him the allowance is the neighbours' (docs/SURROUND.md, item 14)."""
+    law = ImprovedSurroundController(IMPROVED)
+    c = IMPROVED
+    touching = c.human_clearance_m + c.robot_radius_m
+    lost = c.brake_mps2 * c.track_lag_s
+    # beside him, 0.45 m off (inside his margin): he walks past, the robot need not move away
+    beside = law._stop_rule(0.0, 0.45, 1.0, 0.0, touching, c.human_margin_m, walker=True)
+    assert beside is not None and beside[2] == pytest.approx(0.0)
+    pushed = law._stop_rule(0.0, 0.45, 1.0, 0.0, touching, c.human_margin_m)
+    assert pushed is not None and pushed[2] == pytest.approx(-lost)
+    # he comes at it from behind, or walks on ahead of it: as for any body
+    for x, y in ((-0.45, 0.0), (0.6, 0.0)):
+        his = law._stop_rule(x, y, 1.0, 0.0, touching, c.human_margin_m, walker=True)
+        body = law._stop_rule(x, y, 1.0, 0.0, touching, c.human_margin_m)
+        assert his == pytest.approx(body)
+    # coming at it diagonally: the share of his braking along the line to it, between the two
+    his = law._stop_rule(-0.35, 0.3, 1.0, 0.0, touching, c.human_margin_m, walker=True)
+    body = law._stop_rule(-0.35, 0.3, 1.0, 0.0, touching, c.human_margin_m)
+    assert his is not None and body is not None
+    cosine = 0.35 / math.hypot(0.35, 0.3)
+    assert his[2] - body[2] == pytest.approx(lost * (1 - cosine))
+    # a human standing still has nothing to lose
+    still = law._stop_rule(0.45, 0.0, 0.0, 0.0, touching, c.human_margin_m, walker=True)
+    assert still is not None and still[2] == pytest.approx(0.0)
+
+
+def test_the_wake_rule_takes_a_robot_outside_the_lane_into_the_path_of_the_neighbour_ahead() -> None:
+    """The wake rule (docs/SURROUND.md, item 14): 0.5 m to the right of the walking human's line and 1 m behind
+    him, with a neighbour 0.5 m ahead of it 0.1 m nearer his line, a robot moves toward the neighbour's offset at
+    ``wake_rate`` times the difference; not level with him, not with a neighbour further out or off its path."""
+    off = SurroundConfig(law="improved", wake_rate=0.0)
+    walking = (1.0, 0.0)
+
+    def command(config: SurroundConfig, he: tuple[float, float], neighbour: tuple[float, float]) -> tuple[float, float]:
+        law = ImprovedSurroundController(config)
+        v = (0.0, 0.0)
+        for _ in range(30):  # the lane's ramp in
+            v = law.step_plain(
+                [neighbour], [], he, (1.0, 0.0), DT, human_velocity=walking, neighbour_velocities=[walking]
+            )
+        return v
+
+    behind = (-1.0, 0.5)  # he is 1 m behind the robot, his line 0.5 m to its left
+    woken = command(IMPROVED, behind, (0.5, 0.1))
+    assert woken[1] >= IMPROVED.wake_rate * 0.1 - 1e-9
+    assert command(off, behind, (0.5, 0.1))[1] < woken[1] - 0.05
+    level = (-0.3, 0.5)  # beside him: the rule leaves it to link those ahead of him to those behind
+    assert command(IMPROVED, level, (0.5, 0.1)) == command(off, level, (0.5, 0.1))
+    for neighbour in ((0.5, -0.1), (0.5, 0.3), (0.9, 0.1)):  # further out; off its path; beyond reach
+        assert command(IMPROVED, behind, neighbour) == command(off, behind, neighbour)
+
+
+def test_the_wall_rule_turns_a_command_aimed_just_inside_a_point_to_pass_it() -> None:
+    """A robot sliding along a wall whose command is a few degrees into the disc round an end point passes it (the
+    tangent changes the command less than the stop would) rather than braking to a stop there."""
+    point = [(0.3, -0.13)]  # 23 degrees to its right; the disc (its radius and the margin) spans 25 degrees
+    v = ImprovedSurroundController(IMPROVED).step_plain([], [], None, (1.0, 0.0), DT, walls=point)
+    assert math.hypot(*v) > 0.95 and v[1] > 0.0  # on at speed, turned off the point's side
+    x, y = point[0]
+    d = math.hypot(x, y)
+    clear = IMPROVED.robot_radius_m + 0.04
+    assert (v[0] * x + v[1] * y) / (d * math.hypot(*v)) <= math.sqrt(1 - (clear / d) ** 2) + 1e-9  # on the tangent
