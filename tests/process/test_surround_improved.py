@@ -9,8 +9,8 @@ model-time figures and the 5-of-5 process runs):
 - r at the end within 10 % of r* (0.65 m).
 
 One seed per scenario keeps each run near a minute. Seed 1 of each, the first of the ten the bench runs: in model
-time the law meets all four bounds on the cylinder's seeds 1-10 and on the corridor's but seed 7 (one contact at a
-wall's end; docs/RESULTS.md), which `petswarm bench surround --law improved` shows in model time.
+time the law meets all four bounds on both scenarios' seeds 1-10, and on 98 of seeds 1-100 of each (the
+corridor 95 of seeds 101-200; docs/RESULTS.md), which `petswarm bench surround --law improved` shows.
 """
 
 from __future__ import annotations
