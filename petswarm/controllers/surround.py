@@ -230,7 +230,7 @@ class SurroundConfig:
     wake_rate: float = 3.0
     """Improved law: the wake rule (docs/SURROUND.md, item 14): while the lane holds, a robot outside it with a
     neighbour just ahead of it along his walk (within ``wake_reach_m``, overlapping its path) that is nearer his
-    line moves across toward that neighbour's offset at least this (/s) times the difference, relative to him:
+    line moves across toward that neighbour's offset at least this (/s) times the difference:
     the neighbour hides the way ahead from its forward cone, and where the neighbour went is the only space it
     knows is free. 0: off."""
     wake_reach_m: float = 0.7

@@ -59,7 +59,7 @@ WALL_BRAKE_MPS2 = 1.2
 """The deceleration the wall rule counts on: below the bodies' ``brake_mps2`` (1.5), as the robot's own stop
 rules and the neighbours' escapes pull the command other ways too. With 5 cm, no lateness and 1.5 m/s^2, the
 corridor's seeds 1 and 2 had 2 robot-obstacle contacts each; with these values 1 (of any kind) each (both
-before the rule let a robot pass a point by)."""
+before the rule let a robot pass a point by, with the margin at 7 cm, on 2026-11-23)."""
 LANE_SLACK_M = 1.0
 """How much wider the walking lane's rule is while the lane is ramped in or out (share 0), narrowing to
 ``lane_half_m`` at share 1."""
@@ -402,8 +402,10 @@ class ImprovedSurroundController(SurroundController):
     ) -> tuple[float, float, float] | None:
         """``(nx, ny, limit)``: a robot outside the walking lane, more than ``wake_level_m`` from level with him, with
         a neighbour ahead of it along his walk (within ``wake_reach_m``, less than a robot's width across) that is
-        nearer his line, moves across toward that neighbour's offset at ``wake_rate`` times the difference,
-        relative to him (n pointing away from his line). None when no such neighbour, or the lane is off.
+        nearer his line, moves across toward that neighbour's offset at ``wake_rate`` times the difference (n
+        pointing away from his line). None when no such neighbour, when he walks slower than
+        ``lane_speed_mps``, or when the lane is off; from the lane's first step in, it holds in full (the lane's own
+        rule is widened while it ramps in; this one asks only for a move into a neighbour's path).
 
         Why: such a robot's forward cone hears the neighbour, not what is beyond it (the ring reports each cone's
         nearest echo), and a wall's end just outside the neighbour's path then reaches its 15-30 degree blind gap
@@ -433,6 +435,8 @@ class ImprovedSurroundController(SurroundController):
         if theirs * across <= 0 or abs(theirs) >= abs(across):
             return None
         sign = 1.0 if across > 0 else -1.0
+        # his own speed across his line: nil but for rounding, kept as in the lane's rule (the two share one form,
+        # and dropping it moves the last bit, and so every run's digest)
         his = (human_velocity[0] * nx + human_velocity[1] * ny) * sign
         return sign * nx, sign * ny, his + c.wake_rate * (abs(theirs) - abs(across))
 
@@ -531,8 +535,9 @@ class ImprovedSurroundController(SurroundController):
 
 
 def _along_share(ux: float, uy: float, nx: float, ny: float) -> float:
-    """How much of a body's braking (against its velocity (ux, uy)) takes off its speed away along the unit
-    (nx, ny): the cosine between the two where the body moves away, else 0 (braking then only slows its coming)."""
+    """How much of a walker's change of speed along his walk (velocity (ux, uy)) since his track last saw him shows
+    along the unit (nx, ny): |cos| of the angle between the two, as he may have slowed or sped up; 0 for a walker
+    standing still (or whose velocity is unknown: taken as standing, as when he is first seen among the robots)."""
     speed = math.hypot(ux, uy)
     if speed <= 1e-9:
         return 0.0

@@ -683,7 +683,9 @@ def test_the_wall_rule_turns_a_command_aimed_just_inside_a_point_to_pass_it() ->
     point = [(0.3, -0.13)]  # 23 degrees to its right; the disc (its radius and the margin) spans 25 degrees
     v = ImprovedSurroundController(IMPROVED).step_plain([], [], None, (1.0, 0.0), DT, walls=point)
     assert math.hypot(*v) > 0.95 and v[1] > 0.0  # on at speed, turned off the point's side
+    from petswarm.controllers.surround_improved import WALL_MARGIN_M
+
     x, y = point[0]
     d = math.hypot(x, y)
-    clear = IMPROVED.robot_radius_m + 0.04
+    clear = IMPROVED.robot_radius_m + WALL_MARGIN_M
     assert (v[0] * x + v[1] * y) / (d * math.hypot(*v)) <= math.sqrt(1 - (clear / d) ** 2) + 1e-9  # on the tangent
