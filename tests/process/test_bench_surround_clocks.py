@@ -1,7 +1,7 @@
 """``petswarm bench surround --clock lockstep``: the bench's robots as processes give the model-time bench's row.
 
 Five robots of the improved cylinder scenario for 5 s (the human sets off at 3 s), so the proof costs seconds, not
-the minute of the 20-robot run that tests/process/test_surround_improved.py spends through ``petswarm run``."""
+the half minute of each 20-robot run that tests/process/surround_improved_runs.py spends through ``petswarm run``."""
 
 from __future__ import annotations
 
