@@ -424,11 +424,8 @@ class ImprovedSurroundController(SurroundController):
         if abs(human[0] * ux + human[1] * uy) < c.wake_level_m:
             return None  # beside him
         width = 2 * c.robot_radius_m
-        ahead = [
-            (x * ux + y * uy, x * nx + y * ny)
-            for x, y in neighbours
-            if 0 < x * ux + y * uy < c.wake_reach_m and abs(x * nx + y * ny) < width
-        ]
+        along_across = ((x * ux + y * uy, x * nx + y * ny) for x, y in neighbours)
+        ahead = [(a, s) for a, s in along_across if 0 < a < c.wake_reach_m and abs(s) < width]
         if not ahead:
             return None
         theirs = across + min(ahead)[1]  # the nearest one's offset from his line
