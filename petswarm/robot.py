@@ -206,10 +206,18 @@ class Robot:
         while True:
             incoming = await self.rf.receive()
             try:
+                self._check_pan(incoming)
                 self._remember(incoming)
                 await self._on_message(incoming)
             except Exception as err:  # one message must not stop the robot hearing the next
                 self.rf.radio.faults.record("receive", err, type(incoming.message).__name__)
+
+    def _check_pan(self, incoming: Incoming) -> None:
+        """Note a frame whose destination PAN is neither ours nor the broadcast PAN (``foreign_pan``): the MAC
+        filters those, so one here means a filter or a PAN change went wrong (``petswarm explore`` checks it)."""
+        dst_pan, pan = incoming.rx.frame.dst_pan, self.rf.radio.identity.pan_id
+        if dst_pan != pan and dst_pan != BROADCAST:
+            self.log.record("foreign_pan", dst_pan=dst_pan, pan=pan, src=incoming.sender)
 
     async def _on_message(self, incoming: Incoming) -> None:
         msg = incoming.message
