@@ -50,6 +50,9 @@ PROGRAMMING_ERRORS = (
 )
 """An ``error`` event naming one of these is a bug a handler caught, not a fault of the air."""
 SWARM_STATES = ("organizing", "slave-driving", "master-driving")
+HANDOVER_GRACE_S = 0.5
+"""A master handing over its role still counts its members until it hears the new master accept (one frame and
+its retries): that long, the two claims on a member may overlap."""
 
 
 @dataclass(frozen=True)
@@ -283,10 +286,18 @@ def one_master_per_robot(record: Record) -> list[Violation]:
     by_member: dict[str, list[tuple[float, float, str, int]]] = {}
     for since, until, master, member, session in claims(record):
         by_member.setdefault(member, []).append((since, until, master, session))
+    handovers = {
+        (node, e["mono"])
+        for node, events in record.events.items()
+        for e in events
+        if e["kind"] == "state" and e.get("cause") == "handover" and e.get("to") == "master-driving"
+    }
     for member, spans in by_member.items():
         spans.sort()
         for i, (since, until, master, _session) in enumerate(spans):
             for since2, _until2, master2, _session2 in spans[i + 1 :]:
+                if (master2, since2) in handovers and until - since2 <= HANDOVER_GRACE_S:
+                    continue  # the old master hands over: it learns of the acceptance a frame later
                 if since2 < until and master2 != master:
                     out.append(
                         Violation(
@@ -360,14 +371,16 @@ def pan_hearing(record: Record) -> list[Violation]:
 @prop("no_contact", "safety", ("organize", "drive", "follow", "mixed"))
 def no_contact(record: Record) -> list[Violation]:
     """Where the driving law promises it (robots driving with their user, alone or as a swarm, whose safety
-    stage stops short of an echo): no robot touches another robot, an obstacle or the user."""
+    stage stops short of an echo): no robot touches another robot or an obstacle. Contacts with the user are
+    not judged: the scripted user walks blind, into a robot ahead of him as fast as 1.2 m/s."""
     out = []
     seen = 0
     for tick in record.world:
         count = tick.get("collisions", 0)
         if count > seen:
             who = _closest_pair(tick)
-            out.append(Violation(f"contact {who[0]} / {who[1]}", round(tick["t_us"] / 1e6, 3), who))
+            if "user" not in who:
+                out.append(Violation(f"contact {who[0]} / {who[1]}", round(tick["t_us"] / 1e6, 3), who))
             seen = count
     return out
 
@@ -415,9 +428,10 @@ def organize_completes(record: Record) -> list[Violation]:
         t = req["mono"]
         if t + ORGANIZE_WITHIN_S > end or not (t >= record.clear_s or _bounded_loss_only(record, t)):
             continue
-        if record.state_at(owner, t).get("to") not in ("following", "leading"):
+        before = t - 1e-6  # the request's own state change comes at the same instant
+        if record.state_at(owner, before).get("to") not in ("following", "leading"):
             continue  # no swarm to lead from here (the watch refuses it): nothing was promised
-        waiting = [r for r in record.robots if r != owner and record.state_at(r, t).get("to") == "waiting"]
+        waiting = [r for r in record.robots if r != owner and record.state_at(r, before).get("to") == "waiting"]
         if not waiting:
             continue
         done = next((e for e in events if e["mono"] >= t and e["kind"] in _ORGANIZE_ENDS), None)
@@ -443,11 +457,12 @@ def disperse_returns_waiting(record: Record) -> list[Violation]:
         t = req["mono"]
         if t < record.clear_s or t + DISPERSE_WITHIN_S > end:
             continue
-        session = record.state_at(owner, t).get("session")
-        if record.state_at(owner, t).get("to") != "master-driving":
+        before = t - 1e-6
+        session = record.state_at(owner, before).get("session")
+        if record.state_at(owner, before).get("to") != "master-driving":
             continue
         for node in record.robots:
-            own = record.state_at(node, t)
+            own = record.state_at(node, before)
             if node == owner or own.get("to") != "slave-driving" or own.get("session") != session:
                 continue
             later = record.state_at(node, t + DISPERSE_WITHIN_S)
