@@ -399,14 +399,18 @@ def _closest_pair(tick: dict[str, Any]) -> tuple[str, str]:
 # == liveness ================================================================================================
 
 
-def _owner(record: Record) -> str:
-    return f"robot-{record.scenario.user.owner if record.scenario.user else 1}"
-
-
-def _requests(record: Record, request: str) -> list[dict[str, Any]]:
-    return [
-        e for e in record.events.get(_owner(record), []) if e["kind"] == "watch_request" and e.get("request") == request
-    ]
+def _requests(record: Record, request: str) -> list[tuple[str, dict[str, Any]]]:
+    """The watch's requests of one kind, each with the robot that took it (the owner, or after a master change
+    the robot the owner's role moved to)."""
+    return sorted(
+        (
+            (node, e)
+            for node in record.robots
+            for e in record.events.get(node, [])
+            if e["kind"] == "watch_request" and e.get("request") == request
+        ),
+        key=lambda pair: pair[1]["mono"],
+    )
 
 
 def _bounded_loss_only(record: Record, t: float) -> bool:
@@ -420,11 +424,10 @@ def _bounded_loss_only(record: Record, t: float) -> bool:
 def organize_completes(record: Record) -> list[Violation]:
     """An organize asked for once the faults have cleared (or under loss of at most ``LOSS_BOUND`` alone), with
     another robot waiting, completes with at least one member within ``ORGANIZE_WITHIN_S``."""
-    owner = _owner(record)
-    events = record.events.get(owner, [])
     out = []
     end = float(record.summary.get("model_time_s") or 0.0)
-    for req in _requests(record, "organize"):
+    for owner, req in _requests(record, "organize"):
+        events = record.events.get(owner, [])
         t = req["mono"]
         if t + ORGANIZE_WITHIN_S > end or not (t >= record.clear_s or _bounded_loss_only(record, t)):
             continue
@@ -450,10 +453,9 @@ _ORGANIZE_ENDS = ("watch_organized", "watch_organize_failed")
 def disperse_returns_waiting(record: Record) -> list[Violation]:
     """Once the faults have cleared, every member of a swarm its master disperses is back in waiting within
     ``DISPERSE_WITHIN_S``."""
-    owner = _owner(record)
     out = []
     end = float(record.summary.get("model_time_s") or 0.0)
-    for req in _requests(record, "disperse"):
+    for owner, req in _requests(record, "disperse"):
         t = req["mono"]
         if t < record.clear_s or t + DISPERSE_WITHIN_S > end:
             continue

@@ -20,7 +20,7 @@ from petswarm.explore.shrink import shrink
 from petswarm.managers import exchange, messages
 
 pytestmark = pytest.mark.long
-WEIGHTS = {"organize": 3, "drive": 3, "mixed": 2, "follow": 1, "pings": 1}
+WEIGHTS = {"organize": 1, "drive": 1}
 
 
 @pytest.fixture
