@@ -169,7 +169,8 @@ class ReceptionConfig:
 
     ``sinr`` (the default): the frame's signal against the noise floor plus the summed power of everything else
     on the air at the receiver, piece by piece over its airtime, through the O-QPSK bit error rate of
-    IEEE 802.15.4-2011 Annex E; CCA mode 1 reports busy above the energy-detection threshold (10.2.8). A
+    IEEE 802.15.4-2006 Annex E (E.4.1.8); CCA mode 1 reports busy above the energy-detection threshold (2006
+    6.9.9, 2011 8.2.7). A
     receiver stays synchronised to the first frame it hears unless a stronger one starts (capture).
     ``overlap``: the unit-disk rule (Cooja's UDGM), any overlap inside ``interference_range_m`` collides unless
     ``[capture]`` saves the stronger frame; carrier sense inside the same disk.
@@ -178,14 +179,14 @@ class ReceptionConfig:
     model: str = "sinr"
     ed_threshold_above_sensitivity_db: float = 10.0
     """CCA mode 1's energy-detection threshold over the receiver sensitivity: the standard allows at most
-    10 dB (10.2.8, 10.2.5)."""
+    10 dB (IEEE 802.15.4-2006 6.9.9, 2011 8.2.7)."""
 
     def validate(self) -> None:
         """Raise ValueError on an unknown model or a threshold outside the standard's range."""
         if self.model not in RECEPTION_MODELS:
             raise ValueError(f"reception model {self.model!r}: one of {', '.join(RECEPTION_MODELS)}")
         if not 0.0 <= self.ed_threshold_above_sensitivity_db <= 10.0:
-            raise ValueError("ed_threshold_above_sensitivity_db must be 0..10 dB (IEEE 802.15.4-2011 10.2.8)")
+            raise ValueError("ed_threshold_above_sensitivity_db must be 0..10 dB (IEEE 802.15.4-2006 6.9.9)")
 
 
 @dataclass

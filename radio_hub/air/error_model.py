@@ -1,13 +1,13 @@
 """Bit and frame error rates of the 2.4 GHz O-QPSK PHY, from the signal-to-interference-plus-noise ratio.
 
-IEEE 802.15.4-2011 Annex E (E.4.1.8, Figure E.2) gives the bit error rate of the 2.4 GHz O-QPSK PHY over an
+IEEE 802.15.4-2006 Annex E (E.4.1.8, Figure E.2) gives the bit error rate of the 2.4 GHz O-QPSK PHY over an
 AWGN channel as
 
     BER(SINR) = (8/15) (1/16) sum_{k=2}^{16} (-1)^k C(16, k) exp(20 SINR (1/k - 1))
 
 with SINR as a power ratio; interference is treated as further Gaussian noise. A frame piece of ``n`` bits at
 one SINR survives with (1 - BER)^n. The noise floor is derived from the receiver's sensitivity as the standard
-defines it (10.1.7, 10.3.4): the input power at which the packet error rate of a 20-octet PSDU is 1 %. Pure.
+defines it (2006 6.5.3.3, 2011 10.3.4): the input power at which the packet error rate of a 20-octet PSDU is 1 %. Pure.
 """
 
 from __future__ import annotations

@@ -410,8 +410,8 @@ class Medium:
         return True
 
     def _energy_detected(self, node: RadioNode, start_us: int, end_us: int) -> bool:
-        """CCA over [start_us, end_us): ``sinr``, mode 1 (energy above the ED threshold at its peak, 10.2.8);
-        ``overlap``, any transmission inside the interference disk."""
+        """CCA over [start_us, end_us). ``sinr``: mode 1, energy above the ED threshold at its peak (2006 6.9.9,
+        2011 8.2.7). ``overlap``: any transmission inside the interference disk."""
         if self._sinr:
             heard = [
                 (max(tx.start_us, start_us), min(tx.end_us, end_us), self._power_mw(tx.position, node.position))
