@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import json
 import sys
 import time
 import tomllib
@@ -56,9 +57,12 @@ def explore(args: argparse.Namespace) -> int:
     else:
         stream = run_local(args.seed, indices, args.workers, weights)
     results: list[dict[str, Any]] = []
-    for result in stream:
-        results.append(result)
-        progress.step(result["ok"])
+    with (out / "results.jsonl").open("w") as partial:  # as they finish: a campaign cut short keeps what it ran
+        for result in stream:
+            results.append(result)
+            partial.write(json.dumps(result) + "\n")
+            partial.flush()
+            progress.step(result["ok"])
     wall = time.perf_counter() - started
     failed = [r for r in results if not r["ok"]]
     for result in sorted(failed, key=lambda r: r["index"])[: args.shrink]:
