@@ -730,14 +730,17 @@ class DriverCore:
         if self.fix is not None and self.fix.distance_m <= LF_VALID_RANGE_M:
             self._far_limit_m = None  # back inside the LF's valid range: the single robot's rule again
         limit = max(LF_VALID_RANGE_M, self._far_limit_m or 0.0)
-        fresh = self.fix is not None and self.fix.distance_m <= limit and now - self.fix_at < LOST_AFTER_S
+        # no fix since a turn-about ended (it forgets the fix and restarts the clock): LOST_AFTER_S for the first
+        # one; a fix outside the valid range is lost at once, as before
+        in_range = self.fix is None or self.fix.distance_m <= limit
+        fresh = in_range and now - self.fix_at < LOST_AFTER_S
         if state in (RobotState.FOLLOWING, RobotState.LEADING) and not fresh and self.fix_at > -math.inf:
             self.exception_from = state
             self.sequence.transition(RobotState.EMERGENCY, cause="user lost")
             if self.owner is not None:
                 self._emit(BleSend(self.owner, user_link.encode("alert", reason="user lost")))
             return True
-        if state == RobotState.EMERGENCY and fresh:
+        if state == RobotState.EMERGENCY and fresh and self.fix is not None:  # found only by a fix
             back, self.exception_from = self.exception_from or RobotState.FOLLOWING, None
             self.sequence.transition(back, cause="user found")
         return False

@@ -294,6 +294,22 @@ def test_a_single_robot_turns_round_on_its_ahrs_when_following_becomes_leading()
     assert core.fix is None and core.turn_to is None  # the fix taken facing the other way is forgotten
 
 
+def test_a_turn_about_gives_the_first_fix_facing_the_new_way_the_lost_user_time() -> None:
+    core = paired()
+    core.sensors_sample(sensors(0.02, yaw=0.0), 0.02)
+    core.ble_message(BELT, lf_ahead(1.0), 0.03)
+    core.ble_message(BELT, ble("request", request="lead"), 0.04)
+    core.sensors_sample(sensors(0.07, yaw=math.pi - 0.05), 0.07)
+    actions = run_until(core, 0.11)
+    assert logs(actions, "turn_about_done") == [{}]
+    # no fix yet facing the new way: not lost until LOST_AFTER_S has passed without one
+    actions = run_until(core, 0.10 + LOST_AFTER_S - 0.1)
+    assert core.sequence.state == RobotState.LEADING and not of(actions, BleSend)
+    actions = run_until(core, 0.10 + LOST_AFTER_S + 0.1)
+    assert core.sequence.state == RobotState.EMERGENCY
+    assert {"k": "alert", "reason": "user lost"} in [user_link.decode(a.payload) for a in of(actions, BleSend)]
+
+
 # -- the swarm: Table 3 ------------------------------------------------------------------------------
 
 
