@@ -122,6 +122,31 @@ def test_roster_agreement_fails_a_settled_member_the_roster_does_not_match() -> 
     assert P.roster_agreement(agreed) == []
 
 
+def test_roster_agreement_gives_a_master_its_rounds_to_drop_a_member_that_left_unheard() -> None:
+    def killed_member(dropped_at: float | None) -> P.Record:
+        master = [_state(3.0, "following", "master-driving", session=7), _ev("organized", 3.0, session=7, members=[2])]
+        if dropped_at is not None:
+            master += [
+                _ev("member_lost", dropped_at, session=7, member=2),
+                _state(dropped_at, "master-driving", "following", session=7),
+            ]
+        member = [_state(3.0, "waiting", "slave-driving", session=7), _ev("start", 7.1, state="waiting")]
+        record = _record(**{"robot-1": master, "robot-2": member})
+        record.supervision = [
+            {"kind": "died", "process": "robot-2", "mono": 6.5},
+            {"kind": "restarted", "process": "robot-2", "mono": 7.1},
+        ]
+        return record
+
+    # killed at 6.5 s, back in waiting at 7.1 s, dropped after three silent rounds (5.5 s): not a disagreement
+    assert P.roster_agreement(killed_member(12.0)) == []
+    # never dropped: counted in waiting from 6.5 s to the end of the run
+    [violation, *_] = P.roster_agreement(killed_member(None))
+    assert violation.who == ("robot-2", "robot-1") and violation.when > 6.5 + P.MEMBER_DROP_S
+    # dropped, but later than a master's rounds allow
+    assert P.roster_agreement(killed_member(6.5 + P.MEMBER_DROP_S + 3.5))
+
+
 def test_pan_hearing_fails_a_foreign_pan_frame() -> None:
     [violation] = P.pan_hearing(_record(**{"robot-2": [_ev("foreign_pan", 2.5, dst_pan=0x1000, pan=0x2222, src=3)]}))
     assert violation.who == ("robot-2",) and "0x1000" in violation.what
