@@ -36,6 +36,9 @@ FAULT_KINDS = (
 """The fault kinds a case draws from: the hub's chaos kinds, a robot killed (and restarted), the wearable link lost."""
 SETTLE_S = 4.0
 """Fault-free model seconds a case keeps after its last fault clears and before its final requests."""
+TURN_ABOUT_S = 3.0
+"""How long the user stands after asking the robots to change sides (following <-> leading): they turn round in
+place on their AHRS, 180 degrees at the base's 1.5 rad/s slowing at the end, 2.4-2.6 s measured."""
 
 
 def rng_of(seed: int, i: int) -> np.random.Generator:
@@ -145,6 +148,89 @@ def _path(rng: np.random.Generator, seconds: float) -> list[dict[str, Any]]:
                 legs.append({"walk": 0.4, "speed": speed})
                 left -= 0.4 / speed
     return legs
+
+
+def _leg_seconds(leg: dict[str, Any]) -> float:
+    """How long a path leg lasts (s)."""
+    if "walk" in leg:
+        return float(leg["walk"]) / float(leg["speed"])
+    if "turn" in leg:
+        return abs(float(leg["turn"])) / float(leg["rate"])
+    return float(leg["stop"])
+
+
+def _split_leg(leg: dict[str, Any], dt: float) -> list[dict[str, Any]]:
+    """``leg`` as the part of its first ``dt`` seconds and the rest (a part shorter than 10 ms is left out)."""
+    rest = _leg_seconds(leg) - dt
+    if "walk" in leg:
+        speed = leg["speed"]
+        parts = [{"walk": round(speed * dt, 3), "speed": speed}, {"walk": round(speed * rest, 3), "speed": speed}]
+    elif "turn" in leg:
+        rate, sign = leg["rate"], math.copysign(1.0, leg["turn"])
+        parts = [
+            {"turn": round(sign * rate * dt, 2), "rate": rate},
+            {"turn": round(sign * rate * rest, 2), "rate": rate},
+        ]
+    else:
+        parts = [{"stop": round(dt, 3)}, {"stop": round(rest, 3)}]
+    return [part for part, seconds in zip(parts, (dt, rest), strict=True) if seconds >= 0.01 and _leg_seconds(part) > 0]
+
+
+def _turn_about_at(rng: np.random.Generator, user: dict[str, Any], t: float) -> tuple[float, float]:
+    """Make the user turn about at ``t`` (s after the start; a leg under way is cut there) and stand
+    ``TURN_ABOUT_S`` after it: (when the turn ends, the seconds added to the user's timeline)."""
+    turn = {"turn": float(rng.choice([-180.0, 180.0])), "rate": round(float(rng.uniform(60, 120)), 1)}
+    added = [turn, {"stop": TURN_ABOUT_S}]
+    legs, walk_at = user["path"], float(user["walk_at"])
+    if t <= walk_at:  # still standing where the path starts: the path now starts with the turn
+        user["walk_at"] = round(t, 3)
+        user["path"] = [*added, *([{"stop": round(walk_at - t, 3)}] if walk_at - t >= 0.01 else []), *legs]
+    else:
+        clock, out = walk_at, []
+        for k, leg in enumerate(legs):
+            seconds = _leg_seconds(leg)
+            if clock + seconds > t:
+                out += [*_split_leg(leg, t - clock)[:1], *added, *_split_leg(leg, t - clock)[1:], *legs[k + 1 :]]
+                break
+            out.append(leg)
+            clock += seconds
+        else:  # past the path's end: stand until then
+            out += ([{"stop": round(t - clock, 3)}] if t - clock >= 0.01 else []) + added
+        user["path"] = out
+    return t + _leg_seconds(turn), _leg_seconds(turn) + TURN_ABOUT_S
+
+
+def _sides_with_turn_abouts(rng: np.random.Generator, user: dict[str, Any]) -> float:
+    """The user turns about before every request that makes the robots change sides, and stands while they turn.
+
+    Following and leading put the robots on opposite sides of the user (about 1 m behind, about 1 m ahead), and
+    the LF fix cannot tell front from back (pet-bot-wearable.md, "Locating the user": y >= 0), so a robot cannot
+    pass its user: a change between them is the user's turn-about (the paper's trajectory "a turn-about that
+    switches following into leading"), each robot turning round where it stands. A robot that is driving
+    (following, leading, master of a swarm) turns at once; one waiting for a command does not move, so the side
+    the user then selects (or a mode he asks for) is the one it stands on (Table 3 is a driving-mode change).
+    Requests are rewritten to that side where needed; returns the seconds added to the timeline (every later
+    request moves on by the time the user spent turning and standing)."""
+    side, driving, shift = "following", False, 0.0
+    for req in user["watch"]:
+        req["at"] = round(req["at"] + shift, 2)
+        kind = req["request"]
+        if kind == "cancel":
+            driving = False
+        if kind not in ("follow", "lead", "mode"):
+            continue
+        if not driving and kind == "mode":
+            req["mode"] = side
+        elif not driving:
+            req["request"], driving = ("follow" if side == "following" else "lead"), True
+        want = {"follow": "following", "lead": "leading"}.get(req["request"], req.get("mode"))
+        if want == side:
+            continue
+        end, added = _turn_about_at(rng, user, req["at"])
+        req["at"] = round(end + 0.05, 2)
+        shift += added
+        side = want
+    return shift
 
 
 # -- faults ----------------------------------------------------------------------------------------------
@@ -275,6 +361,7 @@ def _drive(rng: np.random.Generator) -> dict[str, Any]:
     }
     if rng.random() < 0.5:
         data["obstacles"] = _obstacles(rng)
+    data["duration_s"] = round(duration + _sides_with_turn_abouts(rng, data["user"]), 2)
     return data
 
 
@@ -342,10 +429,12 @@ def _mixed(rng: np.random.Generator) -> dict[str, Any]:
         {"at": again + 3.0, "request": "disperse"},
     ]
     duration = again + 6.0
-    return {
+    data = {
         "duration_s": duration,
         "user": _user(rng, watch, 4.0, duration - 6.0),
         "robots": _robots(rng, n),
         "obstacles": _obstacles(rng) if rng.random() < 0.3 else [],
         "faults": _faults(rng, n, 2.0, faults_end, user=True),
     }
+    data["duration_s"] = round(duration + _sides_with_turn_abouts(rng, data["user"]), 2)
+    return data

@@ -4,13 +4,14 @@ shrinker's fault units, and every property fed a record that breaks it (and one 
 from __future__ import annotations
 
 import json
+import math
 import tomllib
 from typing import Any
 
 import pytest
 
 from petswarm.explore import properties as P
-from petswarm.explore.generate import FAMILIES, FAULT_KINDS, case
+from petswarm.explore.generate import FAMILIES, FAULT_KINDS, TURN_ABOUT_S, case
 from petswarm.explore.main import parse_families
 from petswarm.explore.shrink import fault_units, join_units
 from petswarm.explore.toml_out import dumps
@@ -30,6 +31,40 @@ def test_a_case_is_a_pure_function_of_seed_and_index_and_a_valid_scenario_file()
         seen_kinds |= {f.get("kind") for f in data.get("faults", [])}
     assert seen_families == set(FAMILIES)
     assert set(FAULT_KINDS) <= seen_kinds
+
+
+def test_the_user_turns_about_and_stands_before_every_change_of_side() -> None:
+    """Following <-> leading is the user's turn-about: each request that changes the robots' side comes right
+    after the user turned 180 degrees, and the user stands ``TURN_ABOUT_S`` while they turn round."""
+    switches = 0
+    for i in range(120):
+        data = case(1, i, "drive" if i % 2 else "mixed")
+        plan = parse(data).user
+        assert all(r.at < data["duration_s"] - 2.0 for r in plan.watch)  # the last request (disperse) still comes
+        side, driving = "following", False
+        for req in plan.watch:
+            want = {"follow": "following", "lead": "leading"}.get(req.request, req.args.get("mode"))
+            if req.request == "cancel":
+                driving = False
+            if want is None:
+                continue
+            if not driving and req.request == "mode":
+                assert want == side  # no mode change while the robot waits for a command
+                continue
+            if not driving:
+                assert want == side  # the side the robot stands on
+                driving = True
+                continue
+            if want != side:
+                switches += 1
+                # a turn of 180 degrees at 60-120 degrees/s began 1.5-3 s before the request
+                start = max(t for t in plan.turn_starts() if req.at - 3.06 <= t <= req.at - 1.5)
+                turned = plan.pose_at(req.at)[2] - plan.pose_at(start)[2]
+                assert abs((turned + math.pi) % (2 * math.pi) - math.pi) == pytest.approx(math.pi, abs=0.02)
+                for dt in (0.0, 1.0, 2.0, TURN_ABOUT_S - 0.1):  # standing while the robots turn round
+                    assert plan.pose_at(req.at + dt)[3:] == (0.0, 0.0, 0.0)
+                side = want
+    assert switches > 20
 
 
 def test_families_and_weights_are_checked() -> None:
