@@ -271,6 +271,8 @@ class DriverCore:
         self.owner: str | None = None
         self.fix: UserFix | None = None
         self.fix_at = -math.inf
+        self.reliable_at = -math.inf
+        """When the robot last had a reliable LF fix (inside the valid range), or ended a turn-about."""
         self.activity = Activity(Movement.STOP, False, 0.0, 0.0)
         self.sensors: OwnSensors | None = None
         """The latest own-body sample (AHRS yaw, odometry, ultrasonic ring)."""
@@ -625,6 +627,7 @@ class DriverCore:
         error = wrap(self.turn_to - sensors.yaw_rad)
         if abs(error) < TURN_DONE_RAD:
             self.turn_to, self.fix, self.fix_at, self.opening_rate = None, None, now, None
+            self.reliable_at = now  # the lost-user time runs from here for the first fix facing the new way
             self._record("turn_about_done")
             return None
         limit = self.config.pet.limits.max_omega
@@ -726,21 +729,23 @@ class DriverCore:
 
     def _lost(self, now: float, state: RobotState) -> bool:
         """Emergency per the spec: no reliable LF fix for LOST_AFTER_S; back when one comes again."""
-        # lost = too far (the LF fix's valid range is 2 m) or no fix at all; a user off the axis is not lost
+        # lost = too far (the LF fix's valid range is 2 m) or no fix at all, for LOST_AFTER_S; a user off the axis
+        # is not lost, and neither is one a fix or two puts just outside the range (a robot that overshot as its
+        # user stopped drives back meanwhile)
         if self.fix is not None and self.fix.distance_m <= LF_VALID_RANGE_M:
             self._far_limit_m = None  # back inside the LF's valid range: the single robot's rule again
         limit = max(LF_VALID_RANGE_M, self._far_limit_m or 0.0)
-        # no fix since a turn-about ended (it forgets the fix and restarts the clock): LOST_AFTER_S for the first
-        # one; a fix outside the valid range is lost at once, as before
-        in_range = self.fix is None or self.fix.distance_m <= limit
-        fresh = in_range and now - self.fix_at < LOST_AFTER_S
+        reliable = self.fix is not None and self.fix.distance_m <= limit
+        if reliable:
+            self.reliable_at = max(self.reliable_at, self.fix_at)
+        fresh = now - self.reliable_at < LOST_AFTER_S
         if state in (RobotState.FOLLOWING, RobotState.LEADING) and not fresh and self.fix_at > -math.inf:
             self.exception_from = state
             self.sequence.transition(RobotState.EMERGENCY, cause="user lost")
             if self.owner is not None:
                 self._emit(BleSend(self.owner, user_link.encode("alert", reason="user lost")))
             return True
-        if state == RobotState.EMERGENCY and fresh and self.fix is not None:  # found only by a fix
+        if state == RobotState.EMERGENCY and reliable and fresh:  # found only by a fix
             back, self.exception_from = self.exception_from or RobotState.FOLLOWING, None
             self.sequence.transition(back, cause="user found")
         return False

@@ -236,6 +236,25 @@ def test_following_drives_toward_a_user_ahead_and_stops_when_the_fix_is_lost_the
     assert core.sequence.state == RobotState.FOLLOWING  # user found: back to the mode before the emergency
 
 
+def test_a_fix_just_outside_the_valid_range_loses_the_user_only_after_lost_after_s() -> None:
+    """A robot that overshot as its user stopped sees him at 2.1 m for a fix or two and drives back: it is
+    lost only when no fix inside the 2 m range has come for LOST_AFTER_S."""
+    core = paired(RobotState.LEADING, "lead")
+    core.sensors_sample(sensors(0.02), 0.02)
+    core.ble_message(BELT, lf_ahead(1.5), 0.03)
+    run_until(core, 0.1)
+    for k in range(int(LOST_AFTER_S / TRACK_PERIOD_S)):  # every fix outside the range, until just before 2 s
+        now = 0.35 + k * TRACK_PERIOD_S
+        core.ble_message(BELT, lf_ahead(2.1), now)
+        actions = run_until(core, now + 0.06)
+        assert core.sequence.state == RobotState.LEADING and not of(actions, BleSend)
+        assert drives(actions)[-1].vx < 0  # backing toward the user behind
+    core.ble_message(BELT, lf_ahead(2.1), 0.03 + LOST_AFTER_S + 0.05)
+    actions = run_until(core, 0.03 + LOST_AFTER_S + 0.11)
+    assert core.sequence.state == RobotState.EMERGENCY
+    assert {"k": "alert", "reason": "user lost"} in [user_link.decode(a.payload) for a in of(actions, BleSend)]
+
+
 def test_leading_takes_the_user_behind_and_keeps_ahead_of_him() -> None:
     core = paired(RobotState.LEADING, "lead")
     assert core.mode == Mode.LEADING
