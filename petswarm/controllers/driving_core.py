@@ -281,6 +281,10 @@ class DriverCore:
         """What the controller wants before the safety stage: what the master broadcasts, so slaves ahead
         of it (leading) move on at the user's pace instead of waiting for a master they block."""
         self.mode = Mode.FOLLOWING
+        self.side_chosen = False
+        """Whether the user chose following or leading since pairing: until then the robot stands as he placed
+        it, and ``mode`` says nothing of which way it faces; after, it faces its user when following and away
+        from him when leading, and every change between them is a turn-about."""
         self.shape = self.config.shape
         self.spacing = self.config.spacing_m
         self.mirrored = False
@@ -500,9 +504,20 @@ class DriverCore:
         if state == RobotState.MASTER_DRIVING or turning_round:
             self._change_mode(Mode.LEADING if target == RobotState.LEADING else Mode.FOLLOWING, False)
             return
-        self.mode = Mode.LEADING if target == RobotState.LEADING else Mode.FOLLOWING
         if state != target:
-            self.sequence.transition(target, cause="watch")
+            self.sequence.transition(target, cause="watch")  # refused: nothing else changes
+        if target in STEERED:  # (remote control keeps the side the robot faces)
+            self._change_side(Mode.LEADING if target == RobotState.LEADING else Mode.FOLLOWING)
+
+    def _change_side(self, mode: Mode) -> None:
+        """Following or leading chosen outside a driving state (waiting for a command, remote control, an
+        emergency): the robot faces its user in one, away in the other, so a change of side turns it round
+        here too, as in ``_change_mode``; the first choice after pairing turns nothing (the robot stands as
+        the user placed it)."""
+        if self.side_chosen and mode != self.mode:
+            self._start_turn_about()
+            self._record("mode_change", frm=str(self.mode), to=str(mode))
+        self.mode, self.side_chosen = mode, True
 
     def gesture(self, gesture: Gesture, now: float) -> None:
         """A watch gesture: in remote control it moves the robot for ``REMOTE_HOLD_S``; a circle cancels."""
@@ -526,18 +541,22 @@ class DriverCore:
         to its other side. Change (``change_master``): the robot ``mode_change`` chooses takes the master's
         role (a ``HandOver`` action) and every robot keeps its place; when Table 3 chooses the master itself,
         or the handover fails, the No-change column applies."""
-        if mode == self.mode:
+        state = self.sequence.state
+        if mode == self.mode or (not self.side_chosen and state == RobotState.COMMAND_WAITING):
+            self.mode, self.side_chosen = mode, True  # (no side chosen yet: the robot stands as placed)
             return
         self._start_turn_about()
         swarm = self.formation.swarm
-        if self.sequence.state == RobotState.MASTER_DRIVING and swarm is not None:
+        target = RobotState.LEADING if mode == Mode.LEADING else RobotState.FOLLOWING
+        if state == RobotState.MASTER_DRIVING and swarm is not None:
             self._change_swarm_mode(swarm, mode, change_master)
         else:
             self._record("mode_change", frm=str(self.mode), to=str(mode))
-            target = RobotState.LEADING if mode == Mode.LEADING else RobotState.FOLLOWING
-            if self.sequence.state in (RobotState.FOLLOWING, RobotState.LEADING):
+            if state in (RobotState.FOLLOWING, RobotState.LEADING):
                 self.sequence.transition(target, cause="mode")
-        self.mode = mode
+            elif self.exception_from is not None:  # remote control or an emergency: "return" / "user found"
+                self.exception_from = target  # comes back to the side the robot now faces
+        self.mode, self.side_chosen = mode, True
 
     def _change_swarm_mode(self, swarm: SwarmInfo, mode: Mode, change_master: bool) -> None:
         chain = (swarm.master, *swarm.members)
@@ -596,7 +615,7 @@ class DriverCore:
         self.shape, self.spacing = shape, spacing
         self.tracker, self._fix_seen, self.drive_state_msg = RelativeTracker(), None, None
         if msg is not None:
-            self.mode = Mode(msg.mode)
+            self.mode, self.side_chosen = Mode(msg.mode), True
         if swarm.number == 0 and msg is not None:
             self.owner = msg.owner or None
             self._emit(SetUser(user_id(msg.owner)))
@@ -677,6 +696,11 @@ class DriverCore:
         self.intent = MotorCommand()
         if state == RobotState.SLAVE_DRIVING:
             return self._slave(now, dt, self._ranges())
+        if state in (RobotState.REMOTE_CONTROL, RobotState.COMMAND_WAITING):
+            turn = self._turning(now)  # a change of side asked for here turns the robot round at once
+            if turn is not None:
+                self.intent = turn
+                return turn
         if state == RobotState.REMOTE_CONTROL:
             return safety(self.remote if now < self.remote_until else MotorCommand(), self._ranges(), self.config.pet)
         if not self._tracking(state) or state in (RobotState.COMMAND_WAITING, RobotState.ORGANIZING):

@@ -329,6 +329,40 @@ def test_a_turn_about_gives_the_first_fix_facing_the_new_way_the_lost_user_time(
     assert {"k": "alert", "reason": "user lost"} in [user_link.decode(a.payload) for a in of(actions, BleSend)]
 
 
+def test_the_first_choice_after_pairing_turns_nothing_and_a_later_change_of_side_turns_in_any_state() -> None:
+    core = paired(RobotState.LEADING, "lead")  # the user placed the robot ahead of him: no turn
+    assert not logs(core.actions(), "turn_about") and core.turn_to is None
+    core.sensors_sample(sensors(0.02, yaw=0.0), 0.02)
+    core.ble_message(BELT, ble("request", request="cancel"), 0.03)
+    core.ble_message(BELT, ble("request", request="follow"), 0.04)  # from command-waiting: faces him now
+    assert core.sequence.state == RobotState.FOLLOWING and logs(core.actions(), "turn_about")
+    [cmd] = drives(run_until(core, 0.06))
+    assert cmd.vx == 0 and cmd.vy == 0 and abs(cmd.omega) == pytest.approx(1.5)
+
+
+def test_a_mode_change_in_command_waiting_or_remote_control_turns_the_robot_at_once() -> None:
+    core = paired(RobotState.LEADING, "lead")
+    core.sensors_sample(sensors(0.02, yaw=0.0), 0.02)
+    core.ble_message(BELT, ble("request", request="cancel"), 0.03)
+    core.ble_message(BELT, ble("request", request="mode", mode="following"), 0.04)
+    assert core.sequence.state == RobotState.COMMAND_WAITING and core.mode == Mode.FOLLOWING
+    [cmd] = drives(run_until(core, 0.06))
+    assert abs(cmd.omega) == pytest.approx(1.5)  # turning round while it waits for a command
+
+    core = paired(RobotState.LEADING, "lead")
+    core.sensors_sample(sensors(0.02, yaw=0.0, ranges=0.3), 0.02)
+    core.ble_message(BELT, lf_ahead(1.0), 0.03)
+    run_until(core, 0.06)  # an obstacle ahead: remote control, the user points the way
+    assert core.sequence.state == RobotState.REMOTE_CONTROL and core.exception_from == RobotState.LEADING
+    core.actions()
+    core.ble_message(BELT, ble("request", request="mode", mode="following"), 0.07)
+    assert core.exception_from == RobotState.FOLLOWING  # "return" comes back to the side it now faces
+    [cmd] = drives(run_until(core, 0.11))
+    assert abs(cmd.omega) == pytest.approx(1.5)
+    core.ble_message(BELT, ble("request", request="remote"), 0.12)  # remote control keeps the side
+    assert core.mode == Mode.FOLLOWING
+
+
 # -- the swarm: Table 3 ------------------------------------------------------------------------------
 
 
