@@ -150,7 +150,7 @@ def _path(rng: np.random.Generator, seconds: float) -> list[dict[str, Any]]:
     return legs
 
 
-def _leg_seconds(leg: dict[str, Any]) -> float:
+def leg_seconds(leg: dict[str, Any]) -> float:
     """How long a path leg lasts (s)."""
     if "walk" in leg:
         return float(leg["walk"]) / float(leg["speed"])
@@ -159,9 +159,10 @@ def _leg_seconds(leg: dict[str, Any]) -> float:
     return float(leg["stop"])
 
 
-def _split_leg(leg: dict[str, Any], dt: float) -> list[dict[str, Any]]:
-    """``leg`` as the part of its first ``dt`` seconds and the rest (a part shorter than 10 ms is left out)."""
-    rest = _leg_seconds(leg) - dt
+def _split_leg(leg: dict[str, Any], dt: float) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """``leg`` as the part of its first ``dt`` seconds and the rest, each as a list of one leg (or none, when
+    shorter than 10 ms)."""
+    rest = leg_seconds(leg) - dt
     if "walk" in leg:
         speed = leg["speed"]
         parts = [{"walk": round(speed * dt, 3), "speed": speed}, {"walk": round(speed * rest, 3), "speed": speed}]
@@ -173,7 +174,8 @@ def _split_leg(leg: dict[str, Any], dt: float) -> list[dict[str, Any]]:
         ]
     else:
         parts = [{"stop": round(dt, 3)}, {"stop": round(rest, 3)}]
-    return [part for part, seconds in zip(parts, (dt, rest), strict=True) if seconds >= 0.01 and _leg_seconds(part) > 0]
+    kept = [[p] if seconds >= 0.01 and leg_seconds(p) > 0 else [] for p, seconds in zip(parts, (dt, rest), strict=True)]
+    return kept[0], kept[1]
 
 
 def _turn_about_at(rng: np.random.Generator, user: dict[str, Any], t: float) -> tuple[float, float]:
@@ -188,16 +190,17 @@ def _turn_about_at(rng: np.random.Generator, user: dict[str, Any], t: float) -> 
     else:
         clock, out = walk_at, []
         for k, leg in enumerate(legs):
-            seconds = _leg_seconds(leg)
+            seconds = leg_seconds(leg)
             if clock + seconds > t:
-                out += [*_split_leg(leg, t - clock)[:1], *added, *_split_leg(leg, t - clock)[1:], *legs[k + 1 :]]
+                first, last = _split_leg(leg, t - clock)
+                out += [*first, *added, *last, *legs[k + 1 :]]
                 break
             out.append(leg)
             clock += seconds
         else:  # past the path's end: stand until then
             out += ([{"stop": round(t - clock, 3)}] if t - clock >= 0.01 else []) + added
         user["path"] = out
-    return t + _leg_seconds(turn), _leg_seconds(turn) + TURN_ABOUT_S
+    return t + leg_seconds(turn), leg_seconds(turn) + TURN_ABOUT_S
 
 
 def _sides_with_turn_abouts(rng: np.random.Generator, user: dict[str, Any]) -> float:
@@ -206,29 +209,19 @@ def _sides_with_turn_abouts(rng: np.random.Generator, user: dict[str, Any]) -> f
     Following and leading put the robots on opposite sides of the user (about 1 m behind, about 1 m ahead), and
     the LF fix cannot tell front from back (pet-bot-wearable.md, "Locating the user": y >= 0), so a robot cannot
     pass its user: a change between them is the user's turn-about (the paper's trajectory "a turn-about that
-    switches following into leading"), each robot turning round where it stands. A robot that is driving
-    (following, leading, master of a swarm) turns at once; one waiting for a command does not move, so the side
-    the user then selects (or a mode he asks for) is the one it stands on (Table 3 is a driving-mode change).
-    Requests are rewritten to that side where needed; returns the seconds added to the timeline (every later
+    switches following into leading"), each robot turning round where it stands. The first choice (the robots
+    stand behind the user: following) turns nothing. Returns the seconds added to the timeline (every later
     request moves on by the time the user spent turning and standing)."""
-    side, driving, shift = "following", False, 0.0
+    side, shift = None, 0.0
     for req in user["watch"]:
         req["at"] = round(req["at"] + shift, 2)
-        kind = req["request"]
-        if kind == "cancel":
-            driving = False
-        if kind not in ("follow", "lead", "mode"):
-            continue
-        if not driving and kind == "mode":
-            req["mode"] = side
-        elif not driving:
-            req["request"], driving = ("follow" if side == "following" else "lead"), True
         want = {"follow": "following", "lead": "leading"}.get(req["request"], req.get("mode"))
-        if want == side:
+        if want is None or want == side:
             continue
-        end, added = _turn_about_at(rng, user, req["at"])
-        req["at"] = round(end + 0.05, 2)
-        shift += added
+        if side is not None:
+            end, added = _turn_about_at(rng, user, req["at"])
+            req["at"] = round(end + 0.05, 2)
+            shift += added
         side = want
     return shift
 

@@ -13,7 +13,7 @@ import pytest
 from petswarm.explore import properties as P
 from petswarm.explore.generate import FAMILIES, FAULT_KINDS, TURN_ABOUT_S, case
 from petswarm.explore.main import parse_families
-from petswarm.explore.shrink import fault_units, join_units
+from petswarm.explore.shrink import candidates, fault_units, join_units
 from petswarm.explore.toml_out import dumps
 from petswarm.scenario import parse
 
@@ -41,21 +41,14 @@ def test_the_user_turns_about_and_stands_before_every_change_of_side() -> None:
         data = case(1, i, "drive" if i % 2 else "mixed")
         plan = parse(data).user
         assert all(r.at < data["duration_s"] - 2.0 for r in plan.watch)  # the last request (disperse) still comes
-        side, driving = "following", False
+        side = None
         for req in plan.watch:
             want = {"follow": "following", "lead": "leading"}.get(req.request, req.args.get("mode"))
-            if req.request == "cancel":
-                driving = False
-            if want is None:
+            if want is None or want == side:
                 continue
-            if not driving and req.request == "mode":
-                assert want == side  # no mode change while the robot waits for a command
-                continue
-            if not driving:
-                assert want == side  # the side the robot stands on
-                driving = True
-                continue
-            if want != side:
+            if side is None:
+                assert want == "following"  # the robots stand behind the user
+            else:
                 switches += 1
                 # a turn of 180 degrees at 60-120 degrees/s began 1.5-3 s before the request
                 start = max(t for t in plan.turn_starts() if req.at - 3.06 <= t <= req.at - 1.5)
@@ -63,8 +56,26 @@ def test_the_user_turns_about_and_stands_before_every_change_of_side() -> None:
                 assert abs((turned + math.pi) % (2 * math.pi) - math.pi) == pytest.approx(math.pi, abs=0.02)
                 for dt in (0.0, 1.0, 2.0, TURN_ABOUT_S - 0.1):  # standing while the robots turn round
                     assert plan.pose_at(req.at + dt)[3:] == (0.0, 0.0, 0.0)
-                side = want
+            side = want
     assert switches > 20
+
+
+def test_shrinking_the_path_keeps_the_users_turn_abouts_and_the_requests_place_on_it() -> None:
+    def turn_abouts(path: list[dict[str, Any]]) -> list[int]:
+        return [k for k, leg in enumerate(path) if abs(leg.get("turn", 0)) == 180 and path[k + 1] == {"stop": 3.0}]
+
+    data = case(1, 8, "mixed")  # two turn-abouts and two other turns
+    path = data["user"]["path"]
+    assert len(turn_abouts(path)) == 2 and sum("turn" in leg for leg in path) == 4
+    simpler = dict(candidates(data))
+    for what in ("a straight path", "the user standing"):
+        plan, shrunk = parse(data).user, parse(simpler[what]).user
+        assert shrunk.path_end_s == pytest.approx(plan.path_end_s, abs=0.01)
+        # the turn-abouts come when they came, right before their requests
+        assert shrunk.turn_starts() == pytest.approx([plan.turn_starts()[k] for k in (0, 2)], abs=0.01)
+        assert turn_abouts(simpler[what]["user"]["path"]) == turn_abouts(path)
+        assert sum("turn" in leg for leg in simpler[what]["user"]["path"]) == 2
+    assert all("walk" not in leg for leg in simpler["the user standing"]["user"]["path"])
 
 
 def test_families_and_weights_are_checked() -> None:
