@@ -178,10 +178,39 @@ def _split_leg(leg: dict[str, Any], dt: float) -> tuple[list[dict[str, Any]], li
     return kept[0], kept[1]
 
 
-def _turn_about_at(rng: np.random.Generator, user: dict[str, Any], t: float) -> tuple[float, float]:
-    """Make the user turn about at ``t`` (s after the start; a leg under way is cut there) and stand
+def turns_about(path: list[dict[str, Any]]) -> bool:
+    """Whether the user's path has a turn-about before a change of side (a turn, then ``TURN_ABOUT_S`` standing)."""
+    return any("turn" in leg and path[k + 1 : k + 2] == [{"stop": TURN_ABOUT_S}] for k, leg in enumerate(path))
+
+
+def _heading_and_reference(user: dict[str, Any], t: float, changes: list[tuple[float, str]]) -> tuple[float, float]:
+    """The user's heading at ``t`` (degrees) and the heading the robots' side is taken from: following, the robots
+    are behind the way he last walked (they do not circle him when he turns on the spot); leading, ahead of the way
+    he faces (they drive an arc when he turns). ``changes``: (when, new side) of the changes of side before ``t``,
+    each made while he stands after his turn."""
+    heading = float(user["start"][2])
+    side, reference, clock = "following", heading, float(user["walk_at"])
+    pending = sorted(changes)
+    for leg in user["path"]:
+        if clock >= t:
+            break
+        seconds = leg_seconds(leg)
+        while pending and pending[0][0] < min(t, clock + seconds):  # a change made during this leg (a stop)
+            side, reference = pending.pop(0)[1], heading
+        if "turn" in leg:
+            heading += math.copysign(float(leg["rate"]) * min(seconds, t - clock), float(leg["turn"]))
+        elif "walk" in leg and side == "following":
+            reference = heading
+        clock += seconds
+    for _, new in (c for c in pending if c[0] < t):
+        side, reference = new, heading
+    return heading, (heading if side == "leading" else reference)
+
+
+def _turn_about_at(rng: np.random.Generator, user: dict[str, Any], t: float, angle: float) -> tuple[float, float]:
+    """Make the user turn by ``angle`` degrees at ``t`` (s after the start; a leg under way is cut there) and stand
     ``TURN_ABOUT_S`` after it: (when the turn ends, the seconds added to the user's timeline)."""
-    turn = {"turn": float(rng.choice([-180.0, 180.0])), "rate": round(float(rng.uniform(60, 120)), 1)}
+    turn = {"turn": round(angle, 1), "rate": round(float(rng.uniform(60, 120)), 1)}
     added = [turn, {"stop": TURN_ABOUT_S}]
     legs, walk_at = user["path"], float(user["walk_at"])
     if t <= walk_at:  # still standing where the path starts: the path now starts with the turn
@@ -212,16 +241,22 @@ def _sides_with_turn_abouts(rng: np.random.Generator, user: dict[str, Any]) -> f
     switches following into leading"), each robot turning round where it stands. The first choice (the robots
     stand behind the user: following) turns nothing. Returns the seconds added to the timeline (every later
     request moves on by the time the user spent turning and standing)."""
-    side, shift = None, 0.0
+    side, shift, changes = None, 0.0, []
     for req in user["watch"]:
         req["at"] = round(req["at"] + shift, 2)
         want = {"follow": "following", "lead": "leading"}.get(req["request"], req.get("mode"))
         if want is None or want == side:
             continue
         if side is not None:
-            end, added = _turn_about_at(rng, user, req["at"])
+            heading, reference = _heading_and_reference(user, req["at"], changes)
+            # to leading: face the robots behind him; to following: turn his back on the robots ahead of him
+            angle = (reference + 180.0 - heading + 180.0) % 360.0 - 180.0 if side == "following" else 180.0
+            if abs(angle) > 179.5:
+                angle = float(rng.choice([-180.0, 180.0]))
+            end, added = _turn_about_at(rng, user, req["at"], angle if abs(angle) >= 1.0 else math.copysign(1.0, angle))
             req["at"] = round(end + 0.05, 2)
             shift += added
+            changes.append((req["at"], want))
         side = want
     return shift
 

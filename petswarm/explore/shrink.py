@@ -9,12 +9,10 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
-from petswarm.explore.generate import TURN_ABOUT_S, leg_seconds
+from petswarm.explore.generate import turns_about
 from petswarm.explore.toml_out import dumps
 from petswarm.scenario import ACTIONS
 
-TURN_ABOUT_STAND = {"stop": TURN_ABOUT_S}
-"""The leg after the generator's turn-about: the user stands while the robots turn round."""
 Runner = Callable[[dict[str, Any]], dict[str, Any]]
 """Runs a case's tables: its result (``run_case``'s)."""
 
@@ -103,12 +101,12 @@ def candidates(data: dict[str, Any]) -> Iterator[tuple[str, dict[str, Any]]]:
             yield f"without obstacle {k}", {**data, "obstacles": data["obstacles"][:k] + data["obstacles"][k + 1 :]}
     user = data.get("user")
     path = user.get("path", []) if user else []
-    straight = _simpler_path(path, keep_walks=True)
-    if straight != path:
-        yield "a straight path", {**data, "user": {**user, "path": straight}}
-    standing = _simpler_path(path, keep_walks=False)
-    if standing != path and standing != straight:
-        yield "the user standing", {**data, "user": {**user, "path": standing}}
+    # a path with the user's turn-abouts before changes of side stays whole: each turns him to face robots placed
+    # by the walks and turns before it, so without those it would ask what the generator never asks
+    if path and not turns_about(path):
+        if any("turn" in leg for leg in path):
+            yield "a straight path", {**data, "user": {**user, "path": [leg for leg in path if "turn" not in leg]}}
+        yield "the user standing", {**data, "user": {**user, "path": []}}
     duration = float(data.get("duration_s", 30.0))
     last = max([float(f["at"]) for f in data.get("faults", [])] + [0.0])
     if user:
@@ -116,20 +114,6 @@ def candidates(data: dict[str, Any]) -> Iterator[tuple[str, dict[str, Any]]]:
     shorter = round(max(last + 2.0, duration * 0.75), 2)
     if shorter < duration - 0.5:
         yield f"a {shorter:g} s run", {**data, "duration_s": shorter}
-
-
-def _simpler_path(path: list[dict[str, Any]], *, keep_walks: bool) -> list[dict[str, Any]]:
-    """The user's path with every turn (and, unless ``keep_walks``, every walk) made a stop of the same length, so
-    the requests keep their place on it; the user's turn-abouts before a change of side (a half turn, then
-    ``TURN_ABOUT_S`` standing) are kept: without them the case would ask what the generator never asks."""
-    out = []
-    for k, leg in enumerate(path):
-        turn_about = "turn" in leg and abs(float(leg["turn"])) == 180.0 and path[k + 1 : k + 2] == [TURN_ABOUT_STAND]
-        if ("turn" in leg and not turn_about) or ("walk" in leg and not keep_walks):
-            out.append({"stop": round(leg_seconds(leg), 3)})
-        else:
-            out.append(leg)
-    return out
 
 
 def _fewer_robots(data: dict[str, Any], count: int) -> dict[str, Any] | None:

@@ -11,7 +11,7 @@ from typing import Any
 import pytest
 
 from petswarm.explore import properties as P
-from petswarm.explore.generate import FAMILIES, FAULT_KINDS, TURN_ABOUT_S, case
+from petswarm.explore.generate import FAMILIES, FAULT_KINDS, TURN_ABOUT_S, case, turns_about
 from petswarm.explore.main import parse_families
 from petswarm.explore.shrink import candidates, fault_units, join_units
 from petswarm.explore.toml_out import dumps
@@ -33,15 +33,21 @@ def test_a_case_is_a_pure_function_of_seed_and_index_and_a_valid_scenario_file()
     assert set(FAULT_KINDS) <= seen_kinds
 
 
-def test_the_user_turns_about_and_stands_before_every_change_of_side() -> None:
-    """Following <-> leading is the user's turn-about: each request that changes the robots' side comes right
-    after the user turned 180 degrees, and the user stands ``TURN_ABOUT_S`` while they turn round."""
+def _angle(a: float, b: float) -> float:
+    """``a - b`` wrapped to [-pi, pi)."""
+    return (a - b + math.pi) % (2 * math.pi) - math.pi
+
+
+def test_the_user_turns_to_put_the_robots_on_their_new_side_before_every_change_and_stands() -> None:
+    """Following, the robots are behind the way the user last walked; leading, ahead of the way he faces. Each
+    request that changes the side comes right after the user turned so that they are on the new side (to
+    leading: he faces them; to following: a half turn), and he stands ``TURN_ABOUT_S`` while they turn round."""
     switches = 0
     for i in range(120):
         data = case(1, i, "drive" if i % 2 else "mixed")
         plan = parse(data).user
         assert all(r.at < data["duration_s"] - 2.0 for r in plan.watch)  # the last request (disperse) still comes
-        side = None
+        side, since = None, 0.0
         for req in plan.watch:
             want = {"follow": "following", "lead": "leading"}.get(req.request, req.args.get("mode"))
             if want is None or want == side:
@@ -50,32 +56,27 @@ def test_the_user_turns_about_and_stands_before_every_change_of_side() -> None:
                 assert want == "following"  # the robots stand behind the user
             else:
                 switches += 1
-                # a turn of 180 degrees at 60-120 degrees/s began 1.5-3 s before the request
-                start = max(t for t in plan.turn_starts() if req.at - 3.06 <= t <= req.at - 1.5)
-                turned = plan.pose_at(req.at)[2] - plan.pose_at(start)[2]
-                assert abs((turned + math.pi) % (2 * math.pi) - math.pi) == pytest.approx(math.pi, abs=0.02)
+                turn_start = max(t for t in plan.turn_starts() if t <= req.at)
+                assert req.at - turn_start <= 3.1  # the turn (at most 180 degrees at 60 deg/s or more) just ended
+                if want == "leading":  # faces the robots: behind the way he last walked (or faced, at the start)
+                    samples = [since + 0.01 * k for k in range(int((turn_start - since) / 0.01) + 1)]
+                    walked = [plan.pose_at(t)[2] for t in samples if plan.pose_at(t)[3:5] != (0.0, 0.0)]
+                    reference = walked[-1] if walked else plan.pose_at(since)[2]
+                else:  # turns his back on the robots ahead of him
+                    reference = plan.pose_at(turn_start)[2]
+                assert abs(_angle(plan.pose_at(req.at)[2], reference + math.pi)) < math.radians(1.5)
                 for dt in (0.0, 1.0, 2.0, TURN_ABOUT_S - 0.1):  # standing while the robots turn round
                     assert plan.pose_at(req.at + dt)[3:] == (0.0, 0.0, 0.0)
-            side = want
+            side, since = want, req.at
     assert switches > 20
 
 
-def test_shrinking_the_path_keeps_the_users_turn_abouts_and_the_requests_place_on_it() -> None:
-    def turn_abouts(path: list[dict[str, Any]]) -> list[int]:
-        return [k for k, leg in enumerate(path) if abs(leg.get("turn", 0)) == 180 and path[k + 1] == {"stop": 3.0}]
-
-    data = case(1, 8, "mixed")  # two turn-abouts and two other turns
-    path = data["user"]["path"]
-    assert len(turn_abouts(path)) == 2 and sum("turn" in leg for leg in path) == 4
-    simpler = dict(candidates(data))
-    for what in ("a straight path", "the user standing"):
-        plan, shrunk = parse(data).user, parse(simpler[what]).user
-        assert shrunk.path_end_s == pytest.approx(plan.path_end_s, abs=0.01)
-        # the turn-abouts come when they came, right before their requests
-        assert shrunk.turn_starts() == pytest.approx([plan.turn_starts()[k] for k in (0, 2)], abs=0.01)
-        assert turn_abouts(simpler[what]["user"]["path"]) == turn_abouts(path)
-        assert sum("turn" in leg for leg in simpler[what]["user"]["path"]) == 2
-    assert all("walk" not in leg for leg in simpler["the user standing"]["user"]["path"])
+def test_shrinking_keeps_a_path_with_turn_abouts_whole() -> None:
+    turned = case(1, 8, "mixed")
+    assert turns_about(turned["user"]["path"])
+    assert not {"a straight path", "the user standing"} & {what for what, _ in candidates(turned)}
+    plain = case(1, 0, "follow")
+    assert not turns_about(plain["user"]["path"]) and "the user standing" in {what for what, _ in candidates(plain)}
 
 
 def test_families_and_weights_are_checked() -> None:
