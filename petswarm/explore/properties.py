@@ -9,6 +9,7 @@ opinion of itself. Pure functions of a ``Record``: the unit tests feed each one 
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -245,10 +246,65 @@ def no_exception(record: Record) -> list[Violation]:
 @prop("checker_invariants", "safety", ALL)
 def checker_invariants(record: Record) -> list[Violation]:
     """The checker's invariants (counters add up, records complete and ordered, transitions chain, every robot
-    ends waiting or with its user, no two IR modules at once) and the run's own checks."""
-    out = [Violation(f"invariant violated: {text}") for text in record.invariants]
+    ends waiting or with its user, no two IR modules at once) and the run's own checks. A robot that ends in
+    emergency because its user asked it to follow or lead from beyond the LF's range, having walked away while it
+    stood (waiting for a command, in remote control), did what the spec says (``_lost_when_asked_from_afar``)."""
+    texts = [t for t in record.invariants if not _lost_when_asked_from_afar(record, t)]
+    out = [Violation(f"invariant violated: {text}") for text in texts]
     problems = [p for p in record.summary.get("problems", []) if not p.startswith("invariant violated")]
     return out + [Violation(f"run check: {p}") for p in problems]
+
+
+LF_VALID_RANGE_M = 2.0
+"""The LF fix's valid range (pet-bot-wearable.md): a user farther than this from his robot is lost to it."""
+REQUEST_TO_LOSS_S = 0.1
+"""A robot judges its user on its next control step (20 Hz) after a request."""
+
+
+def _lost_when_asked_from_afar(record: Record, invariant: str) -> bool:
+    """Whether ``invariant`` is a robot's end in emergency that the spec asks for: the robot stood (waiting for a
+    command, in remote control after an obstacle, or already lost) while its user walked on, and he then asked
+    it to follow or lead from beyond the LF's valid range (its true distance from the world log). Following
+    or leading, a robot too far from its user goes to emergency (pet-bot-wearable.md, Robot states); one that
+    lost him while driving with him is still a failure, and so is one he asked from within the range."""
+    node = invariant.split(":", 1)[0]
+    if not invariant.endswith("ends in emergency, not waiting or driving with its user"):
+        return False
+    events = record.events.get(node, [])
+    losses = [
+        e for e in events if e["kind"] == "state" and e.get("to") == "emergency" and e.get("cause") == "user lost"
+    ]
+    if not losses:
+        return False
+    lost = losses[-1]["mono"]
+    if any(e["kind"] == "state" and e.get("cause") == "user found" and e["mono"] > lost for e in events):
+        return False
+    asked = [
+        e["mono"]
+        for e in events
+        if e["kind"] == "watch_request"
+        and e.get("request") in ("follow", "lead", "mode")
+        and 0 <= lost - e["mono"] <= REQUEST_TO_LOSS_S
+    ]
+    if not asked:
+        return False
+    before = record.state_at(node, asked[-1] - 1e-6).get("to")
+    return before in ("command-waiting", "remote-control", "emergency") and (
+        _true_distance(record, node, asked[-1]) > LF_VALID_RANGE_M
+    )
+
+
+def _true_distance(record: Record, node: str, t: float) -> float:
+    """``node``'s distance from the user at the world tick nearest ``t`` (0 when the log has neither)."""
+    ticks = [tick for tick in record.world if tick.get("bodies")]
+    if not ticks:
+        return 0.0
+    tick = min(ticks, key=lambda w: abs(w["t_us"] / 1e6 - t))
+    bodies = {b["id"]: b for b in tick["bodies"]}
+    if node not in bodies or "user" not in bodies:
+        return 0.0
+    robot, user = bodies[node], bodies["user"]
+    return math.hypot(robot["x"] - user["x"], robot["y"] - user["y"])
 
 
 def claims(record: Record) -> list[tuple[float, float, str, str, int]]:

@@ -194,6 +194,42 @@ def test_roster_agreement_gives_a_master_its_rounds_to_drop_a_member_that_left_u
     assert P.roster_agreement(killed_member(6.5 + P.MEMBER_DROP_S + 3.5))
 
 
+def test_checker_invariants_pass_a_robot_lost_when_asked_to_follow_from_beyond_the_lf_range() -> None:
+    ends = "robot-1: ends in emergency, not waiting or driving with its user"
+
+    def asked(before: str, user_m: float) -> P.Record:
+        robot = [
+            _state(1.0, "command-waiting", "following", cause="watch"),
+            _state(2.0, "following", before, cause="cancel" if before == "command-waiting" else "obstacle ahead"),
+            _ev("watch_request", 5.8, request="follow"),
+            _state(5.8, before, "following", cause="watch"),
+            _state(5.85, "following", "emergency", cause="user lost"),
+            _ev("watch_request", 11.4, request="organize"),
+            _state(11.4, "emergency", "organizing", session=3),
+            _state(11.5, "organizing", "master-driving", session=3),
+            _state(14.4, "master-driving", "emergency", session=3),  # the dispersal restores it
+        ]
+        record = _record(**{"robot-1": robot})
+        record.__dict__["invariants"] = [ends]
+        tick = {
+            "t_us": 5_800_000,
+            "bodies": [{"id": "robot-1", "x": 0.0, "y": 0.0}, {"id": "user", "x": 0.0, "y": user_m}],
+        }
+        record.world_lines = [json.dumps(tick)]
+        return record
+
+    # the user walked away from a robot waiting for a command (or in remote control), then asked from 2.6 m
+    assert P.checker_invariants(asked("command-waiting", 2.6)) == []
+    assert P.checker_invariants(asked("remote-control", 2.6)) == []
+    # asked from 1.5 m: the robot should have found him
+    [violation] = P.checker_invariants(asked("command-waiting", 1.5))
+    assert "ends in emergency" in violation.what
+    # lost while following him (no request): a failure whatever the distance
+    driving = asked("command-waiting", 2.6)
+    driving.events["robot-1"] = [e for e in driving.events["robot-1"] if e["kind"] != "watch_request"]
+    assert P.checker_invariants(driving)
+
+
 def test_pan_hearing_fails_a_foreign_pan_frame() -> None:
     [violation] = P.pan_hearing(_record(**{"robot-2": [_ev("foreign_pan", 2.5, dst_pan=0x1000, pan=0x2222, src=3)]}))
     assert violation.who == ("robot-2",) and "0x1000" in violation.what
