@@ -33,6 +33,7 @@ EPILOG = """examples:
   petswarm swarm status --robot 2               one robot's state, swarm and IR fixes of its neighbours
   petswarm stats                                the hub's counters per node and per channel
   petswarm report runs/<time>-<seed>            a recorded run's summary and plots
+  petswarm export runs/<time>-<seed> --mcap run.mcap   the record as MCAP, for Foxglove
   petswarm watch --world lab                    a web page drawing the world live (--replay RUN: a record)
   petswarm bench hub|organize|ir|reaction|surround|scale|start   the benchmarks (figures, JSON, plots)
 
@@ -284,6 +285,18 @@ def build_parser() -> argparse.ArgumentParser:
         "exactly from its seed (each run's digest is in the results), wall runs real processes over zenoh",
     )
 
+    export = sub.add_parser(
+        "export",
+        help="write a run record as an MCAP file for Foxglove (docs/FOXGLOVE.md)",
+        description="A run record (any clock) as one MCAP file: the world as Foxglove scenes and transforms, IR "
+        "modes and fixes, every radio frame on a channel per node, each node's events as logs, counters; the "
+        "manifest and summary as metadata; every message at the run's model time. Needs the foxglove extra.",
+    )
+    export.add_argument("run", help="a run record directory (runs/<time>-<seed>)")
+    export.add_argument("--mcap", metavar="FILE", required=True, help="the MCAP file to write")
+    export.add_argument("--force", action="store_true", help="replace FILE when it exists")
+    export.add_argument("--json", action="store_true", help="print the messages per topic, size and time as JSON")
+
     rep = sub.add_parser("report", help="print a run record's summary and render its plots to PNG")
     rep.add_argument("run", help="a run record directory (runs/<time>-<seed>)")
     rep.add_argument("--out", help="directory for report.png (default: the run directory)")
@@ -410,7 +423,7 @@ def main(argv: list[str] | None = None, parser: argparse.ArgumentParser | None =
     args = (parser or build_parser()).parse_args(argv)
     commands = {"hub": _hub, "user": _user, "robot": _robot, "run": _run, "stats": _stats, "bench": _bench}
     commands.update(swarm=_swarm, watch=_watch)
-    commands.update(report=_report, chaos=_chaos, experiment=_experiment, certs=_certs)
+    commands.update(report=_report, chaos=_chaos, experiment=_experiment, certs=_certs, export=_export)
     handler = commands[args.command]
     unfit = _use_security(args)
     if unfit:
@@ -666,6 +679,28 @@ def _chaos(args: argparse.Namespace) -> int:
     from cli.chaos import chaos_command
 
     return chaos_command(args)
+
+
+def _export(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from petswarm.lab.mcap_export import MissingExtra, RecordError, export_mcap
+
+    try:
+        result = export_mcap(Path(args.run), Path(args.mcap), overwrite=args.force)
+    except (RecordError, MissingExtra) as err:
+        print(f"petswarm export: {err}", file=sys.stderr)
+        return 2
+    if args.json:
+        body = {"mcap": str(result.path), "size_bytes": result.size_bytes, "elapsed_s": round(result.elapsed_s, 3)}
+        print(json.dumps({**body, "counts": result.counts, "time_origin": result.time_origin}, indent=2))
+        return 0
+    total = sum(result.counts.values())
+    print(
+        f"{result.path}: {total} messages on {len(result.counts)} topics, {result.size_bytes / 1e6:.2f} MB "
+        f"in {result.elapsed_s:.2f} s ({result.time_origin})"
+    )
+    return 0
 
 
 def _report(args: argparse.Namespace) -> int:
