@@ -250,6 +250,7 @@ def build_parser() -> argparse.ArgumentParser:
         "model time goes on without it (longer to hold a robot in a debugger)",
     )
     add_profile(run, "hub, robots and user alike (MAC, BLE, IR noise; MCU and UART per frame; recognition)")
+    _add_foxglove(run, "stream the run live to Foxglove while it goes, in any clock")
     run.add_argument(
         "--fail-fast",
         action="store_true",
@@ -270,6 +271,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--port", type=bounded(int, 0, 65535), default=8047, help="port of the page (default %(default)s; 0: any)"
     )
     watch.add_argument("--bind", default="127.0.0.1", help="address to serve on (default %(default)s; 0.0.0.0: all)")
+    _add_foxglove(watch, "also serve the hub's world live to Foxglove")
+    watch.add_argument(
+        "--record",
+        metavar="RUN",
+        help="with --foxglove: also stream this run record's events and radio frames as its processes write them",
+    )
 
     exp = sub.add_parser("experiment", help="run an experiment file: a run, a fault timeline, repetitions, seeds")
     exp.add_argument("file", help="a TOML experiment file (see examples/experiment-loss.toml)")
@@ -456,6 +463,37 @@ def _wall_hub_class(floor: bool) -> type[Any]:
     return RadioHub
 
 
+FOXGLOVE_PORT = 8765
+"""Foxglove's default port for a WebSocket connection (``--foxglove`` without a port)."""
+
+
+def _add_foxglove(parser: argparse.ArgumentParser, what: str) -> None:
+    """``--foxglove [PORT]``: a Foxglove WebSocket server with the run's channels (docs/FOXGLOVE.md)."""
+    parser.add_argument(
+        "--foxglove",
+        nargs="?",
+        const=FOXGLOVE_PORT,
+        type=bounded(int, 0, 65535),
+        metavar="PORT",
+        help=f"{what}: a Foxglove WebSocket server on PORT (default {FOXGLOVE_PORT}; 0: any free port); needs the "
+        "foxglove extra",
+    )
+
+
+def _foxglove_missing(command: str, args: argparse.Namespace) -> bool:
+    """With --foxglove and no Foxglove SDK: say which extra to install (True)."""
+    if getattr(args, "foxglove", None) is None:
+        return False
+    from petswarm.lab.foxglove_channels import MissingExtra, require_sdk
+
+    try:
+        require_sdk()
+    except MissingExtra as err:
+        print(f"petswarm {command}: --foxglove: {err}", file=sys.stderr)
+        return True
+    return False
+
+
 def _add_dead_after(parser: argparse.ArgumentParser, default: float | None, what: str) -> None:
     """The lockstep hub's patience for a silent node (``LockstepHub.dead_after_s``), on the hub or a run."""
     parser.add_argument("--dead-after", type=bounded(float, 0.5, 3600), default=default, help=f"{what} (default 10)")
@@ -631,6 +669,8 @@ def _run(args: argparse.Namespace) -> int:
         )
         return 2
 
+    if _foxglove_missing("run", args):
+        return 2
     if args.dead_after is not None and args.clock != "lockstep":
         print("petswarm run: --dead-after is the lockstep hub's patience; it needs --clock lockstep", file=sys.stderr)
         return 2
@@ -652,6 +692,7 @@ def _run(args: argparse.Namespace) -> int:
         fail_fast=args.fail_fast,
         profile=args.profile,
         dead_after_s=args.dead_after,
+        foxglove=args.foxglove,
     )
     return run(opts)
 

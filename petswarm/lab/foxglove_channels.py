@@ -351,6 +351,9 @@ class RunChannels:
         """One checked world frame (``watch_frames.check_frame``): scene, transforms, counters, IR modes."""
         stamp = self._stamp(t_ns)
         bodies = frame["bodies"]
+        for body in bodies:  # a robot's radio channel is there from its first frame: a live viewer subscribes to
+            if body["kind"] == "robot":  # it before the robot sends, and misses none of its frames
+                self._radio_channel(body["id"])
         entities = [self._body_entity(b, stamp) for b in bodies]
         entities.append(self._obstacles_entity(frame["obstacles"], stamp))
         links = self._links_entity(bodies, stamp)
@@ -380,6 +383,13 @@ class RunChannels:
         self._emit(self._counters, TOPIC_COUNTERS, counters, t_ns)
         if modes["transmit"] or modes["beacon"]:
             self._emit(self._ir_modes, TOPIC_IR_MODES, {"t_s": t_s, **modes}, t_ns)
+
+    def _radio_channel(self, node: str) -> Any:
+        topic = radio_topic(node)
+        channel = self._radio.get(topic)
+        if channel is None:
+            channel = self._radio[topic] = self._json(topic, RADIO_SCHEMA)
+        return channel
 
     def _body_entity(self, body: dict[str, Any], stamp: Any) -> Any:
         m = self._m
@@ -559,11 +569,7 @@ class RunChannels:
         """One frame of the air (a pcap record's bytes): on its sender's channel, and the air's totals."""
         node, body = describe_frame(psdu, self.air)
         t_s = t_ns / 1e9
-        topic = radio_topic(node)
-        channel = self._radio.get(topic)
-        if channel is None:
-            channel = self._radio[topic] = self._json(topic, RADIO_SCHEMA)
-        self._emit(channel, topic, {"t_s": t_s, "node": node, **body}, t_ns)
+        self._emit(self._radio_channel(node), radio_topic(node), {"t_s": t_s, "node": node, **body}, t_ns)
         air = self.air
         totals = {
             "t_s": t_s,

@@ -16,9 +16,10 @@ import json
 import signal
 import sys
 import time
+from collections.abc import Callable
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import msgpack
 from websockets.asyncio.server import Server, ServerConnection, broadcast, serve
@@ -28,6 +29,9 @@ from websockets.http11 import Request, Response
 
 from petswarm.lab.watch_frames import Replay, ReplayClock, check_frame, parse_replay, with_events_since
 from radio_hub.interface import HubUnavailable, Keys, open_session
+
+if TYPE_CHECKING:
+    from petswarm.lab.foxglove_live import FoxgloveLive
 
 PAGE = "watch_page.html"
 REPLAY_TICK_S = 1 / 30
@@ -46,11 +50,30 @@ def watch_command(args: argparse.Namespace) -> int:
             return 2
     else:
         feed = LiveFeed(args.hub, args.world)
+    live = None
+    foxglove_port = getattr(args, "foxglove", None)
+    if foxglove_port is not None:
+        if args.replay:
+            print("petswarm watch: --foxglove streams a live run; for a record use petswarm export", file=sys.stderr)
+            return 2
+        from petswarm.lab.foxglove_channels import MissingExtra
+        from petswarm.lab.foxglove_live import FoxgloveLive, StreamUnavailable
+
+        try:
+            live = FoxgloveLive(foxglove_port, args.bind, Path(args.record) if args.record else None)
+        except (MissingExtra, StreamUnavailable) as err:
+            print(f"petswarm watch: --foxglove: {err}", file=sys.stderr)
+            return 2
+        feed.listeners.append(live.world_frame)
+        print(f"watch: foxglove ws://{_shown(args.bind)}:{live.port}", flush=True)
     try:
-        return asyncio.run(_serve(feed, args.bind, args.port))
+        return asyncio.run(_serve(feed, args.bind, args.port, live))
     except OSError as err:
         print(f"petswarm watch: cannot serve on {args.bind}:{args.port}: {err}", file=sys.stderr)
         return 2
+    finally:
+        if live is not None:
+            live.close()
 
 
 def load_replay(path: Path) -> Replay:
@@ -73,7 +96,7 @@ def page_html() -> bytes:
     return resources.files("petswarm.lab").joinpath(PAGE).read_bytes()
 
 
-async def _serve(feed: LiveFeed | ReplayFeed, bind: str, port: int) -> int:
+async def _serve(feed: LiveFeed | ReplayFeed, bind: str, port: int, live: FoxgloveLive | None = None) -> int:
     page = page_html()
 
     def http(connection: ServerConnection, request: Request) -> Response | None:
@@ -94,13 +117,25 @@ async def _serve(feed: LiveFeed | ReplayFeed, bind: str, port: int) -> int:
             feed.server = server
             print(f"watch: http://{_shown(bind)}:{_port_of(server)}/  ({feed.describe()})", flush=True)
             runner = asyncio.create_task(feed.run())
+            poller = asyncio.create_task(_poll_record(live)) if live is not None else None
             await stop.wait()
-            runner.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await runner
+            for task in (runner, poller):
+                if task is not None:
+                    task.cancel()
+                    with contextlib.suppress(asyncio.CancelledError):
+                        await task
     finally:
         feed.close()
     return 0
+
+
+async def _poll_record(live: FoxgloveLive) -> None:
+    """Stream the run record's new events and frames to Foxglove as they are written."""
+    from petswarm.lab.foxglove_live import POLL_S
+
+    while True:
+        live.poll()
+        await asyncio.sleep(POLL_S)
 
 
 def _port_of(server: Server) -> int:
@@ -125,6 +160,8 @@ class LiveFeed:
         self.latest: dict[str, Any] | None = None
         self.malformed = 0
         self.status = f"waiting for the hub at {endpoint}"
+        self.listeners: list[Callable[[dict[str, Any]], None]] = []
+        """Who else gets every checked frame (a Foxglove server, petswarm/lab/foxglove_live.py)."""
         self._session: Any = None
         self._loop: asyncio.AbstractEventLoop | None = None
 
@@ -152,16 +189,30 @@ class LiveFeed:
 
     def _publish(self, payload: bytes) -> None:
         try:
-            frame = check_frame(msgpack.unpackb(payload, raw=False, strict_map_key=False))
+            raw = msgpack.unpackb(payload, raw=False, strict_map_key=False)
         except (ValueError, TypeError, msgpack.UnpackException) as err:
-            self.malformed += 1
-            self._set_status(f"dropped a malformed world frame ({self.malformed} so far): {err}")
+            self._malformed(err)
+            return
+        self.offer(raw)
+
+    def offer(self, raw: Any) -> None:
+        """One world frame as the hub publishes it (unpacked), or as a model-time run's environment makes it."""
+        try:
+            frame = check_frame(raw)
+        except ValueError as err:
+            self._malformed(err)
             return
         if self.latest is None:
             self._set_status(f"following world {self.keys.world!r} from the hub at {self.endpoint}")
         self.latest = frame
         if self.server is not None:
             broadcast(self.server.connections, _message("frame", frame=frame, playing=True))
+        for listener in self.listeners:
+            listener(frame)
+
+    def _malformed(self, err: Exception) -> None:
+        self.malformed += 1
+        self._set_status(f"dropped a malformed world frame ({self.malformed} so far): {err}")
 
     def _set_status(self, text: str) -> None:
         self.status = text
