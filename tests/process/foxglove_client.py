@@ -11,6 +11,7 @@ import asyncio
 import json
 import struct
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -42,19 +43,21 @@ class Received:
     """The first message's bytes on each topic."""
 
 
-async def listen(url: str, seconds: float, enough: dict[str, int] | None = None) -> Received:
-    """Connect to ``url``, subscribe to every advertised channel and collect for ``seconds`` (wall), or until every
-    topic of ``enough`` has that many messages, or until the server closes."""
+async def listen(url: str, seconds: float, until: Callable[[], bool] | None = None) -> Received:
+    """Connect to ``url``, subscribe to every advertised channel and collect for ``seconds`` (wall), or until the
+    server closes, or until ``until()`` holds (looked at twice a second)."""
     got = Received()
     subscriptions: dict[int, str] = {}
     deadline = time.monotonic() + seconds
     offered: list[Any] = list(SUBPROTOCOLS)
     async with connect(url, subprotocols=offered, max_size=None, open_timeout=10) as ws:
         got.subprotocol = str(ws.subprotocol)
-        while time.monotonic() < deadline:
+        while time.monotonic() < deadline and not (until is not None and until()):
             try:
-                raw = await asyncio.wait_for(ws.recv(), max(deadline - time.monotonic(), 0.01))
-            except (TimeoutError, ConnectionClosed):
+                raw = await asyncio.wait_for(ws.recv(), 0.5)
+            except TimeoutError:
+                continue
+            except ConnectionClosed:
                 break
             if isinstance(raw, str):
                 message = json.loads(raw)
@@ -80,6 +83,4 @@ async def listen(url: str, seconds: float, enough: dict[str, int] | None = None)
             got.counts[topic] = got.counts.get(topic, 0) + 1
             got.log_times.setdefault(topic, []).append(log_time)
             got.first.setdefault(topic, bytes(raw[_DATA_HEADER.size :]))
-            if enough and all(got.counts.get(t, 0) >= n for t, n in enough.items()):
-                break
     return got
