@@ -238,7 +238,8 @@ def describe_frame(psdu: bytes, air: AirState) -> tuple[str, dict[str, Any]]:
         frame = Frame.decode(psdu)
     except FrameError as err:
         air.undecodable += 1
-        return RADIO_UNKNOWN, {**body, "valid": False, "error": str(err), "sent_so_far": 0}
+        air.sent[RADIO_UNKNOWN] = air.sent.get(RADIO_UNKNOWN, 0) + 1
+        return RADIO_UNKNOWN, {**body, "valid": False, "error": str(err), "sent_so_far": air.sent[RADIO_UNKNOWN]}
     if frame.frame_type == FrameType.ACK:
         air.acks += 1
         answered = air.awaiting_ack.pop(frame.seq, None)
