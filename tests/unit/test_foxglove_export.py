@@ -153,3 +153,36 @@ def test_a_taken_port_gets_one_line_and_status_2(tmp_path: Path, capsys: pytest.
         port = str(taken.getsockname()[1])
         assert main(["watch", "--foxglove", port, "--port", "0"]) == 2
         assert capsys.readouterr().err.startswith(f"petswarm watch: --foxglove: cannot serve on 127.0.0.1:{port}")
+
+
+LAYOUT = Path(__file__).resolve().parents[2] / "docs" / "foxglove" / "petswarm-layout.json"
+
+
+def test_the_layout_opens_channels_and_fields_the_export_has() -> None:
+    from petswarm.lab import foxglove_channels as fc
+
+    layout = json.loads(LAYOUT.read_text())
+    panels = layout["configById"]
+    schemas = {
+        fc.TOPIC_COUNTERS: fc.COUNTERS_SCHEMA,
+        fc.TOPIC_AIR_COUNTERS: fc.AIR_COUNTERS_SCHEMA,
+        fc.TOPIC_IR_FIXES: fc.IR_FIX_SCHEMA,
+        fc.TOPIC_IR_MODES: fc.IR_MODES_SCHEMA,
+    }
+    kinds = {name.split("!")[0] for name in panels}
+    assert {"3D", "Plot", "RosOut", "RawMessages"} <= kinds
+    shown = [t for name, c in panels.items() if name.startswith("3D!") for t in c["topics"]]
+    assert set(shown) <= set(fc.FIXED_TOPICS) and fc.TOPIC_SCENE in shown
+    for config in panels.values():
+        for path in config.get("paths", []):
+            topic, field = path["value"].split(".", 1)
+            assert field in schemas[topic]["properties"], path
+        if "topicToRender" in config:
+            assert config["topicToRender"] == fc.TOPIC_LOG
+        if "topicPath" in config:
+            assert config["topicPath"] == fc.radio_topic("robot-1")
+
+    def leaves(node: object) -> list[str]:
+        return [node] if isinstance(node, str) else leaves(node["first"]) + leaves(node["second"])  # type: ignore[index]
+
+    assert sorted(leaves(layout["layout"])) == sorted(panels)
