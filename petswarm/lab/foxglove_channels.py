@@ -65,8 +65,10 @@ STATE_COLOURS = {
     "master-driving": "#c44e52",
     "slave-driving": "#da8bc3",
     "emergency": "#ff0000",
+    "surround": "#64b5cd",
 }
-"""Robot states (``RobotState.label``) as colours: the report's palette (petswarm/lab/report.py), and two more."""
+"""Robot states (``RobotState.label``, and the surround law's own) as colours: the report's palette
+(petswarm/lab/report.py), and three more."""
 UNKNOWN_STATE_COLOUR = "#808080"
 USER_COLOUR = "#f0c808"
 OBSTACLE_COLOUR = "#5a5a5a"
@@ -398,9 +400,9 @@ class RunChannels:
         height = BODY_HEIGHT_M.get(kind, 0.25)
         colour = m.Color(**hex_colour(state_colour(kind, body["state"])))
         x, y, yaw = body["x"], body["y"], body["yaw"]
-        heading = _yaw_quaternion(m, yaw)
+        heading, upright = _yaw_quaternion(m, yaw), _yaw_quaternion(m, 0.0)
         cylinder = m.CylinderPrimitive(
-            pose=m.Pose(position=m.Vector3(x=x, y=y, z=height / 2), orientation=_yaw_quaternion(m, 0.0)),
+            pose=m.Pose(position=m.Vector3(x=x, y=y, z=height / 2), orientation=upright),
             size=m.Vector3(x=2 * radius, y=2 * radius, z=height),
             bottom_scale=1.0,
             top_scale=1.0,
@@ -416,22 +418,24 @@ class RunChannels:
         )
         label = body["id"] if body["state"] is None else f"{body['id']} {body['state']}"
         text = m.TextPrimitive(
-            pose=m.Pose(position=m.Vector3(x=x, y=y, z=height + 0.25), orientation=_yaw_quaternion(m, 0.0)),
+            pose=m.Pose(position=m.Vector3(x=x, y=y, z=height + 0.25), orientation=upright),
             billboard=True,
             font_size=12.0,
             scale_invariant=True,
             color=m.Color(r=0.0, g=0.0, b=0.0, a=1.0),
             text=label,
         )
-        lines = []
-        ring = IR_COLOURS.get(body["ir"])
-        if ring is not None:  # an IR module that lights the others: a ring round the body
-            lines.append(
-                m.LinePrimitive(
-                    type=m.LinePrimitiveLineType.LineLoop,
-                    thickness=0.03,
-                    points=_circle(m, x, y, radius * 1.6, 0.05),
-                    color=m.Color(**hex_colour(ring)),
+        cylinders = [cylinder]
+        lit = IR_COLOURS.get(body["ir"])
+        if lit is not None:  # an IR module that lights the others: a flat translucent disc round the body (a
+            # cylinder costs the file a tenth of what a ring of line points does, at every frame of every body)
+            cylinders.append(
+                m.CylinderPrimitive(
+                    pose=m.Pose(position=m.Vector3(x=x, y=y, z=0.01), orientation=upright),
+                    size=m.Vector3(x=3.2 * radius, y=3.2 * radius, z=0.02),
+                    bottom_scale=1.0,
+                    top_scale=1.0,
+                    color=m.Color(**hex_colour(lit, 0.45)),
                 )
             )
         metadata = [m.KeyValuePair(key=key, value=str(body[key])) for key in ("kind", "state", "role", "ir", "pan_id")]
@@ -440,10 +444,9 @@ class RunChannels:
             frame_id=WORLD_FRAME,
             id=body["id"],
             metadata=metadata,
-            cylinders=[cylinder],
+            cylinders=cylinders,
             arrows=[arrow],
             texts=[text],
-            lines=lines,
         )
 
     def _obstacles_entity(self, obstacles: Iterable[dict[str, Any]], stamp: Any) -> Any:
@@ -592,13 +595,6 @@ class RunChannels:
 
 def _yaw_quaternion(m: Any, yaw: float) -> Any:
     return m.Quaternion(x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2))
-
-
-def _circle(m: Any, x: float, y: float, r: float, z: float, n: int = 16) -> list[Any]:
-    return [
-        m.Point3(x=x + r * math.cos(2 * math.pi * i / n), y=y + r * math.sin(2 * math.pi * i / n), z=z)
-        for i in range(n)
-    ]
 
 
 def _finite(value: Any) -> float:
