@@ -704,6 +704,10 @@ def _experiment(args: argparse.Namespace) -> int:
 
 
 def _watch(args: argparse.Namespace) -> int:
+    if args.foxglove is not None:
+        from petswarm.lab.foxglove_live import watch_command as watch_with_foxglove
+
+        return watch_with_foxglove(args)
     from petswarm.lab.watch import watch_command
 
     return watch_command(args)

@@ -14,17 +14,19 @@ Every message goes out at the run's model time, as in the MCAP file.
 
 from __future__ import annotations
 
+import argparse
 import asyncio
 import contextlib
 import json
 import struct
+import sys
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from petswarm.lab.foxglove_channels import RunChannels, require_sdk
+from petswarm.lab.foxglove_channels import MissingExtra, RunChannels, require_sdk
 
 POLL_S = 0.2
 """How often the record is looked at for new events and frames (wall seconds)."""
@@ -208,6 +210,35 @@ class RunStream:
         self._thread.join(timeout=10)
         self.feed.close()
         self.live.close()
+
+
+def watch_command(args: argparse.Namespace) -> int:
+    """``petswarm watch --foxglove``: the page of ``petswarm watch`` and a Foxglove server, both live from the hub
+    (``--record``: the run's record, whose events and frames are streamed too); 2 on a bad request or port."""
+    from petswarm.lab.watch import LiveFeed, serve_page
+
+    if args.replay:
+        print("petswarm watch: --foxglove streams a live run; for a record use petswarm export", file=sys.stderr)
+        return 2
+    try:
+        live = FoxgloveLive(args.foxglove, args.bind, Path(args.record) if args.record else None)
+    except (MissingExtra, StreamUnavailable) as err:
+        print(f"petswarm watch: --foxglove: {err}", file=sys.stderr)
+        return 2
+    try:
+        feed = LiveFeed(args.hub, args.world)
+        feed.listeners.append(live.world_frame)
+        shown = "127.0.0.1" if args.bind in ("0.0.0.0", "") else args.bind
+        print(f"watch: foxglove ws://{shown}:{live.port}", flush=True)
+        return serve_page(feed, args.bind, args.port, also=lambda: _poll_forever(live))
+    finally:
+        live.close()
+
+
+async def _poll_forever(live: FoxgloveLive) -> None:
+    while True:
+        live.poll()
+        await asyncio.sleep(POLL_S)
 
 
 def start_stream(port: int | None, world: str, endpoint: str | None, say: Callable[[str], None]) -> RunStream | None:

@@ -16,10 +16,10 @@ import json
 import signal
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from importlib import resources
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import msgpack
 from websockets.asyncio.server import Server, ServerConnection, broadcast, serve
@@ -29,9 +29,6 @@ from websockets.http11 import Request, Response
 
 from petswarm.lab.watch_frames import Replay, ReplayClock, check_frame, parse_replay, with_events_since
 from radio_hub.interface import HubUnavailable, Keys, open_session
-
-if TYPE_CHECKING:
-    from petswarm.lab.foxglove_live import FoxgloveLive
 
 PAGE = "watch_page.html"
 REPLAY_TICK_S = 1 / 30
@@ -50,30 +47,19 @@ def watch_command(args: argparse.Namespace) -> int:
             return 2
     else:
         feed = LiveFeed(args.hub, args.world)
-    live = None
-    foxglove_port = getattr(args, "foxglove", None)
-    if foxglove_port is not None:
-        if args.replay:
-            print("petswarm watch: --foxglove streams a live run; for a record use petswarm export", file=sys.stderr)
-            return 2
-        from petswarm.lab.foxglove_channels import MissingExtra
-        from petswarm.lab.foxglove_live import FoxgloveLive, StreamUnavailable
+    return serve_page(feed, args.bind, args.port)
 
-        try:
-            live = FoxgloveLive(foxglove_port, args.bind, Path(args.record) if args.record else None)
-        except (MissingExtra, StreamUnavailable) as err:
-            print(f"petswarm watch: --foxglove: {err}", file=sys.stderr)
-            return 2
-        feed.listeners.append(live.world_frame)
-        print(f"watch: foxglove ws://{_shown(args.bind)}:{live.port}", flush=True)
+
+def serve_page(
+    feed: LiveFeed | ReplayFeed, bind: str, port: int, also: Callable[[], Awaitable[None]] | None = None
+) -> int:
+    """Serve the page on ``bind:port`` with ``feed`` until Ctrl-C or SIGTERM (``also``: a coroutine to run beside
+    the feed meanwhile); 2 when the port cannot be had."""
     try:
-        return asyncio.run(_serve(feed, args.bind, args.port, live))
+        return asyncio.run(_serve(feed, bind, port, also))
     except OSError as err:
-        print(f"petswarm watch: cannot serve on {args.bind}:{args.port}: {err}", file=sys.stderr)
+        print(f"petswarm watch: cannot serve on {bind}:{port}: {err}", file=sys.stderr)
         return 2
-    finally:
-        if live is not None:
-            live.close()
 
 
 def load_replay(path: Path) -> Replay:
@@ -96,7 +82,9 @@ def page_html() -> bytes:
     return resources.files("petswarm.lab").joinpath(PAGE).read_bytes()
 
 
-async def _serve(feed: LiveFeed | ReplayFeed, bind: str, port: int, live: FoxgloveLive | None = None) -> int:
+async def _serve(
+    feed: LiveFeed | ReplayFeed, bind: str, port: int, also: Callable[[], Awaitable[None]] | None = None
+) -> int:
     page = page_html()
 
     def http(connection: ServerConnection, request: Request) -> Response | None:
@@ -117,9 +105,9 @@ async def _serve(feed: LiveFeed | ReplayFeed, bind: str, port: int, live: Foxglo
             feed.server = server
             print(f"watch: http://{_shown(bind)}:{_port_of(server)}/  ({feed.describe()})", flush=True)
             runner = asyncio.create_task(feed.run())
-            poller = asyncio.create_task(_poll_record(live)) if live is not None else None
+            beside = asyncio.create_task(also()) if also is not None else None
             await stop.wait()
-            for task in (runner, poller):
+            for task in (runner, beside):
                 if task is not None:
                     task.cancel()
                     with contextlib.suppress(asyncio.CancelledError):
@@ -127,15 +115,6 @@ async def _serve(feed: LiveFeed | ReplayFeed, bind: str, port: int, live: Foxglo
     finally:
         feed.close()
     return 0
-
-
-async def _poll_record(live: FoxgloveLive) -> None:
-    """Stream the run record's new events and frames to Foxglove as they are written."""
-    from petswarm.lab.foxglove_live import POLL_S
-
-    while True:
-        live.poll()
-        await asyncio.sleep(POLL_S)
 
 
 def _port_of(server: Server) -> int:
