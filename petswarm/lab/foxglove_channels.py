@@ -387,6 +387,13 @@ class RunChannels:
         if modes["transmit"] or modes["beacon"]:
             self._emit(self._ir_modes, TOPIC_IR_MODES, {"t_s": t_s, **modes}, t_ns)
 
+    def declare_robots(self, count: int) -> None:
+        """Make the radio channels of robots 1 to ``count`` now. A live server advertises a channel made while a
+        viewer is connected before it can take the viewer's subscription (foxglove-sdk 0.30 refuses it as "unknown
+        channel" now and then), so a run's own channels are best all there before anyone connects."""
+        for robot_id in range(1, count + 1):
+            self._radio_channel(node_of_address(robot_id))
+
     def _radio_channel(self, node: str) -> Any:
         topic = radio_topic(node)
         channel = self._radio.get(topic)

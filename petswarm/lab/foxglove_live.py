@@ -114,16 +114,30 @@ class FoxgloveLive:
         except RuntimeError as err:  # the SDK says a taken port as a RuntimeError of its own
             raise StreamUnavailable(f"cannot serve on {host}:{port}: {err}") from None
         self.channels = RunChannels(self.context)
-        self.tail = None if record is None else RecordTail(record)
+        self.tail: RecordTail | None = None
         self.epoch_us: int | None = None
         """The wall stamp of model time 0: the first world frame says it."""
         self.latest_ns = 0
         self._lock = threading.Lock()
+        if record is not None:
+            self.follow(record)
 
     @property
     def port(self) -> int:
         """The port the server listens on."""
         return int(self.server.port)
+
+    def follow(self, record: Path) -> None:
+        """Stream the events and frames of this run record as they are written; its robots' radio channels are
+        made now, from its manifest (``RunChannels.declare_robots``)."""
+        try:
+            robots = json.loads((record / "manifest.json").read_text())["options"]["robots"]
+        except (OSError, ValueError, KeyError, TypeError):
+            robots = 0  # not written yet (watch started first): each channel is made when its robot shows
+        with self._lock:
+            if isinstance(robots, int) and not isinstance(robots, bool):
+                self.channels.declare_robots(robots)
+            self.tail = RecordTail(record)
 
     def world_frame(self, frame: dict[str, Any]) -> None:
         """One checked world frame (``LiveFeed``'s listeners get them)."""
@@ -182,8 +196,8 @@ class RunStream:
         return self.live.port
 
     def follow(self, record: Path) -> None:
-        """Stream the events and frames of this run record as they are written."""
-        self.live.tail = RecordTail(record)
+        """Stream the events and frames of this run record as they are written (``FoxgloveLive.follow``)."""
+        self.live.follow(record)
 
     def offer(self, state: dict[str, Any]) -> None:
         """A world state made in this process (a model-time run's environment)."""
