@@ -195,9 +195,11 @@ class RunStream:
         """The server's port."""
         return self.live.port
 
-    def follow(self, record: Path) -> None:
-        """Stream the events and frames of this run record as they are written (``FoxgloveLive.follow``)."""
+    def follow(self, record: Path, say: Callable[[str], None]) -> None:
+        """Stream the events and frames of this run record as they are written (``FoxgloveLive.follow``), then
+        ``say`` where to connect: by then every channel of the run's robots is there."""
         self.live.follow(record)
+        say(f"foxglove: ws://127.0.0.1:{self.port} (open it in Foxglove: Open connection, Foxglove WebSocket)")
 
     def offer(self, state: dict[str, Any]) -> None:
         """A world state made in this process (a model-time run's environment)."""
@@ -255,11 +257,7 @@ async def _poll_forever(live: FoxgloveLive) -> None:
         await asyncio.sleep(POLL_S)
 
 
-def start_stream(port: int | None, world: str, endpoint: str | None, say: Callable[[str], None]) -> RunStream | None:
-    """A run's live stream when ``port`` is given (None: none); ``say`` tells the user where to connect.
-    StreamUnavailable when the port cannot be had."""
-    if port is None:
-        return None
-    stream = RunStream(port, world, endpoint)
-    say(f"foxglove: ws://127.0.0.1:{stream.port} (open it in Foxglove: Open connection, Foxglove WebSocket)")
-    return stream
+def start_stream(port: int | None, world: str, endpoint: str | None) -> RunStream | None:
+    """A run's live stream when ``port`` is given (None: none), serving before the run makes its record (then
+    ``RunStream.follow`` it). StreamUnavailable when the port cannot be had."""
+    return None if port is None else RunStream(port, world, endpoint)

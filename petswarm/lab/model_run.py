@@ -417,10 +417,10 @@ def execute(opts: RunOptions, scenario: Scenario | None) -> dict[str, Any]:
     if scenario is not None:
         opts = opts.for_scenario(scenario)
     world = opts.world or f"model-{opts.seed}"
-    stream = start_stream(opts.foxglove, world, None, progress)  # before any record: its port may be taken
+    stream = start_stream(opts.foxglove, world, None)  # before any record: its port may be taken
     record = RunRecord.create(opts, world, ENDPOINT)
     if stream is not None:
-        stream.follow(record.path)
+        stream.follow(record.path, progress)
     progress(f"world {world}, seed {opts.seed}, model time, record in {record.path}")
     started = time.perf_counter()
     loop = ModelClockLoop()

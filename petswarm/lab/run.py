@@ -123,13 +123,13 @@ def supervise(
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     keys = Keys(world)
     try:
-        stream = start_stream(opts.foxglove, world, endpoint, progress)
+        stream = start_stream(opts.foxglove, world, endpoint)
     except StreamUnavailable as err:
         print(f"petswarm run: --foxglove {opts.foxglove}: {err}", file=sys.stderr)
         return 2
     record = RunRecord.create(opts, world, endpoint)
     if stream is not None:
-        stream.follow(record.path)
+        stream.follow(record.path, progress)
     sup = Supervisor(record.path / "logs")
     watch = Supervision(sup, record, opts.fail_fast, progress)
     watch.write_progress(force=True)  # from the first moment a kill leaves a summary
