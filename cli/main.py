@@ -10,6 +10,7 @@ import signal
 import sys
 from typing import TYPE_CHECKING, Any
 
+from cli.explore import add_explore, explore
 from petswarm.lab.arguments import CLOCKS, CommandParser, bounded, robot_id, seed
 from petswarm.lab.robot_command import add_hub as _add_hub
 from petswarm.lab.robot_command import add_node_clock as _add_node_clock
@@ -289,6 +290,8 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--out", help="directory for report.png (default: the run directory)")
     rep.add_argument("--json", action="store_true", help="print the record's figures and the plots' paths as JSON")
 
+    add_explore(sub)
+
     stats = sub.add_parser("stats", help="print a running hub's counters")
     _add_hub(stats)
     stats.add_argument("--json", action="store_true", help="print the raw counters as JSON")
@@ -410,7 +413,7 @@ def main(argv: list[str] | None = None, parser: argparse.ArgumentParser | None =
     args = (parser or build_parser()).parse_args(argv)
     commands = {"hub": _hub, "user": _user, "robot": _robot, "run": _run, "stats": _stats, "bench": _bench}
     commands.update(swarm=_swarm, watch=_watch)
-    commands.update(report=_report, chaos=_chaos, experiment=_experiment, certs=_certs)
+    commands.update(report=_report, chaos=_chaos, experiment=_experiment, certs=_certs, explore=explore)
     handler = commands[args.command]
     unfit = _use_security(args)
     if unfit:

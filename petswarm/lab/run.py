@@ -7,7 +7,7 @@ import json
 import os
 import sys
 import time
-from collections.abc import Callable, Collection
+from collections.abc import Awaitable, Callable, Collection
 from dataclasses import dataclass, replace
 from typing import Any, Protocol
 
@@ -283,6 +283,8 @@ class FaultTimeline:
     def __init__(self, faults: list[dict[str, Any]]) -> None:
         self.pending = sorted(faults, key=lambda f: float(f.get("at", 0.0)))
         self.applied: list[dict[str, Any]] = []
+        self.act: Callable[[dict[str, Any]], Awaitable[None]] | None = None
+        """Carries out a scenario's actions (``petswarm.scenario.ACTIONS``) where the run can: model time."""
 
     def apply_due(self, chaos: Callable[[dict[str, Any]], dict[str, Any]], elapsed: float) -> None:
         """Send every fault whose time has come to ``chaos`` (the hub's chaos request); a refused one fails
