@@ -41,6 +41,9 @@ from radio_hub.config import CHANNELS, MediumConfig, airtime_us
 # Receptions are judged against every transmission that could still overlap them.
 _AIR_HORIZON_US = airtime_us(MAX_PSDU) * 2
 _ACK_AIRTIME_US = airtime_us(len(Frame(FrameType.ACK, 0).encode()))
+_POWER_CACHE_SIZE = 1 << 16
+"""Pairs of positions whose received power the medium remembers; cleared when full (robots move, so old
+pairs stop being asked for; the bound keeps a long run's memory flat)."""
 
 
 class RxOutcome(enum.StrEnum):
@@ -253,6 +256,7 @@ class Medium:
             config.path_loss.sensitivity_dbm + config.reception.ed_threshold_above_sensitivity_db
         )
         self._clean_sinr = clean_sinr()
+        self._powers: dict[tuple[Position, Position], float] = {}
         self._events: list[tuple[int, int, Callable[..., None], tuple[Any, ...]]] = []
         self._seq = itertools.count()
         self._tx_ids = itertools.count(1)
@@ -518,7 +522,17 @@ class Medium:
         return RxOutcome.FILTERED if filtered else RxOutcome.DELIVERED
 
     def _power_mw(self, sender: Position, receiver: Position) -> float:
-        return dbm_to_mw(mean_rssi_dbm(self.config.path_loss, distance(sender, receiver)))
+        """Mean received power (mW) from ``sender`` at ``receiver``, remembered per pair of positions: one
+        frame's power at a receiver is asked for when that frame is judged and again for every frame it
+        overlaps there, and the result must be the very same float each time."""
+        key = (sender, receiver)
+        power = self._powers.get(key)
+        if power is None:
+            power = dbm_to_mw(mean_rssi_dbm(self.config.path_loss, distance(sender, receiver)))
+            if len(self._powers) >= _POWER_CACHE_SIZE:
+                self._powers.clear()
+            self._powers[key] = power
+        return power
 
     def _on_air_for(self, node: RadioNode, start_us: int, end_us: int) -> list[Transmission]:
         """Other nodes' transmissions on the node's channel at some instant of [start_us, end_us) that a
