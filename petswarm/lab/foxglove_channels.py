@@ -31,6 +31,7 @@ import math
 from collections.abc import Iterable
 from typing import Any
 
+from petswarm.lab.palette import STATE_COLOURS
 from petswarm.managers.messages import MessageError
 from petswarm.managers.messages import decode as decode_message
 from radio_hub.interface import BROADCAST, Frame, FrameError, FrameType
@@ -55,20 +56,6 @@ def require_sdk() -> Any:
     return foxglove
 
 
-STATE_COLOURS = {
-    "waiting": "#bbbbbb",
-    "command-waiting": "#937860",
-    "following": "#4c72b0",
-    "leading": "#55a868",
-    "remote-control": "#8172b2",
-    "organizing": "#dd8452",
-    "master-driving": "#c44e52",
-    "slave-driving": "#da8bc3",
-    "emergency": "#ff0000",
-    "surround": "#64b5cd",
-}
-"""Robot states (``RobotState.label``, and the surround law's own) as colours: the report's palette
-(petswarm/lab/report.py), and three more."""
 UNKNOWN_STATE_COLOUR = "#808080"
 USER_COLOUR = "#f0c808"
 OBSTACLE_COLOUR = "#5a5a5a"
