@@ -319,9 +319,9 @@ def claims(record: Record) -> list[tuple[float, float, str, str, int]]:
         session = None
         for event in events:
             kind, t = event["kind"], event["mono"]
-            for process, died in deaths:
+            for process, died in deaths:  # the claims made before a death end with it (a restart claims anew)
                 if process == node and died <= t:
-                    _close(out, open_, node, died)
+                    _close(out, open_, node, died, [m for m, (since, _) in open_.items() if since < died])
             session = event.get("session", session)
             if kind == "state" and event.get("cause") == "handover" and event.get("to") == "master-driving":
                 open_.update({member: (t, session) for member in event.get("members", [])})
@@ -333,7 +333,7 @@ def claims(record: Record) -> list[tuple[float, float, str, str, int]]:
                 _close(out, open_, node, t)
         for process, died in deaths:
             if process == node:
-                _close(out, open_, node, died)
+                _close(out, open_, node, died, [m for m, (since, _) in open_.items() if since < died])
         _close(out, open_, node, end_of_run)
     return out
 

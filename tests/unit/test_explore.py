@@ -240,6 +240,31 @@ def test_checker_invariants_pass_a_robot_lost_when_asked_to_follow_from_beyond_t
     assert P.checker_invariants(driving)
 
 
+def test_a_master_killed_and_restarted_claims_the_members_of_its_new_swarm() -> None:
+    master = [
+        _state(3.0, "following", "master-driving", session=7),
+        _ev("organized", 3.0, session=7, members=[2]),
+        _ev("start", 8.3, state="waiting"),
+        _state(8.31, "waiting", "command-waiting"),
+        _state(9.4, "command-waiting", "organizing", session=9),
+        _state(9.5, "organizing", "master-driving", session=9),
+        _ev("organized", 9.5, session=9, members=[2]),
+    ]
+    member = [
+        _state(3.0, "waiting", "slave-driving", session=7),
+        _state(8.0, "slave-driving", "waiting"),  # its master went silent
+        _state(9.5, "waiting", "slave-driving", session=9),
+    ]
+    record = _record(**{"robot-1": master, "robot-2": member})
+    record.supervision = [
+        {"kind": "died", "process": "robot-1", "mono": 6.0},
+        {"kind": "restarted", "process": "robot-1", "mono": 8.3},
+    ]
+    assert (9.5, 30.0, "robot-1", "robot-2", 9) in P.claims(record)  # the new swarm's claim lasts
+    assert (3.0, 6.0, "robot-1", "robot-2", 7) in P.claims(record)  # the old one ended with the death
+    assert P.roster_agreement(record) == []
+
+
 def test_pan_hearing_fails_a_foreign_pan_frame() -> None:
     [violation] = P.pan_hearing(_record(**{"robot-2": [_ev("foreign_pan", 2.5, dst_pan=0x1000, pan=0x2222, src=3)]}))
     assert violation.who == ("robot-2",) and "0x1000" in violation.what
