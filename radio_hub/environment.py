@@ -409,7 +409,7 @@ class Environment:
         wall = round((self.wall_epoch_us + now) / 1e6, 4)
         return (
             f'{{"v":1,"t_us":{_json_number(now)},"wall":{_json_number(wall)},"bodies":[{template % tuple(values)}],'
-            f'"obstacles":{self._obstacles_text()},"collisions":{_json_number(world.collisions)},'
+            f'"obstacles":{self._obstacles_text()},"collisions":{_json_number(world.collisions)},{_contacts_text(world)}'
             f'"radio":{{"delivered":{radio[0]},"collided":{radio[1]},"lost":{radio[2]}}}}}'
         )
 
@@ -502,6 +502,7 @@ class Environment:
             "bodies": bodies,
             "obstacles": [o.to_dict() for o in self.world.obstacles],
             "collisions": self.world.collisions,
+            **({"contacts": [list(pair) for pair in contacts]} if (contacts := self.world.contacts) else {}),
             "radio": totals,
         }
 
@@ -963,6 +964,15 @@ def _tx_done(report: TxReport) -> wire.TxDone:
         done_us=report.done_us,
         reason=report.reason,
     )
+
+
+def _contacts_text(world: World) -> str:
+    """The world line's ``"contacts":[[a,b],...],`` (the pairs touching now, so a judge can tell who touched what:
+    the collision counter alone cannot), or nothing at all while nothing touches."""
+    contacts = world.contacts
+    if not contacts:
+        return ""
+    return f'"contacts":{json.dumps([list(pair) for pair in contacts], separators=(",", ":"))},'
 
 
 _KIND, _RADIUS, _PAN_ID = (operator.attrgetter(name) for name in ("kind", "radius", "pan_id"))

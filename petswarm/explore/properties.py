@@ -368,32 +368,53 @@ def pan_hearing(record: Record) -> list[Violation]:
     ]
 
 
+PUSHED_S = 0.1
+"""A robot the user walked into within this long (five world ticks) is excused its contacts meanwhile: the world
+pushes it out of the user's way, into whatever is beside it, faster than any law can react."""
+
+
 @prop("no_contact", "safety", ("organize", "drive", "follow", "mixed"))
 def no_contact(record: Record) -> list[Violation]:
     """Where the driving law promises it (robots driving with their user, alone or as a swarm, whose safety
     stage stops short of an echo): no robot touches another robot or an obstacle. Contacts with the user are
-    not judged: the scripted user walks blind, into a robot ahead of him as fast as 1.2 m/s."""
+    not judged: the scripted user walks blind, into a robot ahead of him as fast as 1.2 m/s, and into walls
+    (so are a robot's contacts while the user pushes it, ``PUSHED_S``). Who touched what is the world log's
+    ``contacts`` (the pairs touching at each tick): a pair counts once, when it begins to touch."""
     out = []
+    before: set[tuple[str, str]] = set()
+    pushed: dict[str, float] = {}
     seen = 0
     for tick in record.world:
-        count = tick.get("collisions", 0)
-        if count > seen:
-            who = _closest_pair(tick)
-            if "user" not in who:
-                out.append(Violation(f"contact {who[0]} / {who[1]}", round(tick["t_us"] / 1e6, 3), who))
-            seen = count
+        t = tick["t_us"] / 1e6
+        now = {(str(a), str(b)) for a, b in tick.get("contacts", [])}
+        for pair in now:
+            if "user" in pair:
+                pushed.update({who: t for who in pair if who != "user"})
+        for a, b in sorted(now - before):
+            if "user" in (a, b) or any(t - pushed.get(who, -1.0) <= PUSHED_S for who in (a, b)):
+                continue
+            out.append(Violation(f"contact {a} / {_name(tick, b)}", round(t, 3), (a, b)))
+        count = int(tick.get("collisions", 0))
+        if count > seen and not now - before:  # a world log that does not name who touched (an older hub's)
+            out.append(Violation("a contact the world log names no pair of", round(t, 3)))
+        before, seen = now, max(seen, count)
     return out
 
 
-def _closest_pair(tick: dict[str, Any]) -> tuple[str, str]:
-    bodies = tick.get("bodies", [])
-    best, pair = float("inf"), ("?", "?")
-    for i, a in enumerate(bodies):
-        for b in bodies[i + 1 :]:
-            gap = ((a["x"] - b["x"]) ** 2 + (a["y"] - b["y"]) ** 2) ** 0.5 - a["radius"] - b["radius"]
-            if gap < best:
-                best, pair = gap, (a["id"], b["id"])
-    return pair if best < 0.05 else (pair[0] if bodies else "?", "an obstacle")
+def _name(tick: dict[str, Any], who: str) -> str:
+    """A body's id, or an obstacle as the world log lists it (``obstacle-2 (wall (0, 1)-(0, 5))``)."""
+    if not who.startswith("obstacle-"):
+        return who
+    obstacles = tick.get("obstacles", [])
+    k = int(who.rsplit("-", 1)[1])
+    if not 0 <= k < len(obstacles):
+        return who
+    o = obstacles[k]
+    if o.get("kind") == "circle":
+        return f"{who} (circle r {o['r']:g} at ({o['x']:g}, {o['y']:g}))"
+    if o.get("kind") == "wall":
+        return f"{who} (wall ({o['x0']:g}, {o['y0']:g})-({o['x1']:g}, {o['y1']:g}))"
+    return f"{who} ({o.get('kind')})"
 
 
 # == liveness ================================================================================================

@@ -127,19 +127,68 @@ def test_pan_hearing_fails_a_foreign_pan_frame() -> None:
     assert violation.who == ("robot-2",) and "0x1000" in violation.what
 
 
-def test_no_contact_fails_two_robots_touching_but_not_the_user_walking_into_one() -> None:
-    def tick(t_us: int, collisions: int, x2: float) -> str:
-        bodies = [
-            {"id": "robot-1", "x": 0.0, "y": 0.0, "radius": 0.15},
-            {"id": "robot-2", "x": x2, "y": 0.0, "radius": 0.15},
-            {"id": "user", "x": 5.0, "y": 5.0, "radius": 0.25},
-        ]
-        return json.dumps({"t_us": t_us, "bodies": bodies, "collisions": collisions})
+def _tick(t_us: int, collisions: int, contacts: list[list[str]], robot_1: tuple[float, float] = (0.0, 0.0)) -> str:
+    """A world log line: robot-1 (where given), robot-2 beside it, the user at (0, 3) near a wall at x = -0.2."""
+    bodies = [
+        {"id": "robot-1", "x": robot_1[0], "y": robot_1[1], "radius": 0.15},
+        {"id": "robot-2", "x": 0.3, "y": 0.0, "radius": 0.15},
+        {"id": "user", "x": 0.0, "y": 3.0, "radius": 0.25},
+    ]
+    obstacles = [{"kind": "wall", "x0": -0.2, "y0": 1.0, "x1": -0.2, "y1": 9.0}]
+    line: dict[str, Any] = {"t_us": t_us, "bodies": bodies, "obstacles": obstacles, "collisions": collisions}
+    if contacts:
+        line["contacts"] = contacts
+    return json.dumps(line)
 
+
+def test_no_contact_fails_two_robots_touching_once_per_contact() -> None:
     record = _record()
-    record.world_lines = [tick(0, 0, 1.0), tick(20_000, 1, 0.3)]
+    pair = [["robot-1", "robot-2"]]
+    record.world_lines = [_tick(0, 0, []), _tick(20_000, 1, pair), _tick(40_000, 1, pair), _tick(60_000, 1, [])]
     [violation] = P.no_contact(record)
     assert violation.who == ("robot-1", "robot-2") and violation.when == 0.02
+
+
+def test_no_contact_names_the_robot_that_touched_an_obstacle_not_the_closest_pair_of_bodies() -> None:
+    record = _record()
+    record.world_lines = [_tick(0, 0, []), _tick(20_000, 1, [["robot-2", "obstacle-0"]])]
+    [violation] = P.no_contact(record)
+    assert violation.who == ("robot-2", "obstacle-0")
+    assert violation.what == "contact robot-2 / obstacle-0 (wall (-0.2, 1)-(-0.2, 9))"
+
+
+def test_no_contact_keeps_the_user_walking_into_a_wall_or_a_robot() -> None:
+    """The scripted user walks blind: his own contacts are not the robots' (the counter counted them, and the
+    judge once blamed the first robot of the closest pair of bodies for the user's wall)."""
+    record = _record()
+    record.world_lines = [
+        _tick(0, 0, []),
+        _tick(20_000, 1, [["user", "obstacle-0"]]),
+        _tick(40_000, 2, [["robot-1", "user"], ["user", "obstacle-0"]]),
+    ]
+    assert P.no_contact(record) == []
+
+
+def test_no_contact_excuses_a_robot_the_user_pushes_into_another_but_not_long_after() -> None:
+    pushed = [["robot-1", "robot-2"], ["robot-1", "user"]]
+    record = _record()
+    record.world_lines = [_tick(0, 0, []), _tick(20_000, 1, [["robot-1", "user"]]), _tick(40_000, 2, pushed)]
+    assert P.no_contact(record) == []
+    record = _record()
+    record.world_lines = [
+        _tick(0, 0, []),
+        _tick(20_000, 1, [["robot-1", "user"]]),
+        _tick(20_000 + 200_000, 2, pushed[:1]),
+    ]
+    [violation] = P.no_contact(record)
+    assert violation.who == ("robot-1", "robot-2")
+
+
+def test_no_contact_fails_a_contact_a_world_log_does_not_name() -> None:
+    record = _record()
+    record.world_lines = [_tick(0, 0, []), _tick(20_000, 1, [])]
+    [violation] = P.no_contact(record)
+    assert "names no pair" in violation.what and violation.when == 0.02
 
 
 def test_organize_completes_fails_an_organize_with_no_member_after_the_faults() -> None:

@@ -1,0 +1,56 @@
+"""Failures ``petswarm explore`` found, each replayed from its shrunk scenario (tests/model/explore_cases/) in model
+time, exactly as ``petswarm explore --replay FILE`` does: the property it failed holds now.
+
+- ``no_contact``, seed 1 cases 78, 138 and 179: the user, who walks blind, walked into a wall (78, 138) or into a
+  robot and pushed it against another (179); the judge, which had only the world's collision counter, blamed the
+  first robot of the closest pair of bodies. The world log now names the pairs touching, and the judge keeps the
+  user's contacts (and a robot's while the user pushes it) out of the robots' record.
+"""
+
+from __future__ import annotations
+
+import json
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from petswarm.explore.runner import run_case
+
+pytestmark = pytest.mark.long
+
+CASES = Path(__file__).parent / "explore_cases"
+
+
+def _replay(name: str, keep: Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """The case's result (as ``--replay`` gives it) and its world log's lines."""
+    data = tomllib.loads((CASES / name).read_text())
+    meta = data["explore"]
+    result = run_case(data, int(meta["seed"]), meta["family"], keep=keep)
+    world = [json.loads(line) for line in (keep / "world.jsonl").read_text().splitlines()]
+    return result, world
+
+
+def _contacts(world: list[dict[str, Any]]) -> set[tuple[str, str]]:
+    return {(a, b) for tick in world for a, b in tick.get("contacts", [])}
+
+
+@pytest.mark.timeout(120)
+@pytest.mark.parametrize("case", [78, 138])
+def test_the_user_walking_into_a_wall_is_not_a_robot_touching_it(tmp_path: Path, case: int) -> None:
+    result, world = _replay(f"seed-1-case-{case}-no_contact.toml", tmp_path / "run")
+    assert _contacts(world) == {("user", "obstacle-0")}  # what the collision counter counted
+    assert result["ok"], result["failures"]
+
+
+@pytest.mark.timeout(120)
+def test_a_robot_the_user_pushes_into_another_is_not_a_robot_touching_it(tmp_path: Path) -> None:
+    result, world = _replay("seed-1-case-179-no_contact.toml", tmp_path / "run")
+    touching = _contacts(world)
+    assert ("robot-1", "robot-3") in touching and ("robot-1", "user") in touching
+    for tick in world:  # robot-1 touches robot-3 only while the user presses it against it
+        pairs = {tuple(p) for p in tick.get("contacts", [])}
+        if ("robot-1", "robot-3") in pairs:
+            assert ("robot-1", "user") in pairs, tick["t_us"]
+    assert result["ok"], result["failures"]
