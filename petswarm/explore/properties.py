@@ -358,14 +358,44 @@ _ROSTER_EVENTS = ("state", "organized", "member_lost", "member_left", "dispersed
 
 @prop("pan_hearing", "safety", ALL)
 def pan_hearing(record: Record) -> list[Violation]:
-    """No robot hears a frame of a PAN it is not on (the robot notes any frame whose destination PAN is
-    neither its own nor the broadcast PAN: ``foreign_pan`` events)."""
-    return [
-        Violation(f"heard a frame for PAN {e.get('dst_pan'):#06x} while on {e.get('pan'):#06x}", e["mono"], (node,))
-        for node, events in record.events.items()
-        for e in events
-        if e["kind"] == "foreign_pan"
-    ]
+    """No robot hears a frame of a PAN it is not on: every frame a robot was handed for a PAN other than the one
+    it asked for (``foreign_pan``, with the frame's air time) was sent to the PAN the hub's MAC filtered that
+    robot's frames by when the frame ended on the air (the robot's ``start`` and ``pan`` events: each PAN and
+    the hub's model time it applied it). A frame held up after the air (a delay fault, the UART) or received
+    before a change took effect is fine however late it comes; one for a PAN the robot was not on is not."""
+    out = []
+    for node, events in record.events.items():
+        changes: list[tuple[int, int]] = []  # (model us, PAN) of this life of the robot
+        for e in events:
+            if e["kind"] == "start":
+                changes = [(int(e.get("pan_at_us", 0)), int(e["pan"]))] if "pan" in e else []
+            elif e["kind"] == "pan":
+                changes.append((int(e["at_us"]), int(e["pan"])))
+            elif e["kind"] == "foreign_pan":
+                air_end = e.get("air_end_us")
+                on_air = None if air_end is None else _pans_at(changes, int(air_end))
+                if on_air is not None and e.get("dst_pan") in on_air:
+                    continue
+                was = "an unknown PAN" if not on_air else " or ".join(f"{p:#06x}" for p in sorted(on_air))
+                at = "" if air_end is None else f" (on the air until {int(air_end) / 1e6:.6f} s)"
+                out.append(
+                    Violation(f"heard a frame for PAN {e.get('dst_pan'):#06x}{at} while on {was}", e["mono"], (node,))
+                )
+    return out
+
+
+def _pans_at(changes: list[tuple[int, int]], t_us: int) -> set[int]:
+    """The PAN in force at ``t_us`` by the changes (model us, PAN) in time order; both PANs of a change made at
+    that very microsecond (the hub may have handled the frame's end or the change first)."""
+    pans: set[int] = set()
+    for at_us, pan in changes:
+        if at_us < t_us:
+            pans = {pan}
+        elif at_us == t_us:
+            pans.add(pan)
+        else:
+            break
+    return pans
 
 
 PUSHED_S = 0.1

@@ -349,6 +349,12 @@ class RadioClient:
 
         self.on_reattach: list[Callable[[], None]] = []
         """Called after the radio attached again to a restarted hub (the hub forgot IR modes and the like)."""
+        self.pan_on_air: tuple[int, int] | None = None
+        """(PAN, model us): the PAN the hub's MAC filters this radio's frames by, and when the hub applied it (its
+        answer's time). ``identity.pan_id`` is what we asked for, which the hub applies a round trip later; a
+        frame's ``RxFrame.end_us`` against this tells which PAN it was received on, however late it is handed up."""
+        self.on_pan_change: list[Callable[[int, int], None]] = []
+        """Called with (PAN, model us the hub applied it) when the hub's PAN for this radio changes."""
         self._attached_once = False
         self._ir_wanted = "idle"
         """The IR mode last asked for: a switch retried after a re-attach must not undo a later one."""
@@ -575,6 +581,10 @@ class RadioClient:
     # -- plumbing ----------------------------------------------------------------------------------
 
     def _adopt(self, attached: wire.Attached) -> None:
+        if self.pan_on_air is None or self.pan_on_air[0] != attached.pan_id:
+            self.pan_on_air = (attached.pan_id, attached.now_us)
+            for callback in self.on_pan_change:
+                callback(attached.pan_id, attached.now_us)
         self.identity = replace(
             self.identity,
             ext_addr=attached.ext_addr,

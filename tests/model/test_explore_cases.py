@@ -5,6 +5,8 @@ time, exactly as ``petswarm explore --replay FILE`` does: the property it failed
   robot and pushed it against another (179); the judge, which had only the world's collision counter, blamed the
   first robot of the closest pair of bodies. The world log now names the pairs touching, and the judge keeps the
   user's contacts (and a robot's while the user pushes it) out of the robots' record.
+- ``pan_hearing``, seed 1 case 130: a delay fault handed frames up after the receiver's PAN change, later than
+  the 50 ms the judge allowed; it now judges each frame by the PAN the robot was on when the frame was on the air.
 """
 
 from __future__ import annotations
@@ -53,4 +55,22 @@ def test_a_robot_the_user_pushes_into_another_is_not_a_robot_touching_it(tmp_pat
         pairs = {tuple(p) for p in tick.get("contacts", [])}
         if ("robot-1", "robot-3") in pairs:
             assert ("robot-1", "user") in pairs, tick["t_us"]
+    assert result["ok"], result["failures"]
+
+
+@pytest.mark.timeout(120)
+def test_a_frame_a_delay_fault_hands_up_after_a_pan_change_is_judged_by_its_air_time(tmp_path: Path) -> None:
+    """Seed 1 case 130: under a 139 ms delay fault frames the MAC took on the waiting PAN come up after the
+    robot's swarm PAN took effect; each was on the air before the change (its ``air_end_us`` before the
+    ``pan`` event's ``at_us``), and the judge no longer asks how late it came."""
+    result, _ = _replay("seed-1-case-130-pan_hearing.toml", tmp_path / "run")
+    late = 0
+    for robot in ("robot-1", "robot-2"):
+        events = [json.loads(line) for line in (tmp_path / "run" / "events" / f"{robot}.jsonl").open()]
+        changes = [e for e in events if e["kind"] == "pan"]
+        for frame in (e for e in events if e["kind"] == "foreign_pan"):
+            change = max((c for c in changes if c["at_us"] <= frame["mono"] * 1e6), key=lambda c: c["at_us"])
+            assert frame["air_end_us"] < change["at_us"]  # taken on the PAN before
+            late += frame["mono"] - change["at_us"] / 1e6 > 0.05  # and more than 50 ms after the change
+    assert late >= 1
     assert result["ok"], result["failures"]

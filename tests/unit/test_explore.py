@@ -122,9 +122,32 @@ def test_roster_agreement_fails_a_settled_member_the_roster_does_not_match() -> 
     assert P.roster_agreement(agreed) == []
 
 
-def test_pan_hearing_fails_a_foreign_pan_frame() -> None:
-    [violation] = P.pan_hearing(_record(**{"robot-2": [_ev("foreign_pan", 2.5, dst_pan=0x1000, pan=0x2222, src=3)]}))
-    assert violation.who == ("robot-2",) and "0x1000" in violation.what
+def _pan_life(*frames: dict[str, Any]) -> list[dict[str, Any]]:
+    """robot-2 starts on PAN 0x1000; the hub applies its swarm's PAN 0x2222 at 3.000000 s (it asked at 2.99 s)."""
+    start = _ev("start", 0.0, pan=0x1000, pan_at_us=5_000)
+    return [start, _ev("pan", 3.01, pan=0x2222, at_us=3_000_000), *frames]
+
+
+def test_pan_hearing_keeps_a_frame_received_on_the_old_pan_and_handed_up_late() -> None:
+    """Case 130 of seed 1: a delay fault hands a frame the MAC took on the old PAN up 0.18 s after the change."""
+    late = _ev("foreign_pan", 3.18, dst_pan=0x1000, pan=0x2222, src=3, seq=9, air_end_us=2_999_000)
+    asked = _ev("foreign_pan", 2.995, dst_pan=0x1000, pan=0x2222, src=3, seq=8, air_end_us=2_994_000)
+    assert P.pan_hearing(_record(**{"robot-2": _pan_life(asked, late)})) == []
+
+
+def test_pan_hearing_fails_a_frame_for_a_pan_the_robot_was_not_on_when_it_was_on_the_air() -> None:
+    # sent to the old PAN after the hub had applied the new one, handed up at once: the filter let it through
+    wrong = _ev("foreign_pan", 3.02, dst_pan=0x1000, pan=0x2222, src=3, seq=9, air_end_us=3_015_000)
+    [violation] = P.pan_hearing(_record(**{"robot-2": _pan_life(wrong)}))
+    assert violation.who == ("robot-2",) and violation.when == 3.02
+    assert violation.what == "heard a frame for PAN 0x1000 (on the air until 3.015000 s) while on 0x2222"
+    other = _ev("foreign_pan", 1.0, dst_pan=0x3333, pan=0x1000, src=3, seq=1, air_end_us=990_000)  # never ours
+    assert len(P.pan_hearing(_record(**{"robot-2": _pan_life(other)}))) == 1
+    restarted = [*_pan_life(), _ev("start", 5.0, pan=0x1000, pan_at_us=5_000_000)]  # a new life: the old PAN gone
+    late = _ev("foreign_pan", 5.2, dst_pan=0x2222, pan=0x1000, src=3, seq=2, air_end_us=5_100_000)
+    assert len(P.pan_hearing(_record(**{"robot-2": [*restarted, late]}))) == 1
+    unknown = _ev("foreign_pan", 2.5, dst_pan=0x1000, pan=0x2222, src=3)  # no air time: cannot be excused
+    assert "unknown PAN" in P.pan_hearing(_record(**{"robot-2": [unknown]}))[0].what
 
 
 def _tick(t_us: int, collisions: int, contacts: list[list[str]], robot_1: tuple[float, float] = (0.0, 0.0)) -> str:
