@@ -74,3 +74,26 @@ def test_a_frame_a_delay_fault_hands_up_after_a_pan_change_is_judged_by_its_air_
             late += frame["mono"] - change["at_us"] / 1e6 > 0.05  # and more than 50 ms after the change
     assert late >= 1
     assert result["ok"], result["failures"]
+
+
+@pytest.mark.timeout(120)
+@pytest.mark.parametrize("name", ["seed-2-case-57-shrunk-no_contact.toml", "seed-2-case-57-no_contact.toml"])
+def test_a_killed_robot_keeps_its_body_and_restarts_where_it_stood(tmp_path: Path, name: str) -> None:
+    """Seed 2 case 57: robot-4's body vanished from the world while its process was dead (robot-5 drove into its
+    place), and it restarted at its start pose, on top of whoever stood there (robot-2 in the shrunk case)."""
+    result, world = _replay(name, tmp_path / "run")
+    died = restarted = None
+    for line in (tmp_path / "run" / "supervision.jsonl").read_text().splitlines():
+        entry = json.loads(line)
+        died, restarted = (entry["mono"], restarted) if entry["kind"] == "died" else (died, entry["mono"])
+    assert died is not None and restarted is not None
+    poses = [
+        (tick["t_us"] / 1e6, body["x"], body["y"])
+        for tick in world
+        for body in tick["bodies"]
+        if body["id"] == "robot-4" and died - 0.1 <= tick["t_us"] / 1e6 <= restarted + 0.1
+    ]
+    assert poses[0][0] <= died - 0.05 and poses[-1][0] >= restarted + 0.05  # there throughout, dead or alive
+    still = [(x, y) for t, x, y in poses if t >= died]
+    assert max(abs(x - still[0][0]) + abs(y - still[0][1]) for x, y in still) < 0.01  # and where it stopped
+    assert result["ok"], result["failures"]
