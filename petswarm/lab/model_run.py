@@ -19,6 +19,7 @@ import dataclasses
 import functools
 import json
 import math
+import sys
 import time
 import weakref
 from collections.abc import Awaitable, Callable, Collection, Coroutine
@@ -30,6 +31,7 @@ from petswarm.clock import MODEL_EPOCH_S, ModelClockLoop
 from petswarm.control import RelayControl
 from petswarm.lab.checker import check_record
 from petswarm.lab.digest import record_digest
+from petswarm.lab.foxglove_live import RunStream, StreamUnavailable, start_stream
 from petswarm.lab.metrics import driving_metrics, read_world
 from petswarm.lab.processes import Interrupts
 from petswarm.lab.records import RunRecord
@@ -399,6 +401,9 @@ def run_model(opts: RunOptions, scenario: Scenario | None) -> int:
     """The run in model time, printed as a wall-clock run's is; returns the exit code."""
     try:
         summary = execute(opts, scenario)
+    except StreamUnavailable as err:
+        print(f"petswarm run: --foxglove {opts.foxglove}: {err}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         progress("interrupted")
         return 130
@@ -415,7 +420,10 @@ def execute(opts: RunOptions, scenario: Scenario | None) -> dict[str, Any]:
     if scenario is not None:
         opts = opts.for_scenario(scenario)
     world = opts.world or f"model-{opts.seed}"
+    stream = start_stream(opts.foxglove, world, None)  # before any record: its port may be taken
     record = RunRecord.create(opts, world, ENDPOINT)
+    if stream is not None:
+        stream.follow(record.path, progress)
     progress(f"world {world}, seed {opts.seed}, model time, record in {record.path}")
     started = time.perf_counter()
     loop = ModelClockLoop()
@@ -426,7 +434,7 @@ def execute(opts: RunOptions, scenario: Scenario | None) -> dict[str, Any]:
     loop.checkpoint = interrupts.check  # raised between two passes: never lost in a weakref callback (Interrupts)
     finished = False
     try:
-        summary = loop.run_until_complete(_run(opts, scenario, world, record))
+        summary = loop.run_until_complete(_run(opts, scenario, world, record, stream))
         finished = True
     except KeyboardInterrupt:
         summary["interrupted"] = True
@@ -440,6 +448,8 @@ def execute(opts: RunOptions, scenario: Scenario | None) -> dict[str, Any]:
             if not finished:
                 unwind(loop)
             loop.close()
+            if stream is not None:
+                stream.close()
             summary["clock"] = "model"
             summary["model_time_s"] = round(model_time_s, 6)
             summary["wall_time_s"] = round(time.perf_counter() - started, 3)
@@ -463,9 +473,13 @@ def execute(opts: RunOptions, scenario: Scenario | None) -> dict[str, Any]:
     return summary
 
 
-async def _run(opts: RunOptions, scenario: Scenario | None, world: str, record: RunRecord) -> dict[str, Any]:
+async def _run(
+    opts: RunOptions, scenario: Scenario | None, world: str, record: RunRecord, stream: RunStream | None = None
+) -> dict[str, Any]:
     world_log = record.path / "world.jsonl" if scenario is not None else None
     air = MemoryAir(_environment(opts, scenario), opts.seed, pcap_path=record.path / "air.pcap", world_log=world_log)
+    if stream is not None:  # the world states a hub would publish for viewers (the environment then makes them)
+        air.coordinator.on_world = stream.offer
     try:
         # every node starts at model time 0 and attaches in the same round, as lockstep processes do
         argvs = robot_argvs(opts, scenario, world, record)

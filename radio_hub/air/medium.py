@@ -189,6 +189,8 @@ class Transmission:
     job: _Job | None = None
     attempt: int = 0
     outcomes: dict[str, RxOutcome] = field(default_factory=dict)
+    powers: dict[str, tuple[Position, float]] = field(default_factory=dict)
+    """Its mean received power at each node judged so far, with where that node was."""
 
     def overlaps(self, start_us: int, end_us: int) -> bool:
         """True when this transmission is on the air at some instant of [start_us, end_us)."""
@@ -466,8 +468,9 @@ class Medium:
         job = tx.job
         assert job is not None
         channel_counters = self.channel_counters[tx.channel]
+        overlapping = self._overlapping(tx) if self._sinr else []
         for node in self._receivers(tx):
-            outcome = self._judge(tx, node, filtered=not addressed_to(tx.frame, node))
+            outcome = self._judge(tx, node, not addressed_to(tx.frame, node), overlapping)
             tx.outcomes[node.node_id] = outcome
             self.node_counters[node.node_id].count(outcome)
             channel_counters.count(outcome)
@@ -503,12 +506,21 @@ class Medium:
             and (chaos is None or not chaos.separated(sender, n.node_id))
         ]
 
-    def _judge(self, tx: Transmission, node: RadioNode, filtered: bool) -> RxOutcome:
-        """Interference first (the bits are garbled), then random loss, then the address filter."""
+    def _overlapping(self, tx: Transmission) -> list[Transmission]:
+        """The other transmissions on ``tx``'s channel at some instant of its airtime, in the air's order
+        (worked out once per frame, not once per receiver)."""
+        start, end = tx.start_us, tx.end_us
+        return [o for o in self._air[tx.channel] if o is not tx and o.start_us < end and o.end_us > start]
+
+    def _judge(
+        self, tx: Transmission, node: RadioNode, filtered: bool, overlapping: list[Transmission] | None = None
+    ) -> RxOutcome:
+        """Interference first (the bits are garbled), then random loss, then the address filter.
+        ``overlapping``: ``self._overlapping(tx)``, when the caller judges the frame at several receivers."""
         if not tx.left_sender:
             return RxOutcome.LOST
         if self._sinr:
-            spoiled = self._spoiled(tx, node)
+            spoiled = self._spoiled(tx, node, self._overlapping(tx) if overlapping is None else overlapping)
             if spoiled is not None:
                 return spoiled
         elif self._collided(tx, node):
@@ -519,6 +531,18 @@ class Medium:
 
     def _power_mw(self, sender: Position, receiver: Position) -> float:
         return dbm_to_mw(mean_rssi_dbm(self.config.path_loss, distance(sender, receiver)))
+
+    def _power_at(self, tx: Transmission, node: RadioNode) -> float:
+        """Mean received power (mW) of ``tx`` at ``node``, remembered on the transmission while the node stays
+        where it was: a frame's power at a receiver is asked for when the frame is judged there and again for
+        every frame it overlaps there."""
+        position = node.position
+        known = tx.powers.get(node.node_id)
+        if known is not None and known[0] == position:
+            return known[1]
+        power = self._power_mw(tx.position, position)
+        tx.powers[node.node_id] = (position, power)
+        return power
 
     def _on_air_for(self, node: RadioNode, start_us: int, end_us: int) -> list[Transmission]:
         """Other nodes' transmissions on the node's channel at some instant of [start_us, end_us) that a
@@ -534,7 +558,7 @@ class Medium:
             and (chaos is None or not chaos.separated(tx.sender, node_id))
         ]
 
-    def _spoiled(self, tx: Transmission, node: RadioNode) -> RxOutcome | None:
+    def _spoiled(self, tx: Transmission, node: RadioNode, overlapping: list[Transmission]) -> RxOutcome | None:
         """The ``sinr`` model's verdict on ``tx`` at ``node``: COLLIDED, LOST (noise alone) or None (intact).
 
         - Half duplex: a node that transmits at any instant of the frame receives none of it.
@@ -546,26 +570,31 @@ class Medium:
           (1 - BER)^bits (Annex E). One draw decides, and none where the product is exactly 0 or 1.
         """
         start, end = tx.start_us, tx.end_us
-        signal = self._power_mw(tx.position, node.position)
+        signal = self._power_at(tx, node)
         reach = self.config.range.tx_range_m
         heard = []
-        for other in self._air[tx.channel]:
-            if other is tx or not (other.start_us < end and other.end_us > start):
-                continue
+        for other in overlapping:
             if other.sender == node.node_id:
                 return RxOutcome.COLLIDED
             if other.sender == tx.sender or (self.chaos.faults and self.chaos.separated(other.sender, node.node_id)):
                 continue
-            power = self._power_mw(other.position, node.position)
+            power = self._power_at(other, node)
             first = other.start_us < start or (other.start_us == start and other.tx_id < tx.tx_id)
             if first and power >= signal and distance(other.position, node.position) <= reach:
                 return RxOutcome.COLLIDED
             heard.append((max(other.start_us, start), min(other.end_us, end), power))
         success = 1.0
-        for a, b, interference in _pieces(heard, start, end):
-            sinr = signal / (self._noise_mw + interference)
-            if sinr < self._clean_sinr:
-                success *= piece_success(sinr, (b - a) * BITS_PER_US)
+        # every stretch's interference is at most the sum of all (exactly rounded sums of positive powers are
+        # monotone), so when even that leaves the frame clean no stretch needs working out
+        if heard and signal / (self._noise_mw + math.fsum([p for _, _, p in heard])) < self._clean_sinr:
+            for a, b, interference in _pieces(heard, start, end):
+                sinr = signal / (self._noise_mw + interference)
+                if sinr < self._clean_sinr:
+                    success *= piece_success(sinr, (b - a) * BITS_PER_US)
+                    if success == 0.0:
+                        break
+        elif not heard and signal / self._noise_mw < self._clean_sinr:
+            success = piece_success(signal / self._noise_mw, (end - start) * BITS_PER_US)
         if success >= 1.0 or (success > 0.0 and self.rng.random() >= 1.0 - success):
             return None
         return RxOutcome.COLLIDED if heard else RxOutcome.LOST
