@@ -228,15 +228,15 @@ def _organize(rng: np.random.Generator) -> dict[str, Any]:
     k = int(rng.integers(1, n)) if n > 2 else 1
     shape = str(rng.choice(["column", "line", "wedge"]))
     faults_end = round(float(rng.uniform(5.0, 8.0)), 2)
-    again = round(faults_end + SETTLE_S, 2)  # sums of two-place decimals, written back as such
+    again = faults_end + SETTLE_S
     watch = [
         {"at": 1.0, "request": "follow"},
         {"at": 3.0, "request": "organize", "robots": k, "shape": shape, "spacing": 0.6},
         {"at": round(float(rng.uniform(4.0, faults_end)), 2), "request": "disperse"},
         {"at": again, "request": "organize", "robots": k, "shape": shape, "spacing": 0.6},
-        {"at": round(again + 3.0, 2), "request": "disperse"},
+        {"at": again + 3.0, "request": "disperse"},
     ]
-    duration = round(again + 6.0, 2)
+    duration = again + 6.0
     return {
         "duration_s": duration,
         "user": _user(rng, watch, duration, 0),
@@ -265,8 +265,8 @@ def _drive(rng: np.random.Generator) -> dict[str, Any]:
         change["mode"] = str(rng.choice(["following", "leading"]))
         change["change_master"] = bool(rng.random() < 0.5)
         watch.append(change)
-    duration = round(faults_end + SETTLE_S + 4.0, 2)
-    watch.append({"at": round(duration - 3.0, 2), "request": "disperse"})
+    duration = faults_end + SETTLE_S + 4.0
+    watch.append({"at": duration - 3.0, "request": "disperse"})
     data = {
         "duration_s": duration,
         "user": _user(rng, sorted(watch, key=lambda r: r["at"]), 4.5, duration - 8.0),
@@ -335,13 +335,13 @@ def _mixed(rng: np.random.Generator) -> dict[str, Any]:
             req.update(mode=str(rng.choice(["following", "leading"])), change_master=bool(rng.random() < 0.5))
         watch.append(req)
         t += float(rng.uniform(0.5, 3.0))
-    again = round(faults_end + SETTLE_S, 2)  # sums of two-place decimals, written back as such
+    again = faults_end + SETTLE_S
     watch += [
-        {"at": round(again - 1.5, 2), "request": "follow"},
+        {"at": again - 1.5, "request": "follow"},
         {"at": again, "request": "organize", "robots": n - 1},
-        {"at": round(again + 3.0, 2), "request": "disperse"},
+        {"at": again + 3.0, "request": "disperse"},
     ]
-    duration = round(again + 6.0, 2)
+    duration = again + 6.0
     return {
         "duration_s": duration,
         "user": _user(rng, watch, 4.0, duration - 6.0),
