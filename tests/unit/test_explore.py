@@ -214,6 +214,16 @@ def test_no_contact_fails_a_contact_a_world_log_does_not_name() -> None:
     assert "names no pair" in violation.what and violation.when == 0.02
 
 
+def test_no_contact_counts_a_pair_touching_on_as_one_contact_though_the_world_counts_it_again() -> None:
+    """A robot killed while touching another keeps its body, taken out of the world and put back: the world counts
+    the pair again; the log shows one contact going on (seed 3 case 100, with the user)."""
+    record = _record()
+    pair = [["robot-1", "robot-2"]]
+    record.world_lines = [_tick(0, 0, []), _tick(20_000, 1, pair), _tick(40_000, 2, pair)]
+    [violation] = P.no_contact(record)
+    assert violation.when == 0.02
+
+
 def test_organize_completes_fails_an_organize_with_no_member_after_the_faults() -> None:
     events = {
         "robot-1": [
