@@ -95,6 +95,8 @@ MAX_UNPROVEN = 64
 TOKENS_KEPT = 4096
 """Liveliness tokens remembered; past it, tokens of ids that are not attached are forgotten first."""
 _EXPIRY_EVERY_US = 500_000
+MAX_CHAOS_REQUEST_BYTES = 32 << 10
+"""A chaos request's bytes at most: a fault with a partition of ``MAX_GROUP`` ids of 64 characters fits."""
 
 
 class RadioHub:
@@ -426,10 +428,15 @@ class RadioHub:
             reply(item[1], self.env.air())
         elif kind == "chaos":
             query = item[1]
+            if query.payload is not None and len(query.payload) > MAX_CHAOS_REQUEST_BYTES:
+                self.env.counters.chaos_refused += 1
+                reply(query, {"error": f"a chaos request is at most {MAX_CHAOS_REQUEST_BYTES} bytes"})
+                return
             try:
                 request = msgpack.unpackb(query.payload.to_bytes(), raw=False) if query.payload else {}
             except Exception as err:  # a bad request must not hurt the hub
-                reply(query, {"error": f"{type(err).__name__}: {err}"})
+                self.env.counters.chaos_refused += 1
+                reply(query, {"error": f"{type(err).__name__}: {str(err)[:300]}"})
                 return
             reply(query, self.env.chaos_request(request, self.now_us(), time.time()))
         elif kind == "world":
