@@ -289,6 +289,10 @@ QUEUE_LIMIT = 1000
 oldest is dropped and counted (``RadioClient.dropped``): a flood costs the node messages, not memory."""
 LF_MAX_DATA = 4
 """User data bytes an LF burst carries."""
+MAX_GAP = 1 << 32
+"""Missing messages one message's number may account for (as the hub counts its own uplink gaps)."""
+MAX_COUNT = (1 << 63) - 1
+"""Where a node's counters stop: every count stays packable (msgpack takes integers below 2^64)."""
 ERRORS_KEPT = 100
 """The hub's latest error reasons a radio keeps (``RadioClient.errors``)."""
 
@@ -683,11 +687,17 @@ class RadioClient:
         except Exception as err:
             self.faults.record("downlink", err, msg.TYPE)
 
+    def _count_gap(self, n: int) -> None:
+        """Messages missing before number ``n``: at most ``MAX_GAP`` per message, and the sum saturates below
+        2^63, so forged numbers can never make the counter unpackable (a status answer that cannot be encoded
+        is never sent: the robot's status query went unanswered for good)."""
+        self.transport_gaps = min(self.transport_gaps + min(n - self._down_seq - 1, MAX_GAP), MAX_COUNT)
+
     def _on_message(self, msg: wire.Message) -> None:
         kind = type(msg)
         if kind is wire.Sensors or kind is wire.IrBeacons:  # most of the traffic, by its exact type
             if msg.n > self._down_seq + 1:
-                self.transport_gaps += msg.n - self._down_seq - 1
+                self._count_gap(msg.n)
             if msg.n > self._down_seq:
                 self._down_seq = msg.n
             if kind is wire.Sensors:
@@ -700,7 +710,7 @@ class RadioClient:
         if isinstance(msg, wire.Attached) and msg.token == 0:
             self._down_seq = msg.n - 1  # the hub numbers afresh on every attach
         if msg.n > self._down_seq + 1:
-            self.transport_gaps += msg.n - self._down_seq - 1
+            self._count_gap(msg.n)
         self._down_seq = max(self._down_seq, msg.n)
         if isinstance(msg, wire.Received):
             self._on_received(msg)

@@ -303,6 +303,10 @@ class RadioHub:
             if not bucket and not self._stranger_admitted():
                 return
             item = ("up", node_id, item[2])
+        elif item[0] == "alive" and item[2] == zenoh.SampleKind.DELETE and self._departure_of_attached(item[1]):
+            # a departure is never dropped, whatever the load: a dropped one left its body in the world for good
+            # (at most one per attached node per token, so this is bounded by the attached nodes)
+            bucket, limit = "!", 1 << 62
         else:
             bucket, limit = "?", INBOX_OTHER
         with self._waiting_lock:
@@ -322,6 +326,14 @@ class RadioHub:
                 item[1].drop()  # the query ends unanswered
             return
         self._inbox.put((*item, bucket))
+
+    def _departure_of_attached(self, key: str) -> bool:
+        """Whether a token that went is one of an attached node's (zenoh's thread: a read of the kinds only)."""
+        try:
+            node_id, _ = self.keys.alive_of(key)
+        except ValueError:
+            return False
+        return node_id in self.env.kinds
 
     def _stranger_admitted(self) -> bool:
         """Within ``STRANGERS_PER_S`` (else counted as dropped)."""

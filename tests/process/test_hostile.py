@@ -19,10 +19,11 @@ import zenoh
 
 from radio_hub.air.mac import Frame, FrameType
 from radio_hub.link import wire
+from radio_hub.link.port import HubUnavailable
 from radio_hub.link.up_keys import wait_for_up_key
 from radio_hub.link.zenoh_link import reliable_publisher, session_config
 
-from ..waiting import wait_for
+from ..waiting import once_settled, wait_for
 from .procfs import FLOOD_RSS_BOUND_MB, cpu_seconds, peak_rss_mb
 
 ROBOTS = (1, 2, 3)
@@ -207,3 +208,48 @@ def test_a_rogue_client_cannot_take_the_hub_or_its_robots_down(make_air: Any) ->
     for name in air.sup.children:
         log = (air.sup.log_dir / f"{name}.log").read_text(errors="replace")
         assert "Traceback" not in log and "never retrieved" not in log, (name, log[-2000:])
+
+
+ROGUE_NODES = 200
+
+
+def _rogue_swarm(air: Any, session: zenoh.Session, count: int) -> list[Any]:
+    """``count`` nodes attached from one session, each with its token (what a real node has)."""
+    decls: list[Any] = []
+    pubs = []
+    for i in range(count):
+        decls.append(session.liveliness().declare_token(air.keys.alive(f"ghost-{i}", "g")))
+        pubs.append(session.declare_publisher(air.keys.up(f"ghost-{i}")))
+    for i, pub in enumerate(pubs):
+        assert wait_for_up_key(pub)
+        pub.put(wire.Attach(short_addr=2000 + i, pan_id=0x2000, instance="g", n=1, s=31).encode())
+    return decls + pubs
+
+
+def _stats_when_answered(air: Any) -> dict[str, Any]:
+    """The hub's stats, or {} while its inbox is too full to take the question."""
+    try:
+        return air.stats()
+    except HubUnavailable:
+        return {}
+
+
+def test_a_session_that_ends_detaches_all_its_nodes_whatever_the_inbox_load(make_air: Any) -> None:
+    """1,500 attaches from one session, then its end: 500 departures were dropped at a full inbox and their bodies
+    stayed in the world for good. Here 200 attach, and the session ends behind 1,500 queries that fill the inbox:
+    every departure still detaches its node."""
+    air = make_air()
+    rogue = zenoh.open(session_config("client", air.endpoint))
+    held = _rogue_swarm(air, rogue, ROGUE_NODES)
+    stats = once_settled(air.stats, lambda s: len(_attached(s)) == ROGUE_NODES, 20, every=0.2)
+    assert len(_attached(stats)) == ROGUE_NODES, stats["liveliness"]
+    for _ in range(3000):  # answered or dropped, the replies are not waited for
+        rogue.get(air.keys.stats, lambda reply: None)
+    rogue.close()
+    del held
+    stats = once_settled(lambda: _stats_when_answered(air), lambda s: s and not _attached(s), 30, every=0.2)
+    print(f"attached after the session's end: {len(_attached(stats))}; inbox {stats['inbox']}")
+    assert _attached(stats) == set(), stats["inbox"]
+    assert stats["inbox"]["dropped"].get("other", 0) > 0  # the inbox was full meanwhile: the load was real
+    codes = air.close()
+    assert codes["hub"] == 0, codes
