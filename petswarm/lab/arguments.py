@@ -66,12 +66,26 @@ def position(text: str) -> tuple[float, float]:
     return (x, y)
 
 
+MAX_SEED = (1 << 64) - 1
+"""The largest seed: every seed travels in msgpack (the hub's stats, a run's manifest), which stops at 2^64 - 1."""
+
+
 def seed(text: str) -> int:
-    """A non-negative integer seed."""
+    """A non-negative integer seed, at most ``MAX_SEED``."""
     value = int_auto(text)
-    if value < 0:
-        raise argparse.ArgumentTypeError("seed must be >= 0")
+    if not 0 <= value <= MAX_SEED:
+        raise argparse.ArgumentTypeError(f"seed must be in 0..2^64-1, got {text[:40]}")
     return value
+
+
+def world_name(text: str) -> str:
+    """A world name: it becomes a chunk of every key (``radio_hub.interface.Keys``)."""
+    from radio_hub.interface import Keys
+
+    try:
+        return Keys(text).world
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
 
 
 def robot_id(text: str) -> int:

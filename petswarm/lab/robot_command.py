@@ -8,7 +8,16 @@ from __future__ import annotations
 import argparse
 from typing import TYPE_CHECKING
 
-from petswarm.lab.arguments import bounded, int_auto, position, readable_file, robot_id, seed, surround_config
+from petswarm.lab.arguments import (
+    bounded,
+    int_auto,
+    position,
+    readable_file,
+    robot_id,
+    seed,
+    surround_config,
+    world_name,
+)
 
 if TYPE_CHECKING:
     from petswarm.robot import RobotConfig
@@ -180,7 +189,12 @@ def add_profile(p: argparse.ArgumentParser, sets: str) -> None:
 
 
 def add_world(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--world", default="default", help="key prefix shared by a hub and its nodes (default %(default)s)")
+    p.add_argument(
+        "--world",
+        type=world_name,
+        default="default",
+        help="key prefix shared by a hub and its nodes (default %(default)s)",
+    )
 
 
 def add_hub(p: argparse.ArgumentParser) -> None:
