@@ -444,7 +444,10 @@ def _scenario(path: Path, text: str) -> Path:
         # a world name that is a key expression: a ValueError traceback
         (lambda tmp: ["--world", "a/b*", "--robots", "2", "--duration", "1"], "must be 1-64 letters"),
         # a record directory that cannot be written: an OSError traceback
-        (lambda tmp: ["--record", "/sys/petswarm-record", "--robots", "2", "--duration", "1"], "cannot write the run record"),
+        (
+            lambda tmp: ["--record", "/sys/petswarm-record", "--robots", "2", "--duration", "1"],
+            "cannot write the run record",
+        ),
     ],
 )
 def test_bad_run_input_is_refused_in_one_line_with_status_2(tmp_path: Path, args, why: str) -> None:
