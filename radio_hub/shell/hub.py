@@ -95,6 +95,7 @@ MAX_UNPROVEN = 64
 TOKENS_KEPT = 4096
 """Liveliness tokens remembered; past it, tokens of ids that are not attached are forgotten first."""
 _EXPIRY_EVERY_US = 500_000
+_S_FIELD = msgpack.packb("s")
 MAX_CHAOS_REQUEST_BYTES = 32 << 10
 """A chaos request's bytes at most: a fault with a partition of ``MAX_GROUP`` ids of 64 characters fits."""
 
@@ -299,7 +300,8 @@ class RadioHub:
         size = 0
         if item[0] == "up":
             node_id, size = self.keys.node_of(item[1]), len(item[2])
-            bucket, limit = (node_id, INBOX_PER_NODE) if node_id in self.env.kinds else ("", INBOX_STRANGERS)
+            own = node_id in self.env.kinds and self._own_marker(node_id) in item[2]
+            bucket, limit = (node_id, INBOX_PER_NODE) if own else ("", INBOX_STRANGERS)
             if not bucket and not self._stranger_admitted():
                 return
             item = ("up", node_id, item[2])
@@ -326,6 +328,15 @@ class RadioHub:
                 item[1].drop()  # the query ends unanswered
             return
         self._inbox.put((*item, bucket))
+
+    def _own_marker(self, node_id: str) -> bytes:
+        """The bytes every message of ``node_id``'s own session carries (its session key ``s`` in the envelope).
+        Traffic on a member's key without them goes with strangers' (their bucket and rate), so a flood from
+        another session on that key cannot crowd out the member's own messages (it silenced robot-1). The test is
+        a byte search, cheap in zenoh's thread; a message that carries the bytes but not as its key is still
+        refused by the environment (``foreign``)."""
+        key = self.env.session_key_of(node_id)
+        return _S_FIELD + msgpack.packb(key) if key else b""  # a key of 0 is left out of the envelope
 
     def _departure_of_attached(self, key: str) -> bool:
         """Whether a token that went is one of an attached node's (zenoh's thread: a read of the kinds only)."""

@@ -50,8 +50,9 @@ FLOOD_RATE = 50_000
 class Flood:
     """A thread putting small messages for made-up ids at ``FLOOD_RATE``, over its own publishers."""
 
-    def __init__(self, session: zenoh.Session, air: Any, ids: int = 50) -> None:
-        self.pubs = [session.declare_publisher(air.keys.up(f"flood-{i}")) for i in range(ids)]
+    def __init__(self, session: zenoh.Session, air: Any, ids: int = 50, key: str | None = None) -> None:
+        keys = [key] * ids if key else [air.keys.up(f"flood-{i}") for i in range(ids)]
+        self.pubs = [session.declare_publisher(k) for k in keys]
         self.data = wire.Drive(vx=0.1, n=1, s=7).encode()
         self.sent = 0
         self._stop = threading.Event()
@@ -251,5 +252,41 @@ def test_a_session_that_ends_detaches_all_its_nodes_whatever_the_inbox_load(make
     print(f"attached after the session's end: {len(_attached(stats))}; inbox {stats['inbox']}")
     assert _attached(stats) == set(), stats["inbox"]
     assert stats["inbox"]["dropped"].get("other", 0) > 0  # the inbox was full meanwhile: the load was real
+    codes = air.close()
+    assert codes["hub"] == 0, codes
+
+
+def _robot_pongs(air: Any, rid: int) -> int:
+    return sum(air.cmd(rid, "status")["heard_from"].values())
+
+
+def test_a_flood_on_a_robots_own_key_from_another_session_does_not_silence_it(make_air: Any) -> None:
+    """50,000 messages/s from another session on robot-1's up key silenced robot-1 (pong rate 0): the flood filled
+    its inbox bucket. Its own messages (its session key) now go first; the rest queue as a stranger's would."""
+    air = make_air()
+    for rid in (1, 2):
+        air.robot(rid, (2.0 * rid, 0.0), 0x1000, 11, "--ping-interval", "0.1")
+    rogue = zenoh.open(session_config("client", air.endpoint))
+    try:
+
+        def rate(seconds: float) -> float:
+            start, t0 = _robot_pongs(air, 1), time.monotonic()
+            time.sleep(seconds)
+            return (_robot_pongs(air, 1) - start) / (time.monotonic() - t0)
+
+        quiet = rate(2.0)
+        assert quiet > 3, quiet
+        with Flood(rogue, air, ids=8, key=air.keys.up("robot-1")) as flood:
+            time.sleep(0.5)
+            flooded = rate(2.5)
+        stats = air.stats()
+        print(f"pongs/s quiet {quiet:.1f}, under {flood.rate:.0f} msg/s on it {flooded:.1f}; {stats['inbox']}")
+        assert flood.sent > 10_000, flood.sent
+        assert flooded >= quiet / 2, (quiet, flooded)
+        assert stats["inbox"]["dropped"].get("node", 0) == 0, stats["inbox"]  # none of robot-1's own was dropped
+        assert stats["inbox"]["dropped"]["stranger"] > 0  # the flood was: queued as a stranger's, past its rate
+        assert "robot-1" in _attached(stats)
+    finally:
+        rogue.close()
     codes = air.close()
     assert codes["hub"] == 0, codes
