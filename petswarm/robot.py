@@ -157,7 +157,9 @@ class Robot:
             self.formation.note_answers,
         )
 
-        self.driver = Driver(config.robot_id, self.rf, self.sequence, self.formation, self.locations, self.log)
+        self.driver = Driver(
+            config.robot_id, self.rf, self.sequence, self.formation, self.locations, self.log, pairing_seed=config.seed
+        )
         self.formation.on_handover = self.driver.on_handover
         self.surround = (
             SurroundDriver(radio, self.ir, self.log, config.surround) if config.formation_mode == "surround" else None
@@ -425,6 +427,7 @@ class Robot:
                     round(v, 3) for v in (self.driver.command.vx, self.driver.command.vy, self.driver.command.omega)
                 ],
                 **self.driver.counters,
+                "unpaired": self.driver.core.unpaired,
             },
             "relative_location": self.locations.snapshot(clock.now()),
             "surround": None if self.surround is None else self.surround.status(),
