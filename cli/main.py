@@ -12,7 +12,7 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from petswarm.lab.arguments import CLOCKS, CommandParser, bounded, robot_id, seed, world_name
+from petswarm.lab.arguments import CLOCKS, CommandParser, add_link_security, bounded, robot_id, seed, world_name
 from petswarm.lab.robot_command import add_hub as _add_hub
 from petswarm.lab.robot_command import add_node_clock as _add_node_clock
 from petswarm.lab.robot_command import add_profile, add_robot_arguments, robot_config
@@ -350,6 +350,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_profile(borg, "hub and robots; the paper's figure printed beside the bench's, with the ratio")
     borg.add_argument("--seed", type=seed, default=1, help="seed of the hub and the robots (default %(default)s)")
+    add_link_security(borg)
     borg.add_argument("--out", default="bench-results", help="directory for JSON and plots (default %(default)s)")
     borg.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
     from petswarm.bench.ir import add_arguments as add_bench_ir_arguments

@@ -45,6 +45,7 @@ from radio_hub.interface import (
     HubLink,
     HubUnavailable,
     Keys,
+    LinkSecurity,
     RadioClient,
     RadioError,
     RadioIdentity,
@@ -103,6 +104,10 @@ class RobotConfig:
     """The surround law's gains and the human's beacon id (used in ``surround`` mode)."""
     profile: str = DEFAULT_PROFILE
     """The testbed profile (``petswarm.profiles``): the robot's MCU and UART between middleware and radio."""
+    link_key: str | None = None
+    """802.15.4 link security's network key, 32 hex digits (docs/SECURITY.md); None: off (plain frames)."""
+    link_mic: int = 4
+    """Bytes of a secured frame's MIC (4 or 8)."""
 
     def __post_init__(self) -> None:
         if self.formation_mode not in FORMATIONS:
@@ -133,6 +138,8 @@ class Robot:
         timing = robot_profile(config.profile).link
         # the link's own stream of draws: the robot's other draws stay what they are without a link
         link = None if timing.ideal else SerialLink(timing, Draws([config.seed, config.robot_id, LINK_STREAM]))
+        if config.link_key is not None:
+            radio.security = LinkSecurity(bytes.fromhex(config.link_key), config.link_mic)
         self.rf = RfCommunicationManager(radio, link)
         # numpy's default_rng draws, without loading numpy.random into every robot process
         self.rng = Draws([config.seed, config.robot_id])
@@ -409,6 +416,7 @@ class Robot:
             "malformed_payloads": self.rf.malformed,
             "tx_results": dict(self.rf.tx_results),
             "radio_malformed": radio.malformed,
+            "link_security": None if radio.security is None else radio.security.counters.to_dict(),
             "transport_gaps": radio.transport_gaps,
             "radio_dropped": {**radio.dropped, "link": radio.link_dropped},
             "faults": radio.faults.to_dict(),

@@ -78,6 +78,37 @@ def seed(text: str) -> int:
     return value
 
 
+def link_key_file(text: str) -> str:
+    """A file holding a 128-bit 802.15.4 network key (32 hex digits), made absolute for child processes."""
+    from radio_hub.interface import read_key_file
+
+    try:
+        read_key_file(text)
+    except (OSError, ValueError) as err:
+        raise argparse.ArgumentTypeError(f"{text}: {getattr(err, 'strerror', None) or err}") from None
+    return os.path.abspath(text)
+
+
+def add_link_security(p: argparse.ArgumentParser) -> None:
+    """``--link-key`` and ``--link-mic``: 802.15.4 link security (docs/SECURITY.md), off without a key."""
+    p.add_argument(
+        "--link-key",
+        type=link_key_file,
+        metavar="FILE",
+        help="802.15.4 link security (AES-CCM*, docs/SECURITY.md) with the network key in FILE (32 hex digits); "
+        "default: off",
+    )
+    p.add_argument(
+        "--link-mic", type=int, choices=(4, 8), default=4, help="bytes of the frames' MIC with --link-key (default 4)"
+    )
+
+
+def link_argv(args: argparse.Namespace) -> list[str]:
+    """The robot options that pass ``--link-key`` and ``--link-mic`` on (none without a key)."""
+    key = getattr(args, "link_key", None)
+    return ["--link-key", key, "--link-mic", str(args.link_mic)] if key else []
+
+
 def world_name(text: str) -> str:
     """A world name: it becomes a chunk of every key (``radio_hub.interface.Keys``)."""
     from radio_hub.interface import Keys

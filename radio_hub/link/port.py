@@ -23,6 +23,7 @@ from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any, Protocol
 
 from radio_hub.air.mac import BROADCAST, Frame, FrameError, FrameType, TxStatus
+from radio_hub.air.security import LinkSecurity, SecurityError
 from radio_hub.guard import Faults
 from radio_hub.lazy import lazy_numpy
 from radio_hub.link import wire
@@ -326,6 +327,9 @@ class RadioClient:
         self.on_sensors: list[Callable[[OwnSensors], None]] = []
         self.on_relayed: Callable[[wire.Relayed], None] | None = None
         """Where control messages relayed by the hub go (model and lockstep runs); None: counted as malformed."""
+        self.security: LinkSecurity | None = None
+        """802.15.4 link security (``radio_hub.air.security``): None, the default, sends and takes plain frames;
+        set, every data frame leaves secured and only authentic, fresh secured frames are handed up."""
         self._ultrasonic_deg: tuple[float, ...] = ()
         """The ultrasonic ring's axes (degrees from the heading), as the hub gave them on attaching."""
         self._ultrasonic_rad: np.ndarray | None = None
@@ -429,6 +433,11 @@ class RadioClient:
 
     async def send(self, frame: Frame) -> TxResult:
         """Hand a frame to the MAC and wait for its result. FrameError if it cannot be encoded."""
+        if self.security is not None:
+            try:
+                frame = self.security.protect_auto(frame)
+            except SecurityError as err:
+                raise FrameError(f"cannot secure the frame: {err}") from None
         psdu = frame.encode()
         for attempt in range(2):
             token = next(self._tokens)
@@ -764,6 +773,11 @@ class RadioClient:
         except FrameError:
             self.malformed += 1
             return
+        if self.security is not None:
+            try:
+                frame = self.security.unprotect(frame)
+            except SecurityError:
+                return  # counted by kind in the security's counters
         rx = RxFrame(frame, msg.rssi_dbm, msg.lqi, msg.start_us, msg.end_us, msg.submitted_us)
         if self.on_frame is not None:
             self.on_frame(rx)
