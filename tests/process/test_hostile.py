@@ -290,3 +290,87 @@ def test_a_flood_on_a_robots_own_key_from_another_session_does_not_silence_it(ma
         rogue.close()
     codes = air.close()
     assert codes["hub"] == 0, codes
+
+
+class RogueNode:
+    """A node of the rogue's own, attached with a short address of its choosing, that sends raw PSDUs."""
+
+    def __init__(self, session: zenoh.Session, air: Any, short_addr: int, pan: int = 0x1000) -> None:
+        self.heard: list[wire.Message] = []
+        self.alive = session.liveliness().declare_token(air.keys.alive("rogue-1", "r1"))
+        self.sub = session.declare_subscriber(
+            air.keys.down("rogue-1"), lambda s: self.heard.extend(wire.decode_all(s.payload.to_bytes()))
+        )
+        self.up = session.declare_publisher(air.keys.up("rogue-1"))
+        assert wait_for_up_key(self.up)
+        self.n = 1
+        self._put(wire.Attach(short_addr=short_addr, pan_id=pan, instance="r1", n=1, s=9))
+        wait_for("rogue attached", lambda: any(isinstance(m, wire.Attached) for m in self.heard), 10, every=0.1)
+
+    def _put(self, msg: wire.Message) -> None:
+        msg.n, msg.s = self.n, 9
+        self.n += 1
+        self.up.put(msg.encode())
+
+    def send(self, psdu: bytes) -> None:
+        self._put(wire.Transmit(token=self.n, psdu=psdu))
+
+    def configure(self, pan: int) -> None:
+        self._put(wire.Configure(token=self.n, pan_id=pan))
+
+
+def _security(air: Any, rid: int) -> dict[str, int]:
+    return air.cmd(rid, "status")["link_security"]
+
+
+def test_with_link_security_the_air_hijacks_fail_and_are_counted(make_air: Any, tmp_path: Any) -> None:
+    """A node attached with robot 1's short address sent as robot 1, a forged join notice moved a robot to another
+    PAN under a made-up master, and a forged disperse sent a member back to waiting. With 802.15.4 link security
+    on (the network key in every robot, not the rogue's), all of it is refused and counted; so is a replay."""
+    from petswarm.managers import messages as m
+    from radio_hub.air.mac import Frame, FrameType
+
+    key = tmp_path / "network.key"
+    key.write_text("00112233445566778899aabbccddeeff\n")
+    air = make_air()
+    secured = ["--link-key", str(key)]
+    air.robot(1, (0.0, 0.0), 0x1000, 11, "--user", "1", *secured)
+    for rid in (2, 3):
+        air.robot(rid, (1.0 * rid, 0.0), 0x1000, 11, *secured)
+    organized = air.cmd(1, "organize", timeout=30, count=1)
+    assert organized.get("members") == [2], organized  # the secured handshake organizes
+    swarm_pan = organized["pan_id"]
+    rogue_session = zenoh.open(session_config("client", air.endpoint))
+    try:
+        rogue = RogueNode(rogue_session, air, short_addr=0x0001)  # robot 1's address, from another node
+        ping = m.Ping(nonce=1).encode()
+        for seq in range(10):  # robot 1's address, plain frames
+            rogue.send(Frame(FrameType.DATA, seq, 0x1000, 0xFFFF, 0x1000, 1, ping).encode())
+        notice = m.JoinNotice(session=50, pan_id=0x6666, members=1, number=1, slot_ms=4).encode()
+        rogue.send(Frame(FrameType.DATA, 20, 0x1000, 3, 0x1000, 1, notice).encode())  # to PAN 0x6666
+        rogue.configure(swarm_pan)
+        time.sleep(0.3)
+        session = air.cmd(1, "status")["swarm"]["session"]
+        disperse = m.Disperse(session=session, slot_ms=4).encode()
+        rogue.send(Frame(FrameType.DATA, 21, swarm_pan, 2, swarm_pan, 1, disperse).encode())
+        time.sleep(1.0)
+        # a replay: a secured frame of robot 1 heard on the swarm's PAN, sent again
+        heard = [msg.psdu for msg in rogue.heard if isinstance(msg, wire.Received)]
+        secured_frames = [p for p in heard if Frame.decode(p).secured and Frame.decode(p).src == 1]
+        assert secured_frames, "the rogue heard no secured frame of robot 1"
+        for psdu in secured_frames[:5]:
+            rogue.send(psdu)
+        time.sleep(1.0)
+        states = {rid: air.cmd(rid, "status") for rid in (1, 2, 3)}
+        assert states[3]["state"] == "waiting" and states[3]["radio"]["pan_id"] == 0x1000, states[3]
+        assert states[2]["state"] == "slave-driving" and states[2]["radio"]["pan_id"] == swarm_pan, states[2]
+        assert states[1]["swarm"]["members"] == [2], states[1]["swarm"]
+        refused = {rid: states[rid]["link_security"] for rid in (2, 3)}
+        print(f"refused with link security: {refused}")
+        assert refused[3]["unsecured"] > 0 and refused[2]["unsecured"] > 0, refused  # what reached them, refused
+        assert refused[2]["replayed"] + refused[3]["replayed"] >= 1, refused
+        assert states[1]["link_security"]["accepted"] > 0
+    finally:
+        rogue_session.close()
+    codes = air.close()
+    assert all(code == 0 for code in codes.values()), codes
