@@ -251,6 +251,7 @@ def build_parser() -> argparse.ArgumentParser:
         "model time goes on without it (longer to hold a robot in a debugger)",
     )
     add_profile(run, "hub, robots and user alike (MAC, BLE, IR noise; MCU and UART per frame; recognition)")
+    add_link_security(run)
     run.add_argument(
         "--fail-fast",
         action="store_true",
@@ -660,6 +661,8 @@ def _run(args: argparse.Namespace) -> int:
         fail_fast=args.fail_fast,
         profile=args.profile,
         dead_after_s=args.dead_after,
+        link_key=args.link_key,
+        link_mic=args.link_mic,
     )
     return run(opts)
 
