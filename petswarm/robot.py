@@ -130,6 +130,20 @@ class RobotConfig:
         )
 
 
+EVENTS_ANSWER_BYTES = 3 << 20
+"""The longest ``events`` answer: zenoh carries nothing over 4 MB to or from a petswarm process
+(``radio_hub.interface.MAX_TRANSPORT_BYTES``); the record file keeps every event."""
+
+
+def events_answer(events: list[dict[str, Any]]) -> dict[str, Any]:
+    """The ``events`` command's answer: the latest events that fit in ``EVENTS_ANSWER_BYTES`` (``left_out``: the
+    number of older ones that did not)."""
+    kept = events
+    while kept and len(msgpack.packb(kept, use_bin_type=True, default=str)) > EVENTS_ANSWER_BYTES:
+        kept = kept[len(kept) // 2 :]
+    return {"events": kept, "left_out": len(events) - len(kept)} if len(kept) < len(events) else {"events": kept}
+
+
 class Robot:
     """One robot's middleware on top of its radio."""
 
@@ -367,7 +381,7 @@ class Robot:
             if name == "connect":
                 return self._connect_user(int(cmd.get("user", 1)), str(cmd.get("mode", "following")))
             if name == "events":
-                return {"events": list(self.log.events)}
+                return events_answer(list(self.log.events))
         except (FrameError, RadioError, HubUnavailable, FormationError, TransitionError, ValueError, TypeError) as err:
             return {"error": f"{type(err).__name__}: {err}"}
         return {"error": f"unknown command {name!r}; known: {', '.join(COMMANDS)}"}

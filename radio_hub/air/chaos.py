@@ -181,8 +181,8 @@ MAX_NODE_ID = 64
 
 
 def _node_id(name: str, value: Any) -> str:
-    if not isinstance(value, str) or not 0 < len(value) <= MAX_NODE_ID:
-        raise ValueError(f"{name} must be a node id (1-{MAX_NODE_ID} characters), not {_short(value)}")
+    if not isinstance(value, str) or len(value) > MAX_NODE_ID:  # an empty one is judged where it matters
+        raise ValueError(f"{name} must be a node id (at most {MAX_NODE_ID} characters), not {_short(value)}")
     return value
 
 
