@@ -12,6 +12,7 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from cli.explore import add_explore, explore
 from petswarm.lab.arguments import CLOCKS, CommandParser, add_link_security, bounded, robot_id, seed, world_name
 from petswarm.lab.robot_command import add_hub as _add_hub
 from petswarm.lab.robot_command import add_node_clock as _add_node_clock
@@ -35,6 +36,7 @@ EPILOG = """examples:
   petswarm swarm status --robot 2               one robot's state, swarm and IR fixes of its neighbours
   petswarm stats                                the hub's counters per node and per channel
   petswarm report runs/<time>-<seed>            a recorded run's summary and plots
+  petswarm export runs/<time>-<seed> --mcap run.mcap   the record as MCAP, for Foxglove
   petswarm watch --world lab                    a web page drawing the world live (--replay RUN: a record)
   petswarm bench hub|organize|ir|reaction|surround|scale|start   the benchmarks (figures, JSON, plots)
 
@@ -252,6 +254,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_profile(run, "hub, robots and user alike (MAC, BLE, IR noise; MCU and UART per frame; recognition)")
     add_link_security(run)
+    _add_foxglove(run, "stream the run live to Foxglove while it goes, in any clock")
     run.add_argument(
         "--fail-fast",
         action="store_true",
@@ -272,6 +275,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--port", type=bounded(int, 0, 65535), default=8047, help="port of the page (default %(default)s; 0: any)"
     )
     watch.add_argument("--bind", default="127.0.0.1", help="address to serve on (default %(default)s; 0.0.0.0: all)")
+    _add_foxglove(watch, "also serve the hub's world live to Foxglove")
+    watch.add_argument(
+        "--record",
+        metavar="RUN",
+        help="with --foxglove: also stream this run record's events and radio frames as its processes write them",
+    )
 
     exp = sub.add_parser("experiment", help="run an experiment file: a run, a fault timeline, repetitions, seeds")
     exp.add_argument("file", help="a TOML experiment file (see examples/experiment-loss.toml)")
@@ -287,10 +296,24 @@ def build_parser() -> argparse.ArgumentParser:
         "exactly from its seed (each run's digest is in the results), wall runs real processes over zenoh",
     )
 
+    export = sub.add_parser(
+        "export",
+        help="write a run record as an MCAP file for Foxglove (docs/FOXGLOVE.md)",
+        description="A run record (any clock) as one MCAP file: the world as Foxglove scenes and transforms, IR "
+        "modes and fixes, every radio frame on a channel per node, each node's events as logs, counters; the "
+        "manifest and summary as metadata; every message at the run's model time. Needs the foxglove extra.",
+    )
+    export.add_argument("run", help="a run record directory (runs/<time>-<seed>)")
+    export.add_argument("--mcap", metavar="FILE", required=True, help="the MCAP file to write")
+    export.add_argument("--force", action="store_true", help="replace FILE when it exists")
+    export.add_argument("--json", action="store_true", help="print the messages per topic, size and time as JSON")
+
     rep = sub.add_parser("report", help="print a run record's summary and render its plots to PNG")
     rep.add_argument("run", help="a run record directory (runs/<time>-<seed>)")
     rep.add_argument("--out", help="directory for report.png (default: the run directory)")
     rep.add_argument("--json", action="store_true", help="print the record's figures and the plots' paths as JSON")
+
+    add_explore(sub)
 
     stats = sub.add_parser("stats", help="print a running hub's counters")
     _add_hub(stats)
@@ -414,7 +437,8 @@ def main(argv: list[str] | None = None, parser: argparse.ArgumentParser | None =
     args = (parser or build_parser()).parse_args(argv)
     commands = {"hub": _hub, "user": _user, "robot": _robot, "run": _run, "stats": _stats, "bench": _bench}
     commands.update(swarm=_swarm, watch=_watch)
-    commands.update(report=_report, chaos=_chaos, experiment=_experiment, certs=_certs)
+    commands.update(report=_report, chaos=_chaos, experiment=_experiment, certs=_certs, explore=explore)
+    commands.update(export=_export)
     handler = commands[args.command]
     unfit = _use_security(args)
     if unfit:
@@ -445,6 +469,37 @@ def _wall_hub_class(floor: bool) -> type[Any]:
     from radio_hub.shell.hub import RadioHub
 
     return RadioHub
+
+
+FOXGLOVE_PORT = 8765
+"""Foxglove's default port for a WebSocket connection (``--foxglove`` without a port)."""
+
+
+def _add_foxglove(parser: argparse.ArgumentParser, what: str) -> None:
+    """``--foxglove [PORT]``: a Foxglove WebSocket server with the run's channels (docs/FOXGLOVE.md)."""
+    parser.add_argument(
+        "--foxglove",
+        nargs="?",
+        const=FOXGLOVE_PORT,
+        type=bounded(int, 0, 65535),
+        metavar="PORT",
+        help=f"{what}: a Foxglove WebSocket server on PORT (default {FOXGLOVE_PORT}; 0: any free port); needs the "
+        "foxglove extra",
+    )
+
+
+def _foxglove_missing(command: str, args: argparse.Namespace) -> bool:
+    """With --foxglove and no Foxglove SDK: say which extra to install (True)."""
+    if getattr(args, "foxglove", None) is None:
+        return False
+    from petswarm.lab.foxglove_channels import MissingExtra, require_sdk
+
+    try:
+        require_sdk()
+    except MissingExtra as err:
+        print(f"petswarm {command}: --foxglove: {err}", file=sys.stderr)
+        return True
+    return False
 
 
 def _add_dead_after(parser: argparse.ArgumentParser, default: float | None, what: str) -> None:
@@ -636,6 +691,8 @@ def _run(args: argparse.Namespace) -> int:
         )
         return 2
 
+    if _foxglove_missing("run", args):
+        return 2
     if args.dead_after is not None and args.clock != "lockstep":
         print("petswarm run: --dead-after is the lockstep hub's patience; it needs --clock lockstep", file=sys.stderr)
         return 2
@@ -663,6 +720,7 @@ def _run(args: argparse.Namespace) -> int:
         dead_after_s=args.dead_after,
         link_key=args.link_key,
         link_mic=args.link_mic,
+        foxglove=args.foxglove,
     )
     return run(opts)
 
@@ -674,6 +732,10 @@ def _experiment(args: argparse.Namespace) -> int:
 
 
 def _watch(args: argparse.Namespace) -> int:
+    if args.foxglove is not None:
+        from petswarm.lab.foxglove_live import watch_command as watch_with_foxglove
+
+        return watch_with_foxglove(args)
     from petswarm.lab.watch import watch_command
 
     return watch_command(args)
@@ -690,6 +752,28 @@ def _chaos(args: argparse.Namespace) -> int:
     from cli.chaos import chaos_command
 
     return chaos_command(args)
+
+
+def _export(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from petswarm.lab.mcap_export import MissingExtra, RecordError, export_mcap
+
+    try:
+        result = export_mcap(Path(args.run), Path(args.mcap), overwrite=args.force)
+    except (RecordError, MissingExtra) as err:
+        print(f"petswarm export: {err}", file=sys.stderr)
+        return 2
+    if args.json:
+        body = {"mcap": str(result.path), "size_bytes": result.size_bytes, "elapsed_s": round(result.elapsed_s, 3)}
+        print(json.dumps({**body, "counts": result.counts, "time_origin": result.time_origin}, indent=2))
+        return 0
+    total = sum(result.counts.values())
+    print(
+        f"{result.path}: {total} messages on {len(result.counts)} topics, {result.size_bytes / 1e6:.2f} MB "
+        f"in {result.elapsed_s:.2f} s ({result.time_origin})"
+    )
+    return 0
 
 
 def _report(args: argparse.Namespace) -> int:

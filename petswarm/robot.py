@@ -60,6 +60,9 @@ COMMANDS = ("status", "ping", "send", "configure", "received", "organize", "disp
 AUTO_ID = 0
 """``--id auto``: claim the lowest id no live robot of the world uses."""
 FORMATIONS = ("swarm", "surround")
+PAN_CHANGE_GRACE_S = 0.05
+"""After its PAN changes, how long a robot may still get frames sent to the old one: the radio takes the new PAN
+as its own when it asks the hub, which applies it a round trip later (``RadioClient.configure``)."""
 """``swarm``: the leader-follower middleware (organize, token IR, master and slaves); ``surround``: every
 robot runs the surround law on its own beacons and echoes (docs/SURROUND.md)."""
 LINK_STREAM = 0x5E7A
@@ -195,6 +198,8 @@ class Robot:
         self.pings_sent = 0
         self.pings_answered = 0
         self.heard_from: Counter[int] = Counter()
+        self._pan: tuple[int, int | None, float] = (radio.identity.pan_id, None, 0.0)
+        """The PAN frames last came on, the one before it, and when the change was first seen."""
         self.recent: deque[dict[str, Any]] = deque(maxlen=200)
         self.stopping = asyncio.Event()
         self._nonce = 0
@@ -229,10 +234,24 @@ class Robot:
         while True:
             incoming = await self.rf.receive()
             try:
+                self._check_pan(incoming)
                 self._remember(incoming)
                 await self._on_message(incoming)
             except Exception as err:  # one message must not stop the robot hearing the next
                 self.rf.radio.faults.record("receive", err, type(incoming.message).__name__)
+
+    def _check_pan(self, incoming: Incoming) -> None:
+        """Note a frame whose destination PAN is neither ours nor the broadcast PAN (``foreign_pan``): the MAC
+        filters those, so one here means a filter or a PAN change went wrong (``petswarm explore`` checks it)."""
+        dst_pan, pan = incoming.rx.frame.dst_pan, self.rf.radio.identity.pan_id
+        if pan != self._pan[0]:  # our PAN changed since the last frame: the old one's frames may still come a while
+            self._pan = (pan, self._pan[0], incoming.received_at)
+        if dst_pan in (pan, BROADCAST):
+            return
+        _, previous, changed_at = self._pan
+        if dst_pan == previous and incoming.received_at - changed_at <= PAN_CHANGE_GRACE_S:
+            return  # sent to us on the old PAN before the hub applied the change (the radio asks, then adopts)
+        self.log.record("foreign_pan", dst_pan=dst_pan, pan=pan, src=incoming.sender)
 
     async def _on_message(self, incoming: Incoming) -> None:
         msg = incoming.message

@@ -15,7 +15,10 @@ A scenario is one TOML file (``scenarios/*.toml`` ship with the project)::
     [robots]
     count = 4
     positions = [[0, -1, 90], [0, -1.6, 90]]   # x, y, heading (deg) per robot id 1, 2, ...
+    ping_interval = 0.5      # optional: each robot pings this often (s) and answers the others (default 0)
     [[faults]]               # as in experiment files: at = s, then a fault or an action
+    [[faults]]               # model time only: at = s, kind = "kill" | "restart" (robot = id), or
+                             # kind = "wearable_lost" | "wearable_back" (the user's BLE link, every robot)
 
 Pure: parsing and the user's path as a function of time; every error names what is wrong, and a key
 no table takes is refused with the nearest one it does take (``radio_hub.config.check_keys``).
@@ -46,10 +49,34 @@ REQUEST_ARGS: dict[str, tuple[str, ...]] = {
 }
 """What each watch request takes besides ``at`` and ``request`` (as petswarm/controllers/driving.py reads them)."""
 _CHOICES = {"shape": tuple(Shape), "mode": tuple(Mode), "gesture": tuple(Gesture)}
-TOP_KEYS = ("name", "description", "duration_s", "seed", "hub", "obstacles", "user", "robots", "faults", "surround")
-ROBOTS_KEYS = ("count", "formation", "positions")
+TOP_KEYS = (
+    "name",
+    "description",
+    "duration_s",
+    "seed",
+    "hub",
+    "obstacles",
+    "user",
+    "robots",
+    "faults",
+    "surround",
+    "explore",
+)
+EXPLORE_KEYS = ("family", "seed", "property")
+"""``[explore]``: where a case written by ``petswarm explore`` came from (its family, the run's seed, the property
+it failed); a run ignores it, ``petswarm explore --replay`` reads it."""
+ROBOTS_KEYS = ("count", "formation", "positions", "ping_interval")
 USER_KEYS = ("id", "owner", "start", "walk_at", "path", "watch")
 LEG_KEYS = {"walk": ("walk", "speed"), "turn": ("turn", "rate"), "stop": ("stop",)}
+ACTIONS: dict[str, tuple[str, ...]] = {
+    "kill": ("robot",),
+    "restart": ("robot",),
+    "wearable_lost": (),
+    "wearable_back": (),
+}
+"""Faults of a scenario's timeline that are not the air's: a robot killed (as SIGKILL) or restarted (a fresh
+process of the same id, in waiting), and the user's wearables' BLE link lost or back. The run carries them out
+(model time only), and what they take besides ``at`` and ``kind``."""
 
 
 class ScenarioError(ValueError):
@@ -138,6 +165,8 @@ class Scenario:
     robot_poses: list[tuple[float, float, float]]
     """x, y, heading (deg) for robots 1..robot_count."""
     formation: str = "surround-free"
+    ping_interval: float = 0.0
+    """Seconds between a robot's pings (0: none), as ``petswarm robot --ping-interval``."""
     faults: list[dict[str, Any]] = field(default_factory=list)
     surround: dict[str, Any] = field(default_factory=dict)
     raw: dict[str, Any] = field(default_factory=dict)
@@ -150,6 +179,11 @@ class Scenario:
     def surround_law(self) -> dict[str, Any]:
         """The ``[surround]`` table's law settings (``SurroundConfig`` fields), ``enabled`` left out."""
         return {k: v for k, v in self.surround.items() if k != "enabled"}
+
+    @property
+    def actions(self) -> list[dict[str, Any]]:
+        """The ``[[faults]]`` the run carries out itself: robots killed or restarted, the wearable link lost."""
+        return [f for f in self.faults if is_action(f)]
 
     def hub_tables(self) -> dict[str, Any]:
         """The hub's config tables with the obstacles, as ``radio_hub.shell.hub.environment_from_dict`` takes them."""
@@ -203,6 +237,7 @@ def load(path: str | Path) -> Scenario:
 def parse(data: dict[str, Any], path: Path | None = None) -> Scenario:
     """A scenario from its tables; ValueError naming the table and key of the first problem."""
     check_keys(data, TOP_KEYS, "the top level")
+    check_keys(data.get("explore", {}), EXPLORE_KEYS, "[explore]")
     duration = _positive(data.get("duration_s", 30.0), "duration_s")
     robots = data.get("robots", {})
     check_keys(robots, ROBOTS_KEYS, "[robots]")
@@ -216,7 +251,10 @@ def parse(data: dict[str, Any], path: Path | None = None) -> Scenario:
     obstacles = list(data.get("obstacles", []))
     faults = list(data.get("faults", []))
     for i, fault in enumerate(faults):
-        check_timed_fault(fault, f"[[faults]][{i}]")
+        if isinstance(fault, dict) and fault.get("kind") in ACTIONS:
+            _check_action(fault, f"[[faults]][{i}]", count)
+        else:
+            check_timed_fault(fault, f"[[faults]][{i}]")
     return Scenario(
         name=str(data.get("name", path.stem if path else "scenario")),
         path=path,
@@ -227,10 +265,28 @@ def parse(data: dict[str, Any], path: Path | None = None) -> Scenario:
         robot_count=count,
         robot_poses=poses[:count],
         formation=str(robots.get("formation", "column")),
+        ping_interval=_ping_interval(robots.get("ping_interval", 0.0)),
         faults=faults,
         surround=_surround(data.get("surround", {})),
         raw=data,
     )
+
+
+def is_action(fault: dict[str, Any]) -> bool:
+    """True for a ``[[faults]]`` entry the run carries out itself (``ACTIONS``), not the hub's chaos."""
+    return fault.get("kind") in ACTIONS
+
+
+def _check_action(spec: dict[str, Any], where: str, robots: int) -> None:
+    kind = spec["kind"]
+    check_keys(spec, ("at", "kind", *ACTIONS[kind]), where)
+    at = spec.get("at")
+    if not isinstance(at, int | float) or isinstance(at, bool) or not at >= 0:
+        raise ValueError(f"{where} needs at = seconds (a number >= 0), not {at!r}")
+    if "robot" in ACTIONS[kind]:
+        robot = spec.get("robot")
+        if not isinstance(robot, int) or isinstance(robot, bool) or not 1 <= robot <= robots:
+            raise ValueError(f"{where}: robot must be a robot id 1-{robots}, not {robot!r}")
 
 
 def _hub_tables(table: Any, obstacles: list[Any]) -> dict[str, Any]:
@@ -322,6 +378,13 @@ def _pose(values: Any, where: str) -> tuple[float, float, float]:
     if not all(math.isfinite(v) for v in (x, y, heading)):
         raise ValueError(f"{where} must be finite numbers")
     return x, y, heading
+
+
+def _ping_interval(value: Any) -> float:
+    number = float(value)
+    if not 0 <= number <= 3600:
+        raise ValueError(f"robots.ping_interval must be 0-3600 s, got {value!r}")
+    return number
 
 
 def _positive(value: Any, where: str) -> float:

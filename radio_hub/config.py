@@ -46,6 +46,17 @@ class MacConfig:
     max_frame_retries: int = 3
     queue_limit: int = 32
     """Frames a node may have waiting in its MAC; more are refused (a real MAC has a small queue)."""
+    sifs_us: int = 12 * SYMBOL_US
+    """macSIFSPeriod (IEEE 802.15.4-2011 5.1.1.3, Table 52): 12 symbols after an MPDU of at most
+    ``max_sifs_frame_size`` octets, before the same device starts its next frame."""
+    lifs_us: int = 40 * SYMBOL_US
+    """macLIFSPeriod: 40 symbols after a longer MPDU."""
+    max_sifs_frame_size: int = 18
+    """aMaxSIFSFrameSize (Table 51): the largest MPDU followed by a short interframe spacing."""
+
+    def ifs_us(self, mpdu_len: int) -> int:
+        """The interframe spacing after an MPDU of ``mpdu_len`` octets (5.1.1.3)."""
+        return self.sifs_us if mpdu_len <= self.max_sifs_frame_size else self.lifs_us
 
     def validate(self) -> None:
         """Raise ValueError on settings outside the standard's ranges."""
@@ -59,14 +70,20 @@ class MacConfig:
             raise ValueError("MAC durations must be positive")
         if self.queue_limit < 1:
             raise ValueError("queue_limit must be at least 1")
+        if not 0 <= self.sifs_us <= self.lifs_us:
+            raise ValueError("need 0 <= sifs_us <= lifs_us")
+        if not 0 < self.max_sifs_frame_size <= 127:
+            raise ValueError("max_sifs_frame_size must be 1..127 octets")
 
 
 @dataclass
 class RangeConfig:
-    """Unit-disk graph medium, as in Cooja: decode inside tx range, interfere inside interference range."""
+    """Who can decode whom: a unit disk, as in Cooja, with a success ratio falling towards its edge."""
 
     tx_range_m: float = 30.0
     interference_range_m: float = 50.0
+    """The ``overlap`` reception model's interference and carrier-sense disk; the ``sinr`` model sums every
+    transmission's power instead and senses energy against ``ReceptionConfig``'s threshold."""
     success_ratio_tx: float = 1.0
     """Probability that a transmission leaves the sender at all."""
     success_ratio_rx: float = 0.9
@@ -136,10 +153,40 @@ class PathLossConfig:
 
 @dataclass
 class CaptureConfig:
-    """Capture effect: a frame survives overlap when it is stronger than every interferer by a margin."""
+    """The ``overlap`` model's capture effect: a frame survives overlap when it is stronger than every
+    interferer by a margin. The ``sinr`` model needs no margin: the error rate decides."""
 
     enabled: bool = False
     margin_db: float = 6.0
+
+
+RECEPTION_MODELS = ("sinr", "overlap")
+
+
+@dataclass
+class ReceptionConfig:
+    """How a receiver decides a frame that other transmissions overlap, and how CCA senses the channel.
+
+    ``sinr`` (the default): the frame's signal against the noise floor plus the summed power of everything else
+    on the air at the receiver, piece by piece over its airtime, through the O-QPSK bit error rate of
+    IEEE 802.15.4-2006 Annex E (E.4.1.8); CCA mode 1 reports busy above the energy-detection threshold (2006
+    6.9.9, 2011 8.2.7). A
+    receiver stays synchronised to the first frame it hears unless a stronger one starts (capture).
+    ``overlap``: the unit-disk rule (Cooja's UDGM), any overlap inside ``interference_range_m`` collides unless
+    ``[capture]`` saves the stronger frame; carrier sense inside the same disk.
+    """
+
+    model: str = "sinr"
+    ed_threshold_above_sensitivity_db: float = 10.0
+    """CCA mode 1's energy-detection threshold over the receiver sensitivity: the standard allows at most
+    10 dB (IEEE 802.15.4-2006 6.9.9, 2011 8.2.7)."""
+
+    def validate(self) -> None:
+        """Raise ValueError on an unknown model or a threshold outside the standard's range."""
+        if self.model not in RECEPTION_MODELS:
+            raise ValueError(f"reception model {self.model!r}: one of {', '.join(RECEPTION_MODELS)}")
+        if not 0.0 <= self.ed_threshold_above_sensitivity_db <= 10.0:
+            raise ValueError("ed_threshold_above_sensitivity_db must be 0..10 dB (IEEE 802.15.4-2006 6.9.9)")
 
 
 @dataclass
@@ -151,6 +198,7 @@ class MediumConfig:
     loss: LossConfig = field(default_factory=LossConfig)
     path_loss: PathLossConfig = field(default_factory=PathLossConfig)
     capture: CaptureConfig = field(default_factory=CaptureConfig)
+    reception: ReceptionConfig = field(default_factory=ReceptionConfig)
 
     def validate(self) -> MediumConfig:
         """Check every section; returns self so it can be chained."""
@@ -158,6 +206,7 @@ class MediumConfig:
         self.range.validate()
         self.loss.validate()
         self.path_loss.validate()
+        self.reception.validate()
         return self
 
     def to_dict(self) -> dict[str, Any]:

@@ -105,6 +105,7 @@ _LAB_ENTRY_POINTS = {
     "parse_obstacle": "radio_hub.physics.world",
     "receiver_axes_rad": "radio_hub.physics.light",
     "receiver_readings": "radio_hub.physics.light",
+    "read_pcap": "radio_hub.air.pcap",
     "put_up": "radio_hub.link.zenoh_link",
     "reliable_publisher": "radio_hub.link.zenoh_link",
     "wait_for_up_key": "radio_hub.link.up_keys",

@@ -860,10 +860,14 @@ class DriverCore:
             self.tracker.predict(dt, self.command, master_motion)
         if self.tracker.pose is None:
             return MotorCommand()
-        pose = (self.tracker.pose[0], self.tracker.pose[1], heading_rel)
         chain = (swarm.master, *swarm.members)
-        layout = self._reference(chain, state.shape, state.spacing, bool(state.mirrored), bool(state.kept))
         number = swarm.number
+        if number >= len(chain):
+            # the JoinNotice gave our number but no roster has come yet (lost): without the members before us
+            # neither our slot nor our neighbour is known, so hold still until the next roster (every 0.25 s)
+            return MotorCommand()
+        pose = (self.tracker.pose[0], self.tracker.pose[1], heading_rel)
+        layout = self._reference(chain, state.shape, state.spacing, bool(state.mirrored), bool(state.kept))
         near = neighbours(state.shape, number)
         neighbour_fix, neighbour_ref = None, None
         if near and near[0] != 0:
@@ -893,9 +897,9 @@ class DriverCore:
         if swarm is not None and state in (RobotState.MASTER_DRIVING, RobotState.SLAVE_DRIVING):
             role = "master" if swarm.number == 0 else "slave"
             master = user_link.robot_node(swarm.master)
-            if role == "slave" and self.drive_state_msg is not None:
+            chain = (swarm.master, *swarm.members)
+            if role == "slave" and self.drive_state_msg is not None and swarm.number < len(chain):
                 ds = self.drive_state_msg
-                chain = (swarm.master, *swarm.members)
                 slot = self._reference(chain, ds.shape, ds.spacing, bool(ds.mirrored), bool(ds.kept))[swarm.number]
         return Telemetry(state.label, role, master, slot, str(self.mode))
 

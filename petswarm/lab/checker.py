@@ -8,7 +8,8 @@
 - every robot ends in a valid state: waiting or driving with its user, never half-way through a swarm;
 - no two IR modules shone at once (the hub's overlap counter), so no IR reading came from two sources;
 - a robot that died during the run (``supervision.jsonl``) is held to what it did while alive: its events
-  may end without ``stop`` and in any state, but they must still start, keep order and chain.
+  may end without ``stop`` and in any state, but they must still start, keep order and chain; a robot
+  restarted after (model-time scenarios' ``restart``) starts a new life, checked as a robot of its own.
 
 Pure functions over the record's data; ``check_record`` reads a run directory.
 """
@@ -68,9 +69,27 @@ def check_ir(ir: dict[str, Any] | None) -> list[str]:
 
 
 def died_during(run: Path) -> set[str]:
-    """The processes a run recorded as dying while it ran (their events end early, by no fault of theirs)."""
+    """The processes a run recorded as dying while it ran and not restarted after (their events end early, by
+    no fault of theirs)."""
     path = run / "supervision.jsonl"
-    return {e["process"] for e in read_events(path) if e.get("kind") == "died"} if path.exists() else set()
+    dead: set[str] = set()
+    for entry in read_events(path) if path.exists() else []:
+        if entry.get("kind") == "died":
+            dead.add(entry["process"])
+        elif entry.get("kind") == "restarted":
+            dead.discard(entry["process"])
+    return dead
+
+
+def lives(events: list[dict[str, Any]]) -> list[list[dict[str, Any]]]:
+    """A robot's events split at each ``start``: one list per process life (a robot killed and restarted appends
+    to the same events file; its new process starts over in waiting)."""
+    split: list[list[dict[str, Any]]] = []
+    for event in events:
+        if event["kind"] == "start" or not split:
+            split.append([])
+        split[-1].append(event)
+    return split
 
 
 def check_record(run: Path) -> list[str]:
@@ -81,5 +100,8 @@ def check_record(run: Path) -> list[str]:
     problems = check_counters(summary["nodes"]) if finished else []
     died = died_during(run)
     for path in sorted((run / "events").glob("*.jsonl")):
-        problems += check_events(path.stem, read_events(path), finished and path.stem not in died)
+        split = lives(read_events(path)) or [[]]
+        for i, life in enumerate(split):  # every life but the last was ended by a kill
+            last = i == len(split) - 1
+            problems += check_events(path.stem, life, finished and last and path.stem not in died)
     return problems + check_ir(summary.get("ir") if summary else None)

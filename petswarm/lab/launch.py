@@ -21,6 +21,12 @@ def run(opts: RunOptions) -> int:
         except ScenarioError as err:
             print(f"petswarm run: {err}", file=sys.stderr)
             return 2
+        if scenario.actions and opts.clock != "model":
+            kinds = ", ".join(sorted({a["kind"] for a in scenario.actions}))
+            print(
+                f"petswarm run: {opts.scenario}: {kinds} faults run in model time only (--clock model)", file=sys.stderr
+            )
+            return 2
     if opts.config is not None:  # checked on every clock before anything starts: unchecked, a traceback in model
         from radio_hub.interface import config_problem  # time, a hub dead at start on the wall clock
 

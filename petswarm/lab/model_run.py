@@ -15,11 +15,14 @@ import argparse
 import asyncio
 import contextlib
 import contextvars
+import dataclasses
 import functools
+import json
 import math
+import sys
 import time
 import weakref
-from collections.abc import Callable, Collection, Coroutine
+from collections.abc import Awaitable, Callable, Collection, Coroutine
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -28,12 +31,14 @@ from petswarm.clock import MODEL_EPOCH_S, ModelClockLoop
 from petswarm.control import RelayControl
 from petswarm.lab.checker import check_record
 from petswarm.lab.digest import record_digest
+from petswarm.lab.foxglove_live import RunStream, StreamUnavailable, start_stream
 from petswarm.lab.metrics import driving_metrics, read_world
 from petswarm.lab.processes import Interrupts
 from petswarm.lab.records import RunRecord
 from petswarm.lab.run import (
     HEARING_PROBLEMS,
     FaultTimeline,
+    RunFailed,
     RunOptions,
     _print,
     organize_and_disperse,
@@ -45,7 +50,7 @@ from petswarm.lab.run import (
 )
 from petswarm.managers.sequence import EventLog
 from petswarm.robot import Robot, RobotConfig
-from petswarm.scenario import Scenario
+from petswarm.scenario import Scenario, is_action
 from petswarm.wearables.user import UserConfig, run_user
 from radio_hub.interface import (
     HANDED_OVER,
@@ -396,6 +401,9 @@ def run_model(opts: RunOptions, scenario: Scenario | None) -> int:
     """The run in model time, printed as a wall-clock run's is; returns the exit code."""
     try:
         summary = execute(opts, scenario)
+    except StreamUnavailable as err:
+        print(f"petswarm run: --foxglove {opts.foxglove}: {err}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         progress("interrupted")
         return 130
@@ -412,7 +420,10 @@ def execute(opts: RunOptions, scenario: Scenario | None) -> dict[str, Any]:
     if scenario is not None:
         opts = opts.for_scenario(scenario)
     world = opts.world or f"model-{opts.seed}"
+    stream = start_stream(opts.foxglove, world, None)  # before any record: its port may be taken
     record = RunRecord.create(opts, world, ENDPOINT)
+    if stream is not None:
+        stream.follow(record.path, progress)
     progress(f"world {world}, seed {opts.seed}, model time, record in {record.path}")
     started = time.perf_counter()
     loop = ModelClockLoop()
@@ -423,7 +434,7 @@ def execute(opts: RunOptions, scenario: Scenario | None) -> dict[str, Any]:
     loop.checkpoint = interrupts.check  # raised between two passes: never lost in a weakref callback (Interrupts)
     finished = False
     try:
-        summary = loop.run_until_complete(_run(opts, scenario, world, record))
+        summary = loop.run_until_complete(_run(opts, scenario, world, record, stream))
         finished = True
     except KeyboardInterrupt:
         summary["interrupted"] = True
@@ -437,6 +448,8 @@ def execute(opts: RunOptions, scenario: Scenario | None) -> dict[str, Any]:
             if not finished:
                 unwind(loop)
             loop.close()
+            if stream is not None:
+                stream.close()
             summary["clock"] = "model"
             summary["model_time_s"] = round(model_time_s, 6)
             summary["wall_time_s"] = round(time.perf_counter() - started, 3)
@@ -460,21 +473,26 @@ def execute(opts: RunOptions, scenario: Scenario | None) -> dict[str, Any]:
     return summary
 
 
-async def _run(opts: RunOptions, scenario: Scenario | None, world: str, record: RunRecord) -> dict[str, Any]:
+async def _run(
+    opts: RunOptions, scenario: Scenario | None, world: str, record: RunRecord, stream: RunStream | None = None
+) -> dict[str, Any]:
     world_log = record.path / "world.jsonl" if scenario is not None else None
     air = MemoryAir(_environment(opts, scenario), opts.seed, pcap_path=record.path / "air.pcap", world_log=world_log)
+    if stream is not None:  # the world states a hub would publish for viewers (the environment then makes them)
+        air.coordinator.on_world = stream.offer
     try:
         # every node starts at model time 0 and attaches in the same round, as lockstep processes do
         argvs = robot_argvs(opts, scenario, world, record)
-        loop = asyncio.get_running_loop()
-        robots = [loop.create_task(_run_robot(argv, air)) for argv in argvs.values()]
+        cast = Cast(air, argvs, record)
+        for rid in argvs:
+            cast.start(rid)
         user = _start_user(opts, scenario, world, record, air)
         radio = await RadioClient.connect(CONTROL_IDENTITY, world=world, link=air.link(), timeout=5.0)
         ctl = RelayControl(radio)
-        summary = await orchestrate(opts, scenario, ctl, world)
+        summary = await orchestrate(opts, scenario, ctl, world, cast.dead, cast.act)
         if user is not None:
             await user
-        await asyncio.gather(*robots)
+        await asyncio.gather(*cast.tasks)
         await radio.close()
         await cancel_leftovers(asyncio.get_running_loop())
     finally:
@@ -506,14 +524,64 @@ def robot_argvs(
     return {rid: scenario_robot_argv(opts, scenario, rid, endpoint, world, record) for rid in range(1, count + 1)}
 
 
-async def _run_robot(argv: list[str], air: MemoryAir) -> None:
-    """The robot a ``petswarm robot`` command line describes, attached through memory, until told to stop."""
-    running = await start_robot(robot_config_of(argv), air)
+class Cast:
+    """The run's robots by id, and the scenario's actions on them (``petswarm.scenario.ACTIONS``): a robot
+    killed as by SIGKILL, restarted as a fresh process of the same id, the wearables' BLE link lost and back.
+    Deaths and restarts go to the record's ``supervision.jsonl`` as a wall-clock run's supervisor writes them."""
+
+    def __init__(self, air: MemoryAir, argvs: dict[int, list[str]], record: RunRecord) -> None:
+        self.air, self.argvs, self.record = air, argvs, record
+        self.running: dict[int, RunningRobot] = {}
+        self.tasks: list[asyncio.Task[None]] = []
+        self._dead: set[int] = set()
+        self._ble: Any = None
+
+    def dead(self) -> frozenset[int]:
+        """The robots killed and not restarted (neither asked nor expected to do anything)."""
+        return frozenset(self._dead)
+
+    def start(self, rid: int) -> None:
+        """Robot ``rid``'s process starts (again)."""
+        self.tasks.append(asyncio.get_running_loop().create_task(_run_robot(self.argvs[rid], self.air, self.running)))
+
+    async def act(self, action: dict[str, Any]) -> None:
+        """Carry out one scenario action now."""
+        kind, rid = action["kind"], action.get("robot")
+        if kind == "kill" and rid not in self._dead and rid in self.running:
+            self._dead.add(rid)
+            await self.running[rid].kill()
+            self._supervision("died", rid, cause="killed by the scenario")
+        elif kind == "restart" and rid in self._dead:
+            self._dead.discard(rid)
+            self._supervision("restarted", rid)
+            self.start(rid)
+        elif kind == "wearable_lost" and self._ble is None:
+            ble = self.air.env.ble
+            self._ble = ble.config
+            ble.config = dataclasses.replace(ble.config, range_m=1e-9)  # every message out of range: no link
+        elif kind == "wearable_back" and self._ble is not None:
+            self.air.env.ble.config, self._ble = self._ble, None
+
+    def _supervision(self, what: str, rid: int, **detail: Any) -> None:
+        entry = {"kind": what, "process": f"robot-{rid}", "mono": round(self.air.loop.time(), 6), **detail}
+        with open(self.record.path / "supervision.jsonl", "a") as out:
+            out.write(json.dumps(entry) + "\n")
+
+
+async def _run_robot(argv: list[str], air: MemoryAir, running_by_id: dict[int, RunningRobot] | None = None) -> None:
+    """The robot a ``petswarm robot`` command line describes, attached through memory, until told to stop (or
+    killed: ``RunningRobot.kill``)."""
+    config = robot_config_of(argv)
+    running = await start_robot(config, air)
+    if running_by_id is not None:
+        running_by_id[config.robot_id] = running
     try:
         assert running.task is not None
         await running.task
         await running.robot.close()
     except asyncio.CancelledError:
+        if running.gone and running_by_id is not None and running_by_id.get(config.robot_id) is running:
+            return  # killed by the scenario: its process is over, the run goes on
         if not running.gone:  # the run was interrupted (a killed robot, gone, leaves no last event)
             # its record ends as a process's does on SIGTERM, not at whatever it did last
             running.robot.log.record("stop", driving=dict(running.robot.driver.counters), interrupted=True)
@@ -556,13 +624,16 @@ async def orchestrate(
     ctl: RelayControl,
     world: str,
     dead: Callable[[], Collection[int]] = frozenset,
+    act: Callable[[dict[str, Any]], Awaitable[None]] | None = None,
 ) -> dict[str, Any]:
     """What a model or lockstep run does, on model time, through the relay: wait for the robots, the
     traffic or scenario phase with its faults, the summary, then every robot told to stop. Robots in ``dead()``
     (a lockstep run's robot processes that died, as its supervision saw them; none in model time) are neither
-    asked nor expected to do anything; any other robot that does not answer is a problem of the run."""
+    asked nor expected to do anything; any other robot that does not answer is a problem of the run. ``act``
+    carries out the scenario's actions (``petswarm.scenario.ACTIONS``; model time only)."""
     await _wait_attached(ctl, opts.robots)
     faults = FaultTimeline(list(opts.faults) + (list(scenario.faults) if scenario is not None else []))
+    faults.act = act
     if scenario is None:
         summary = await ping_and_organize(opts, ctl, faults, world, dead)
     else:
@@ -588,6 +659,13 @@ async def _wait_attached(ctl: RelayControl, robots: int) -> None:
 
 async def _apply_faults(ctl: RelayControl, faults: FaultTimeline, elapsed: float) -> None:
     for at, request in faults.take_due(elapsed):
+        if request["op"] == "add" and is_action(request["fault"]):
+            if faults.act is None:
+                raise RunFailed(f"fault at {at:g} s: {request['fault']['kind']} runs in model time only")
+            await faults.act(request["fault"])
+            progress(f"fault at {at:g} s: {request['fault']['kind']} {request['fault'].get('robot', '')}".rstrip())
+            faults.applied.append({"at": at, **request})
+            continue
         answer = await ctl.hub("chaos", request=request)
         faults.applied_or_refused(at, request, answer)
 

@@ -10,6 +10,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
@@ -270,6 +271,9 @@ class Interrupts:
         self._stop_began = False
         """In or past ``deferred()``: the KeyboardInterrupt has done its work (or none came)."""
         self._previous: dict[int, Any] = {}
+        if threading.current_thread() is not threading.main_thread():
+            return  # only the main thread may take signals: a run in a host's worker thread (a Dask worker) leaves
+            # the host's own handling alone
         for signum in (signal.SIGINT, signal.SIGTERM):
             current = signal.getsignal(signum)
             if current not in (signal.SIG_IGN, None):  # None: a handler not set from Python, not ours to replace

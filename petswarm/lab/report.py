@@ -18,18 +18,9 @@ from pathlib import Path
 from typing import Any
 
 from petswarm.lab.metrics import describe_driving, driving_metrics, read_world, rotation_starts
+from petswarm.lab.palette import STATE_COLOURS
 from petswarm.lab.records import read_events
 from petswarm.lab.surround_plots import is_surround_run, plot_snapshots
-
-STATE_COLOURS = {
-    "waiting": "#bbbbbb",
-    "following": "#4c72b0",
-    "leading": "#55a868",
-    "remote-control": "#8172b2",
-    "organizing": "#dd8452",
-    "master-driving": "#c44e52",
-    "slave-driving": "#da8bc3",
-}
 
 
 def report_command(args: argparse.Namespace) -> int:

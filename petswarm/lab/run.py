@@ -7,7 +7,7 @@ import json
 import os
 import sys
 import time
-from collections.abc import Callable, Collection
+from collections.abc import Awaitable, Callable, Collection
 from dataclasses import dataclass, replace
 from typing import Any, Protocol
 
@@ -16,6 +16,7 @@ import zenoh
 
 from petswarm import control
 from petswarm.lab.checker import check_record
+from petswarm.lab.foxglove_live import StreamUnavailable, start_stream
 from petswarm.lab.metrics import describe_driving
 from petswarm.lab.processes import Interrupts, Supervisor, free_tcp_port
 from petswarm.lab.records import RunRecord
@@ -63,6 +64,8 @@ class RunOptions:
     dead_after_s: float | None = None
     """``lockstep``: wall seconds the hub waits for a granted process's idle before it takes the process as gone
     (None: the hub's own default)."""
+    foxglove: int | None = None
+    """Port of a Foxglove WebSocket server that streams the run live (0: any free port; None: no server)."""
 
     def for_scenario(self, scenario: Any) -> RunOptions:
         """These options with the scenario's robot count and duration (what its record's manifest shows)."""
@@ -123,7 +126,14 @@ def supervise(
     world = opts.world or f"{prefix}-{os.getpid()}-{opts.seed}"
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     keys = Keys(world)
+    try:
+        stream = start_stream(opts.foxglove, world, endpoint)
+    except StreamUnavailable as err:
+        print(f"petswarm run: --foxglove {opts.foxglove}: {err}", file=sys.stderr)
+        return 2
     record = RunRecord.create(opts, world, endpoint)
+    if stream is not None:
+        stream.follow(record.path, progress)
     sup = Supervisor(record.path / "logs")
     watch = Supervision(sup, record, opts.fail_fast, progress)
     watch.write_progress(force=True)  # from the first moment a kill leaves a summary
@@ -156,6 +166,8 @@ def supervise(
             if session is not None:
                 session.close()
             codes = sup.stop_all()
+            if stream is not None:
+                stream.close()  # after the processes: their last events and frames are streamed too
             summary["deaths"] = watch.deaths
             summary["elapsed_s"] = round(time.monotonic() - watch.started, 2)
             record.finish(summary, codes)
@@ -288,6 +300,8 @@ class FaultTimeline:
     def __init__(self, faults: list[dict[str, Any]]) -> None:
         self.pending = sorted(faults, key=lambda f: float(f.get("at", 0.0)))
         self.applied: list[dict[str, Any]] = []
+        self.act: Callable[[dict[str, Any]], Awaitable[None]] | None = None
+        """Carries out a scenario's actions (``petswarm.scenario.ACTIONS``) where the run can: model time."""
 
     def apply_due(self, chaos: Callable[[dict[str, Any]], dict[str, Any]], elapsed: float) -> None:
         """Send every fault whose time has come to ``chaos`` (the hub's chaos request); a refused one fails

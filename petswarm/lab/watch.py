@@ -16,6 +16,7 @@ import json
 import signal
 import sys
 import time
+from collections.abc import Awaitable, Callable
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -46,10 +47,18 @@ def watch_command(args: argparse.Namespace) -> int:
             return 2
     else:
         feed = LiveFeed(args.hub, args.world)
+    return serve_page(feed, args.bind, args.port)
+
+
+def serve_page(
+    feed: LiveFeed | ReplayFeed, bind: str, port: int, also: Callable[[], Awaitable[None]] | None = None
+) -> int:
+    """Serve the page on ``bind:port`` with ``feed`` until Ctrl-C or SIGTERM (``also``: a coroutine to run beside
+    the feed meanwhile); 2 when the port cannot be had."""
     try:
-        return asyncio.run(_serve(feed, args.bind, args.port))
+        return asyncio.run(_serve(feed, bind, port, also))
     except OSError as err:
-        print(f"petswarm watch: cannot serve on {args.bind}:{args.port}: {err}", file=sys.stderr)
+        print(f"petswarm watch: cannot serve on {bind}:{port}: {err}", file=sys.stderr)
         return 2
 
 
@@ -73,7 +82,9 @@ def page_html() -> bytes:
     return resources.files("petswarm.lab").joinpath(PAGE).read_bytes()
 
 
-async def _serve(feed: LiveFeed | ReplayFeed, bind: str, port: int) -> int:
+async def _serve(
+    feed: LiveFeed | ReplayFeed, bind: str, port: int, also: Callable[[], Awaitable[None]] | None = None
+) -> int:
     page = page_html()
 
     def http(connection: ServerConnection, request: Request) -> Response | None:
@@ -94,10 +105,13 @@ async def _serve(feed: LiveFeed | ReplayFeed, bind: str, port: int) -> int:
             feed.server = server
             print(f"watch: http://{_shown(bind)}:{_port_of(server)}/  ({feed.describe()})", flush=True)
             runner = asyncio.create_task(feed.run())
+            beside = asyncio.create_task(also()) if also is not None else None
             await stop.wait()
-            runner.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await runner
+            for task in (runner, beside):
+                if task is not None:
+                    task.cancel()
+                    with contextlib.suppress(asyncio.CancelledError):
+                        await task
     finally:
         feed.close()
     return 0
@@ -125,6 +139,8 @@ class LiveFeed:
         self.latest: dict[str, Any] | None = None
         self.malformed = 0
         self.status = f"waiting for the hub at {endpoint}"
+        self.listeners: list[Callable[[dict[str, Any]], None]] = []
+        """Who else gets every checked frame (a Foxglove server, petswarm/lab/foxglove_live.py)."""
         self._session: Any = None
         self._loop: asyncio.AbstractEventLoop | None = None
 
@@ -152,16 +168,30 @@ class LiveFeed:
 
     def _publish(self, payload: bytes) -> None:
         try:
-            frame = check_frame(msgpack.unpackb(payload, raw=False, strict_map_key=False))
+            raw = msgpack.unpackb(payload, raw=False, strict_map_key=False)
         except (ValueError, TypeError, msgpack.UnpackException) as err:
-            self.malformed += 1
-            self._set_status(f"dropped a malformed world frame ({self.malformed} so far): {err}")
+            self._malformed(err)
+            return
+        self.offer(raw)
+
+    def offer(self, raw: Any) -> None:
+        """One world frame as the hub publishes it (unpacked), or as a model-time run's environment makes it."""
+        try:
+            frame = check_frame(raw)
+        except ValueError as err:
+            self._malformed(err)
             return
         if self.latest is None:
             self._set_status(f"following world {self.keys.world!r} from the hub at {self.endpoint}")
         self.latest = frame
         if self.server is not None:
             broadcast(self.server.connections, _message("frame", frame=frame, playing=True))
+        for listener in self.listeners:
+            listener(frame)
+
+    def _malformed(self, err: Exception) -> None:
+        self.malformed += 1
+        self._set_status(f"dropped a malformed world frame ({self.malformed} so far): {err}")
 
     def _set_status(self, text: str) -> None:
         self.status = text

@@ -26,7 +26,8 @@ from typing import Any
 import numpy as np
 
 from radio_hub.air.chaos import Chaos
-from radio_hub.air.mac import BROADCAST, MAX_PSDU, Frame, FrameError, FrameType, TxStatus
+from radio_hub.air.error_model import BITS_PER_US, clean_sinr, dbm_to_mw, noise_floor_dbm, piece_success
+from radio_hub.air.mac import ACK_PSDU_LEN, BROADCAST, MAX_PSDU, Frame, FrameError, FrameType, TxStatus
 from radio_hub.air.propagation import (
     GilbertElliott,
     Position,
@@ -188,6 +189,8 @@ class Transmission:
     job: _Job | None = None
     attempt: int = 0
     outcomes: dict[str, RxOutcome] = field(default_factory=dict)
+    powers: dict[str, tuple[Position, float]] = field(default_factory=dict)
+    """Its mean received power at each node judged so far, with where that node was."""
 
     def overlaps(self, start_us: int, end_us: int) -> bool:
         """True when this transmission is on the air at some instant of [start_us, end_us)."""
@@ -241,7 +244,17 @@ class Medium:
         """Per channel, the attached nodes tuned to it in attach order (worked out again after an attach,
         update or detach; the order of receivers is the order of their random draws)."""
         self._acking_until: dict[str, int] = {}
-        """Per node, when the last ACK its MAC committed to send leaves the air: the radio is busy until then."""
+        """Per node, when the last ACK its MAC committed to send has left the air and its SIFS is over: the radio
+        neither senses nor sends its own frames until then."""
+        self._ifs_until: dict[str, int] = {}
+        """Per node, when the interframe spacing after its last data frame (or that frame's ACK) ends: its next
+        frame's CSMA-CA starts no earlier (IEEE 802.15.4-2011 5.1.1.3)."""
+        self._sinr = config.reception.model == "sinr"
+        self._noise_mw = dbm_to_mw(noise_floor_dbm(config.path_loss.sensitivity_dbm))
+        self._ed_threshold_mw = dbm_to_mw(
+            config.path_loss.sensitivity_dbm + config.reception.ed_threshold_above_sensitivity_db
+        )
+        self._clean_sinr = clean_sinr()
         self._events: list[tuple[int, int, Callable[..., None], tuple[Any, ...]]] = []
         self._seq = itertools.count()
         self._tx_ids = itertools.count(1)
@@ -273,6 +286,7 @@ class Medium:
         self.nodes.pop(node_id, None)
         self._on_channel = None
         self._acking_until.pop(node_id, None)
+        self._ifs_until.pop(node_id, None)
         for job in self._queues.pop(node_id, ()):
             job.done = True
         self._burst.forget(node_id)
@@ -342,6 +356,13 @@ class Medium:
     # -- CSMA-CA ---------------------------------------------------------------------------------
 
     def _start_csma(self, job: _Job) -> None:
+        ifs_end = self._ifs_until.get(job.node_id, 0)
+        if ifs_end > self.now_us:
+            # the MAC is still in the interframe spacing after its last frame: channel access waits for its end
+            self._at(ifs_end, self._start_csma, job)
+            return
+        if job.done:
+            return
         job.nb, job.be = 0, self.config.mac.min_be
         self._backoff(job)
 
@@ -391,6 +412,14 @@ class Medium:
         return True
 
     def _energy_detected(self, node: RadioNode, start_us: int, end_us: int) -> bool:
+        """CCA over [start_us, end_us). ``sinr``: mode 1, energy above the ED threshold at its peak (2006 6.9.9,
+        2011 8.2.7). ``overlap``: any transmission inside the interference disk."""
+        if self._sinr:
+            heard = [
+                (max(tx.start_us, start_us), min(tx.end_us, end_us), self._power_mw(tx.position, node.position))
+                for tx in self._on_air_for(node, start_us, end_us)
+            ]
+            return any(power > self._ed_threshold_mw for _, _, power in _pieces(heard, start_us, end_us))
         reach = self.config.range.interference_range_m
         chaos = self.chaos if self.chaos.faults else None
         node_id, (x, y) = node.node_id, node.position
@@ -439,18 +468,22 @@ class Medium:
         job = tx.job
         assert job is not None
         channel_counters = self.channel_counters[tx.channel]
+        overlapping = self._overlapping(tx) if self._sinr else []
         for node in self._receivers(tx):
-            outcome = self._judge(tx, node, filtered=not addressed_to(tx.frame, node))
+            outcome = self._judge(tx, node, not addressed_to(tx.frame, node), overlapping)
             tx.outcomes[node.node_id] = outcome
             self.node_counters[node.node_id].count(outcome)
             channel_counters.count(outcome)
             if outcome is RxOutcome.DELIVERED:
                 self._deliver(tx, node, job.psdu)
                 if job.wants_ack and node.short_addr == tx.frame.dst:
-                    ack_start = self.now_us + self.config.mac.turnaround_us
+                    mac = self.config.mac
+                    ack_start = self.now_us + mac.turnaround_us
                     self._at(ack_start, self._on_ack_start, tx, node)
-                    # from now the responder's radio is turning around to send the ACK, then sending it
-                    until = max(self._acking_until.get(node.node_id, 0), ack_start + _ACK_AIRTIME_US)
+                    # from now the responder's radio is turning around to send the ACK, then sending it, then
+                    # keeping the interframe spacing after it (an ACK is a frame of at most aMaxSIFSFrameSize)
+                    ack_done = ack_start + _ACK_AIRTIME_US + mac.ifs_us(ACK_PSDU_LEN)
+                    until = max(self._acking_until.get(node.node_id, 0), ack_done)
                     self._acking_until[node.node_id] = until
         self._left_air(tx)
         if job.done:
@@ -458,6 +491,7 @@ class Medium:
         if job.wants_ack:
             self._at(self.now_us + self.config.mac.ack_wait_us, self._on_ack_timeout, job, tx.attempt)
         else:
+            self._ifs_until[job.node_id] = self.now_us + self.config.mac.ifs_us(len(job.psdu))
             self._finish(job, TxStatus.SUCCESS)
 
     def _receivers(self, tx: Transmission) -> list[RadioNode]:
@@ -472,17 +506,101 @@ class Medium:
             and (chaos is None or not chaos.separated(sender, n.node_id))
         ]
 
-    def _judge(self, tx: Transmission, node: RadioNode, filtered: bool) -> RxOutcome:
-        """Collision first (the bits are garbled), then random loss, then the address filter."""
+    def _overlapping(self, tx: Transmission) -> list[Transmission]:
+        """The other transmissions on ``tx``'s channel at some instant of its airtime, in the air's order
+        (worked out once per frame, not once per receiver)."""
+        start, end = tx.start_us, tx.end_us
+        return [o for o in self._air[tx.channel] if o is not tx and o.start_us < end and o.end_us > start]
+
+    def _judge(
+        self, tx: Transmission, node: RadioNode, filtered: bool, overlapping: list[Transmission] | None = None
+    ) -> RxOutcome:
+        """Interference first (the bits are garbled), then random loss, then the address filter.
+        ``overlapping``: ``self._overlapping(tx)``, when the caller judges the frame at several receivers."""
         if not tx.left_sender:
             return RxOutcome.LOST
-        if self._collided(tx, node):
+        if self._sinr:
+            spoiled = self._spoiled(tx, node, self._overlapping(tx) if overlapping is None else overlapping)
+            if spoiled is not None:
+                return spoiled
+        elif self._collided(tx, node):
             return RxOutcome.COLLIDED
         if self._lost(tx, node):
             return RxOutcome.LOST
         return RxOutcome.FILTERED if filtered else RxOutcome.DELIVERED
 
+    def _power_mw(self, sender: Position, receiver: Position) -> float:
+        return dbm_to_mw(mean_rssi_dbm(self.config.path_loss, distance(sender, receiver)))
+
+    def _power_at(self, tx: Transmission, node: RadioNode) -> float:
+        """Mean received power (mW) of ``tx`` at ``node``, remembered on the transmission while the node stays
+        where it was: a frame's power at a receiver is asked for when the frame is judged there and again for
+        every frame it overlaps there."""
+        position = node.position
+        known = tx.powers.get(node.node_id)
+        if known is not None and known[0] == position:
+            return known[1]
+        power = self._power_mw(tx.position, position)
+        tx.powers[node.node_id] = (position, power)
+        return power
+
+    def _on_air_for(self, node: RadioNode, start_us: int, end_us: int) -> list[Transmission]:
+        """Other nodes' transmissions on the node's channel at some instant of [start_us, end_us) that a
+        partition does not keep from it."""
+        chaos = self.chaos if self.chaos.faults else None
+        node_id = node.node_id
+        return [
+            tx
+            for tx in self._air[node.channel]
+            if tx.start_us < end_us
+            and tx.end_us > start_us
+            and tx.sender != node_id
+            and (chaos is None or not chaos.separated(tx.sender, node_id))
+        ]
+
+    def _spoiled(self, tx: Transmission, node: RadioNode, overlapping: list[Transmission]) -> RxOutcome | None:
+        """The ``sinr`` model's verdict on ``tx`` at ``node``: COLLIDED, LOST (noise alone) or None (intact).
+
+        - Half duplex: a node that transmits at any instant of the frame receives none of it.
+        - Synchronisation: the receiver locks on the first preamble it hears and keeps it unless a stronger
+          frame starts, so a frame that starts after (or with, and after in air order) an at least as strong
+          frame it can decode is not received (it only interferes).
+        - Otherwise each stretch of the airtime with one set of overlapping transmissions has its SINR (their
+          summed power and the noise floor), and the frame survives with the product of the stretches'
+          (1 - BER)^bits (Annex E). One draw decides, and none where the product is exactly 0 or 1.
+        """
+        start, end = tx.start_us, tx.end_us
+        signal = self._power_at(tx, node)
+        reach = self.config.range.tx_range_m
+        heard = []
+        for other in overlapping:
+            if other.sender == node.node_id:
+                return RxOutcome.COLLIDED
+            if other.sender == tx.sender or (self.chaos.faults and self.chaos.separated(other.sender, node.node_id)):
+                continue
+            power = self._power_at(other, node)
+            first = other.start_us < start or (other.start_us == start and other.tx_id < tx.tx_id)
+            if first and power >= signal and distance(other.position, node.position) <= reach:
+                return RxOutcome.COLLIDED
+            heard.append((max(other.start_us, start), min(other.end_us, end), power))
+        success = 1.0
+        # every stretch's interference is at most the sum of all (exactly rounded sums of positive powers are
+        # monotone), so when even that leaves the frame clean no stretch needs working out
+        if heard and signal / (self._noise_mw + math.fsum([p for _, _, p in heard])) < self._clean_sinr:
+            for a, b, interference in _pieces(heard, start, end):
+                sinr = signal / (self._noise_mw + interference)
+                if sinr < self._clean_sinr:
+                    success *= piece_success(sinr, (b - a) * BITS_PER_US)
+                    if success == 0.0:
+                        break
+        elif not heard and signal / self._noise_mw < self._clean_sinr:
+            success = piece_success(signal / self._noise_mw, (end - start) * BITS_PER_US)
+        if success >= 1.0 or (success > 0.0 and self.rng.random() >= 1.0 - success):
+            return None
+        return RxOutcome.COLLIDED if heard else RxOutcome.LOST
+
     def _collided(self, tx: Transmission, node: RadioNode) -> bool:
+        """The ``overlap`` model: any overlap inside the interference disk collides, unless capture saves it."""
         reach = self.config.range.interference_range_m
         chaos = self.chaos if self.chaos.faults else None
         start, end, node_id, (x, y) = tx.start_us, tx.end_us, node.node_id, node.position
@@ -596,6 +714,7 @@ class Medium:
         outcome = self._judge(ack, sender, filtered=False) if in_range else RxOutcome.LOST
         ack.outcomes[sender.node_id] = outcome
         if outcome == RxOutcome.DELIVERED:
+            self._ifs_until[job.node_id] = self.now_us + self.config.mac.ifs_us(len(job.psdu))
             self._finish(job, TxStatus.SUCCESS)
         else:
             self._count(job.node_id, "acks_lost")
@@ -643,6 +762,19 @@ class Medium:
         air = self._air[channel]
         if air and air[0].end_us < horizon:
             self._air[channel] = [tx for tx in air if tx.end_us >= horizon]
+
+
+def _pieces(spans: list[tuple[int, int, float]], start_us: int, end_us: int) -> list[tuple[int, int, float]]:
+    """[start_us, end_us) cut where any of ``spans`` (start, end, power) begins or ends: each piece with the
+    summed power of the spans that cover it."""
+    if not spans:
+        return [(start_us, end_us, 0.0)]
+    cuts = sorted({start_us, end_us, *(s for s, _, _ in spans), *(e for _, e, _ in spans)})
+    return [
+        (a, b, math.fsum(p for s, e, p in spans if s <= a and e >= b))
+        for a, b in itertools.pairwise(cuts)
+        if start_us <= a and b <= end_us
+    ]
 
 
 def addressed_to(frame: Frame, node: RadioNode) -> bool:

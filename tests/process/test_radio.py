@@ -95,7 +95,11 @@ def test_simultaneous_sends_collide_as_the_model_says(make_air):
         at_3 = {t["outcomes"]["robot-3"] for t in sent}
         if _overlap(*sent):
             overlaps += 1
-            assert at_3 == {"collided"}
+            # robot 3 is 1 m from both: it stays on the frame that started first (the later one, no stronger,
+            # only interferes) and each sender, transmitting, hears nothing of the other (docs/AIR.md)
+            first, later = sorted(sent, key=lambda t: (t["start_us"], t["tx_id"]))
+            assert later["outcomes"]["robot-3"] == "collided"
+            assert first["outcomes"]["robot-3"] in ("delivered", "collided")
             assert sent[0]["outcomes"]["robot-2" if sent[0]["sender"] == "robot-1" else "robot-1"] == "collided"
         else:
             assert at_3 == {"delivered"}

@@ -1,4 +1,7 @@
-"""Overlap, capture, half duplex, range and the PAN/address/channel filters."""
+"""Overlap, capture, half duplex, range and the PAN/address/channel filters.
+
+The overlap tests run the ``overlap`` reception model (the unit-disk rule, a named option); the default ``sinr``
+model's reception rule has its own tests in test_reception_sinr.py."""
 
 import pytest
 
@@ -9,6 +12,7 @@ from radio_hub.config import airtime_us
 from .helpers import PAN, data, medium, place, receptions, reports, run_to_idle
 
 ALOHA = {"mac": {"csma_enabled": False}}
+OVERLAP = {**ALOHA, "reception": {"model": "overlap"}}
 TURNAROUND = 192
 
 
@@ -17,7 +21,7 @@ def _outcome(m: Medium, sender: str, receiver: str) -> RxOutcome:
 
 
 def test_overlapping_frames_collide_at_a_receiver_that_hears_both():
-    m = medium(ALOHA)
+    m = medium(OVERLAP)
     a, b, c = place(m, 1, 0), place(m, 2, 2), place(m, 3, 1)
     m.submit(a, data(1, payload=bytes(30)), 1, 0)
     outs = run_to_idle(m, m.submit(b, data(2, payload=bytes(30)), 2, 100))
@@ -38,7 +42,7 @@ def test_back_to_back_frames_do_not_collide():
 
 
 def test_capture_keeps_the_much_stronger_frame():
-    m = medium({**ALOHA, "capture": {"enabled": True, "margin_db": 6.0}})
+    m = medium({**OVERLAP, "capture": {"enabled": True, "margin_db": 6.0}})
     a, b, c = place(m, 1, 0), place(m, 2, 21), place(m, 3, 1)  # c is 1 m from a, 20 m from b
     m.submit(a, data(1), 1, 0)
     outs = run_to_idle(m, m.submit(b, data(2), 2, 50))
@@ -47,20 +51,20 @@ def test_capture_keeps_the_much_stronger_frame():
 
 
 def test_without_capture_the_stronger_frame_is_lost_too():
-    m = medium(ALOHA)
+    m = medium(OVERLAP)
     a, b, c = place(m, 1, 0), place(m, 2, 21), place(m, 3, 1)
     m.submit(a, data(1), 1, 0)
     assert receptions(run_to_idle(m, m.submit(b, data(2), 2, 50)), c) == []
 
 
 def test_a_far_node_is_not_heard_but_interferes_and_is_sensed():
-    m = medium(ALOHA)  # tx range 30 m, interference range 50 m
+    m = medium(OVERLAP)  # tx range 30 m, interference range 50 m
     a, c, far = place(m, 1, 0), place(m, 3, 10), place(m, 9, 50)
     m.submit(far, data(9, payload=bytes(60)), 1, 0)
     outs = run_to_idle(m, m.submit(a, data(1), 2, 300))
     assert receptions(outs, c) == []  # 40 m from far: interference only, and it garbles a's frame
     assert m.node_counters[c].heard == 1 and m.node_counters[c].collided == 1
-    m2 = medium({"mac": {"min_be": 0, "max_be": 0}})
+    m2 = medium({"mac": {"min_be": 0, "max_be": 0}, "reception": {"model": "overlap"}})
     a2, far2 = place(m2, 1, 0), place(m2, 9, 45)
     m2.submit(far2, data(9, payload=bytes(100)), 1, 0)
     failure = reports(run_to_idle(m2, m2.submit(a2, data(1), 2, 500)))

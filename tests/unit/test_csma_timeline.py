@@ -11,7 +11,7 @@ from radio_hub.config import airtime_us
 
 from .helpers import NO_BACKOFF, data, medium, place, receptions, reports, run_to_idle
 
-CCA, TURNAROUND, UNIT, ACK_WAIT, ACK_AIR = 128, 192, 320, 864, 352
+CCA, TURNAROUND, UNIT, ACK_WAIT, ACK_AIR, SIFS = 128, 192, 320, 864, 352, 192
 
 
 def test_broadcast_with_no_backoff_goes_out_after_cca_and_turnaround():
@@ -115,7 +115,9 @@ def test_frames_queue_in_the_mac_one_at_a_time():
     first, second = reports(outs)
     assert (first.token, second.token) == (1, 2)
     assert [r.frame.seq for r in receptions(outs, b)] == [1, 2]
-    assert receptions(outs, b)[1].start_us == first.done_us + CCA + TURNAROUND
+    # the second waits for the interframe spacing after the first (a 12-octet MPDU: SIFS, 192 us), then CCA
+    assert len(data(1)) <= 18
+    assert receptions(outs, b)[1].start_us == first.done_us + SIFS + CCA + TURNAROUND
 
 
 def test_mac_queue_limit_refuses_with_a_reason():

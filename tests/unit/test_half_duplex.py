@@ -1,6 +1,7 @@
 """A radio is half duplex: while it sends (its ACK or a data frame) it starts nothing else and receives nothing.
 
-Constants as in test_csma_timeline: CCA 128 us, turnaround 192 us, an ACK is 352 us on air.
+Constants as in test_csma_timeline: CCA 128 us, turnaround 192 us, an ACK is 352 us on air, and the SIFS
+(192 us) a radio keeps after its ACK before it senses or sends again (IEEE 802.15.4-2011 5.1.1.3).
 """
 
 from itertools import pairwise
@@ -13,7 +14,7 @@ from radio_hub.config import airtime_us
 
 from .helpers import NO_BACKOFF, data, medium, place, receptions, reports, run_to_idle
 
-CCA, TURNAROUND, ACK_AIR = 128, 192, 352
+CCA, TURNAROUND, ACK_AIR, SIFS = 128, 192, 352, 192
 
 
 def _on_air(m: Medium, sender: str) -> list[tuple[int, int, str]]:
@@ -31,12 +32,14 @@ def test_a_radio_sending_an_ack_defers_its_own_data_until_the_ack_has_left():
     m.submit(a, unicast, 1, 0)
     data_end = CCA + TURNAROUND + airtime_us(len(unicast))
     ack_end = data_end + TURNAROUND + ACK_AIR
-    # b's CCA would fall in the turnaround before its ACK: its radio is already committed to sending the ACK
+    # b's CCA would fall in the turnaround before its ACK: its radio is already committed to sending the ACK,
+    # and to the SIFS after it
     reply = data(2, payload=bytes(30))
     outs = run_to_idle(m, m.submit(b, reply, 2, data_end + 10))
+    reply_start = ack_end + SIFS + CCA + TURNAROUND
     assert _on_air(m, b) == [
         (data_end + TURNAROUND, ack_end, "ACK"),
-        (ack_end + CCA + TURNAROUND, ack_end + CCA + TURNAROUND + airtime_us(len(reply)), "DATA"),
+        (reply_start, reply_start + airtime_us(len(reply)), "DATA"),
     ]
     by_token = {r.token: r for r in reports(outs)}
     assert by_token[1].status == TxStatus.SUCCESS and by_token[1].done_us == ack_end
@@ -52,9 +55,9 @@ def test_without_csma_a_radio_sending_an_ack_still_sends_its_data_after_it():
     m.submit(a, unicast, 1, 0)
     data_end = TURNAROUND + airtime_us(len(unicast))
     ack_end = data_end + TURNAROUND + ACK_AIR
-    # b's data would start 10 us into its own ACK
+    # b's data would start 10 us into its own ACK: it goes once the ACK and its SIFS are over
     outs = run_to_idle(m, m.submit(b, data(2), 2, data_end + 10))
-    assert [span[0] for span in _on_air(m, b)] == [data_end + TURNAROUND, ack_end + TURNAROUND]
+    assert [span[0] for span in _on_air(m, b)] == [data_end + TURNAROUND, ack_end + SIFS + TURNAROUND]
     assert all(r.status == TxStatus.SUCCESS for r in reports(outs))
 
 

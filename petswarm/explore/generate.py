@@ -1,0 +1,351 @@
+"""Cases of a campaign: ``case(seed, i)`` is a scenario file's tables, drawn only from a generator seeded ``(seed, i)``.
+
+A case is a world (robots, obstacles, the user's path), a mission (the watch requests of its family) and a fault
+schedule (every chaos kind of the hub, robots killed and restarted, the wearables' link lost), written as a user
+could have written it: ``petswarm.scenario.parse`` takes it and ``petswarm run FILE --clock model`` runs it.
+Pure: case 17 is the same whether 16 ran first, on another worker, or alone.
+
+Every fault ends by ``FAULTS_CLEAR_S`` before the mission's last requests (an organize, a dispersal), so the
+liveness properties have a fault-free stretch to judge; each case is sized (robots, duration) to cost about a
+CPU-second.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+FAMILIES = ("organize", "drive", "surround", "pings", "follow", "mixed")
+"""What a case asks of the swarm: organize / disperse / organize again; swarm driving with Table 3's mode changes
+and master changes; surround under either law; robots pinging; one robot following or leading its user; a mix."""
+DEFAULT_WEIGHTS = {"organize": 3, "drive": 3, "surround": 1, "pings": 1, "follow": 1, "mixed": 2}
+FAULT_KINDS = (
+    "loss",
+    "burst",
+    "delay",
+    "duplicate",
+    "corrupt",
+    "partition",
+    "ir_blind",
+    "ir_noise",
+    "kill",
+    "wearable_lost",
+)
+"""The fault kinds a case draws from: the hub's chaos kinds, a robot killed (and restarted), the wearable link lost."""
+SETTLE_S = 4.0
+"""Fault-free model seconds a case keeps after its last fault clears and before its final requests."""
+
+
+def rng_of(seed: int, i: int) -> np.random.Generator:
+    """Case ``i`` of seed ``seed``'s own generator (never a shared stream)."""
+    return np.random.default_rng([int(seed), int(i), 0x9E37])
+
+
+def pick_family(seed: int, i: int, weights: dict[str, float]) -> str:
+    """The family of case ``i`` under ``weights`` (families with weight 0 never come)."""
+    names = [f for f in FAMILIES if weights.get(f, 0) > 0]
+    p = np.array([weights[f] for f in names], dtype=float)
+    return str(np.random.default_rng([int(seed), int(i), 0xFA]).choice(names, p=p / p.sum()))
+
+
+def case(seed: int, i: int, family: str | None = None) -> dict[str, Any]:
+    """Case ``i`` of campaign seed ``seed`` as a scenario file's tables (``family`` None: by the default weights)."""
+    family = family or pick_family(seed, i, DEFAULT_WEIGHTS)
+    if family not in FAMILIES:
+        raise ValueError(f"family must be one of {', '.join(FAMILIES)}, not {family!r}")
+    rng = rng_of(seed, i)
+    build = {
+        "organize": _organize,
+        "drive": _drive,
+        "surround": _surround,
+        "pings": _pings,
+        "follow": _follow,
+        "mixed": _mixed,
+    }[family]
+    data = build(rng)
+    data["name"] = f"explore-{seed}-{i}-{family}"
+    data["description"] = f"petswarm explore --seed {seed} --case {i} ({family})"
+    return data
+
+
+# -- worlds ----------------------------------------------------------------------------------------------
+
+
+def _robots(rng: np.random.Generator, count: int, spread: float = 0.6) -> dict[str, Any]:
+    """``count`` robots behind the user (who starts at the origin facing north), on a jittered grid."""
+    per_row = max(2, math.ceil(math.sqrt(count)))
+    positions = []
+    for k in range(count):
+        row, col = divmod(k, per_row)
+        x = (col - (per_row - 1) / 2) * spread + float(rng.uniform(-0.1, 0.1))
+        y = -0.8 - row * spread + float(rng.uniform(-0.1, 0.1))
+        positions.append(
+            [round(x, 3), round(y, 3), round(float(rng.uniform(-180, 180)) if rng.random() < 0.3 else 90, 1)]
+        )
+    return {"count": count, "positions": positions}
+
+
+def _obstacles(rng: np.random.Generator, far: float = 3.0) -> list[dict[str, Any]]:
+    """Walls, corridors of any width and length, cylinders, pairs and rows, kept clear of the start area."""
+    out: list[dict[str, Any]] = []
+    for _ in range(int(rng.integers(0, 4))):
+        kind = str(rng.choice(["wall", "corridor", "cylinder", "pair", "row"]))
+        side = 1 if rng.random() < 0.5 else -1
+        x0, y0 = float(side * rng.uniform(1.5, far + 2)), float(rng.uniform(1.0, far + 6))
+        if kind == "wall":
+            length = float(rng.uniform(1.0, 6.0))
+            out.append(_wall(x0, y0, x0 + float(rng.uniform(-1, 1)), y0 + length))
+        elif kind == "corridor":
+            width, length = float(rng.uniform(1.2, 4.0)), float(rng.uniform(2.0, 10.0))
+            y = float(rng.uniform(1.0, 3.0))
+            out += [_wall(-width / 2, y, -width / 2, y + length), _wall(width / 2, y, width / 2, y + length)]
+        elif kind == "cylinder":
+            out.append(_circle(x0, y0, float(rng.uniform(0.2, 1.2))))
+        elif kind == "pair":
+            r, gap = float(rng.uniform(0.2, 0.8)), float(rng.uniform(0.8, 3.0))
+            out += [_circle(-gap / 2 - r, y0, r), _circle(gap / 2 + r, y0, r)]
+        else:
+            r, step = float(rng.uniform(0.15, 0.5)), float(rng.uniform(1.0, 2.5))
+            out += [_circle(x0, y0 + k * step, r) for k in range(int(rng.integers(2, 5)))]
+    return out
+
+
+def _wall(x0: float, y0: float, x1: float, y1: float) -> dict[str, Any]:
+    return {"kind": "wall", "x0": round(x0, 3), "y0": round(y0, 3), "x1": round(x1, 3), "y1": round(y1, 3)}
+
+
+def _circle(x: float, y: float, r: float) -> dict[str, Any]:
+    return {"kind": "circle", "x": round(x, 3), "y": round(y, 3), "r": round(r, 3)}
+
+
+def _path(rng: np.random.Generator, seconds: float) -> list[dict[str, Any]]:
+    """The user's path for about ``seconds``: stand, walk, turn, stop and speed steps."""
+    legs: list[dict[str, Any]] = []
+    left = seconds
+    while left > 0.5:
+        what = str(rng.choice(["walk", "walk", "turn", "stop", "steps"]))
+        if what == "walk":
+            speed = round(float(rng.uniform(0.3, 1.2)), 2)
+            dist = round(min(float(rng.uniform(0.5, 4.0)), left * speed), 2)
+            legs.append({"walk": max(dist, 0.1), "speed": speed})
+            left -= dist / speed
+        elif what == "turn":
+            angle = round(float(rng.choice([-1, 1]) * rng.uniform(20, 180)), 1)
+            rate = round(float(rng.uniform(30, 120)), 1)
+            legs.append({"turn": angle, "rate": rate})
+            left -= abs(angle) / rate
+        elif what == "stop":
+            stop = round(float(rng.uniform(0.5, 3.0)), 2)
+            legs.append({"stop": stop})
+            left -= stop
+        else:  # speeding up in steps
+            for speed in (0.3, 0.6, 0.9):
+                legs.append({"walk": 0.4, "speed": speed})
+                left -= 0.4 / speed
+    return legs
+
+
+# -- faults ----------------------------------------------------------------------------------------------
+
+
+def _faults(
+    rng: np.random.Generator, robots: int, start: float, clear_by: float, *, user: bool
+) -> list[dict[str, Any]]:
+    """0-4 faults between ``start`` and ``clear_by`` s, every one over by then (an explicit clear, or a restart);
+    heavy ones included (loss up to 0.6, a partition the whole window long)."""
+    if clear_by - start < 0.5:
+        return []
+    out: list[dict[str, Any]] = []
+    chaos_id = 0
+    nodes = [f"robot-{k}" for k in range(1, robots + 1)]
+    for _ in range(int(rng.choice([0, 1, 1, 2, 2, 3, 4]))):
+        kind = str(rng.choice(FAULT_KINDS))
+        if kind == "wearable_lost" and not user:
+            kind = "loss"
+        at = round(float(rng.uniform(start, clear_by - 0.3)), 2)
+        end = round(float(rng.uniform(at + 0.2, clear_by)), 2)
+        if kind == "kill":
+            robot = int(rng.integers(1, robots + 1))
+            out += [{"at": at, "kind": "kill", "robot": robot}, {"at": end, "kind": "restart", "robot": robot}]
+            continue
+        if kind == "wearable_lost":
+            out += [{"at": at, "kind": "wearable_lost"}, {"at": end, "kind": "wearable_back"}]
+            continue
+        fault: dict[str, Any] = {"at": at, "kind": kind}
+        if kind in ("loss", "corrupt", "duplicate"):
+            fault["p"] = round(float(rng.choice([rng.uniform(0.05, 0.3), rng.uniform(0.3, 0.6)], p=[0.7, 0.3])), 3)
+        elif kind == "delay":
+            fault["ms"] = round(float(rng.uniform(1, 200)), 1)
+            if rng.random() < 0.5:
+                fault["jitter_ms"] = round(float(rng.uniform(0, fault["ms"])), 1)
+        elif kind == "burst":
+            fault["p_gb"] = round(float(rng.uniform(0.02, 0.2)), 3)
+            fault["p_bg"] = round(float(rng.uniform(0.1, 0.6)), 3)
+        elif kind == "partition":
+            size = int(rng.integers(1, max(2, robots // 2 + 1)))
+            fault["group"] = sorted(str(n) for n in rng.choice(nodes, size=size, replace=False))
+        elif kind == "ir_noise":
+            fault["sigma"] = round(float(rng.uniform(5, 200)), 1)
+        if kind in ("loss", "corrupt", "duplicate", "delay", "burst", "ir_blind", "ir_noise") and rng.random() < 0.3:
+            fault["node"] = str(rng.choice(nodes))
+        chaos_id += 1  # the hub numbers the faults it takes from 1, in the order they come
+        out += [fault, {"at": end, "clear": True, "id": chaos_id}]
+    # the hub numbers faults as they are added: keep each clear's id on its own fault in time order
+    return _renumber(out)
+
+
+def _renumber(faults: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Give each clear the id the hub will give its fault (faults are added in time order)."""
+    adds = [f for f in faults if "clear" not in f and "kind" in f and f["kind"] not in _ACTIONS]
+    clears = [f for f in faults if f.get("clear")]
+    order = sorted(range(len(adds)), key=lambda k: (adds[k]["at"], k))
+    new_id = {k: rank + 1 for rank, k in enumerate(order)}
+    for k, clear in enumerate(clears):  # clears were written right after their fault, in the same order
+        clear["id"] = new_id[k]
+    return sorted(faults, key=lambda f: f["at"])
+
+
+_ACTIONS = ("kill", "restart", "wearable_lost", "wearable_back")
+
+
+def clear_time(faults: list[dict[str, Any]]) -> float:
+    """When the last fault of a schedule is over (0 without faults)."""
+    return max((float(f["at"]) for f in faults), default=0.0)
+
+
+# -- families --------------------------------------------------------------------------------------------
+
+
+def _user(rng: np.random.Generator, watch: list[dict[str, Any]], walk_at: float, seconds: float) -> dict[str, Any]:
+    return {"owner": 1, "start": [0.0, 0.0, 90.0], "walk_at": walk_at, "path": _path(rng, seconds), "watch": watch}
+
+
+def _organize(rng: np.random.Generator) -> dict[str, Any]:
+    """Organize, disperse, organize again (after the faults), disperse."""
+    n = int(rng.choice([int(rng.integers(2, 6)), int(rng.integers(6, 31))], p=[0.7, 0.3]))
+    k = int(rng.integers(1, n)) if n > 2 else 1
+    shape = str(rng.choice(["column", "line", "wedge"]))
+    faults_end = round(float(rng.uniform(5.0, 8.0)), 2)
+    again = faults_end + SETTLE_S
+    watch = [
+        {"at": 1.0, "request": "follow"},
+        {"at": 3.0, "request": "organize", "robots": k, "shape": shape, "spacing": 0.6},
+        {"at": round(float(rng.uniform(4.0, faults_end)), 2), "request": "disperse"},
+        {"at": again, "request": "organize", "robots": k, "shape": shape, "spacing": 0.6},
+        {"at": again + 3.0, "request": "disperse"},
+    ]
+    duration = again + 6.0
+    return {
+        "duration_s": duration,
+        "user": _user(rng, watch, duration, 0),
+        "robots": _robots(rng, n),
+        "faults": _faults(rng, n, 2.0, faults_end, user=True),
+    }
+
+
+def _drive(rng: np.random.Generator) -> dict[str, Any]:
+    """A swarm driving with its user through a path, with Table 3's mode changes (and master changes)."""
+    n = int(rng.integers(2, 7))
+    shape = str(rng.choice(["column", "line", "wedge"]))
+    faults_end = round(float(rng.uniform(6.0, 10.0)), 2)
+    watch: list[dict[str, Any]] = [
+        {"at": 1.0, "request": "follow"},
+        {
+            "at": 3.0,
+            "request": "organize",
+            "robots": n - 1,
+            "shape": shape,
+            "spacing": float(rng.choice([0.5, 0.6, 0.8])),
+        },
+    ]
+    for _ in range(int(rng.integers(0, 3))):
+        change = {"at": round(float(rng.uniform(4.5, faults_end + 2)), 2), "request": "mode"}
+        change["mode"] = str(rng.choice(["following", "leading"]))
+        change["change_master"] = bool(rng.random() < 0.5)
+        watch.append(change)
+    duration = faults_end + SETTLE_S + 4.0
+    watch.append({"at": duration - 3.0, "request": "disperse"})
+    data = {
+        "duration_s": duration,
+        "user": _user(rng, sorted(watch, key=lambda r: r["at"]), 4.5, duration - 8.0),
+        "robots": _robots(rng, n),
+        "faults": _faults(rng, n, 2.0, faults_end, user=True),
+    }
+    if rng.random() < 0.5:
+        data["obstacles"] = _obstacles(rng)
+    return data
+
+
+def _surround(rng: np.random.Generator) -> dict[str, Any]:
+    """The surround formation under either law round a user who stands, then walks."""
+    n = int(rng.integers(3, 9))
+    duration = round(float(rng.uniform(8.0, 12.0)), 2)
+    return {
+        "duration_s": duration,
+        "hub": {"world": {"robot_radius_m": 0.1}},
+        "surround": {"enabled": True, "law": str(rng.choice(["paper", "improved"]))},
+        "obstacles": _obstacles(rng, far=4.0),
+        "user": {"start": [0.0, 0.0, 90.0], "walk_at": 3.0, "path": _path(rng, duration - 4.0)},
+        "robots": _robots(rng, n, spread=0.8),
+        "faults": _faults(rng, n, 1.0, duration - 3.0, user=False),
+    }
+
+
+def _pings(rng: np.random.Generator) -> dict[str, Any]:
+    """Robots pinging each other, no user."""
+    n = int(rng.integers(2, 16))
+    duration = round(float(rng.uniform(4.0, 8.0)), 2)
+    robots = _robots(rng, n, spread=1.0)
+    robots["ping_interval"] = round(float(rng.uniform(0.2, 1.0)), 2)
+    return {"duration_s": duration, "robots": robots, "faults": _faults(rng, n, 0.5, duration - 1.0, user=False)}
+
+
+def _follow(rng: np.random.Generator) -> dict[str, Any]:
+    """One robot follows or leads its user along a path (others wait)."""
+    n = int(rng.integers(1, 4))
+    duration = round(float(rng.uniform(8.0, 14.0)), 2)
+    watch = [{"at": 1.0, "request": str(rng.choice(["follow", "lead"]))}]
+    if rng.random() < 0.3:
+        watch.append({"at": round(float(rng.uniform(3, duration - 2)), 2), "request": "cancel"})
+    data = {
+        "duration_s": duration,
+        "user": _user(rng, watch, 3.0, duration - 4.0),
+        "robots": _robots(rng, n),
+        "faults": _faults(rng, n, 2.0, duration - 2.0, user=True),
+    }
+    if rng.random() < 0.5:
+        data["obstacles"] = _obstacles(rng)
+    return data
+
+
+def _mixed(rng: np.random.Generator) -> dict[str, Any]:
+    """Requests of every kind in a random order, then (faults over) an organize and a dispersal."""
+    n = int(rng.integers(2, 8))
+    faults_end = round(float(rng.uniform(6.0, 10.0)), 2)
+    watch: list[dict[str, Any]] = [{"at": 1.0, "request": "follow"}]
+    t = 2.0
+    while t < faults_end:
+        what = str(rng.choice(["organize", "disperse", "mode", "cancel", "follow", "lead"]))
+        req: dict[str, Any] = {"at": round(t, 2), "request": what}
+        if what == "organize":
+            req.update(robots=int(rng.integers(1, n)), shape=str(rng.choice(["column", "line", "wedge"])))
+        elif what == "mode":
+            req.update(mode=str(rng.choice(["following", "leading"])), change_master=bool(rng.random() < 0.5))
+        watch.append(req)
+        t += float(rng.uniform(0.5, 3.0))
+    again = faults_end + SETTLE_S
+    watch += [
+        {"at": again - 1.5, "request": "follow"},
+        {"at": again, "request": "organize", "robots": n - 1},
+        {"at": again + 3.0, "request": "disperse"},
+    ]
+    duration = again + 6.0
+    return {
+        "duration_s": duration,
+        "user": _user(rng, watch, 4.0, duration - 6.0),
+        "robots": _robots(rng, n),
+        "obstacles": _obstacles(rng) if rng.random() < 0.3 else [],
+        "faults": _faults(rng, n, 2.0, faults_end, user=True),
+    }

@@ -1,0 +1,509 @@
+"""Named properties judged on a case's record: safety ones hold at every instant, liveness ones once the faults
+have cleared, within a stated time. Each says which families it applies to; a failure says what, when and who.
+
+The record is the run's own (events of every robot and the user, the world log, the summary, the supervision
+log of robots killed and restarted) and the case's scenario: the judge reads what happened, not the code's own
+opinion of itself. Pure functions of a ``Record``: the unit tests feed each one a record that breaks it.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+from petswarm.lab.checker import check_record
+from petswarm.lab.records import read_events
+from petswarm.scenario import Scenario, is_action
+
+ALL = ("organize", "drive", "surround", "pings", "follow", "mixed")
+SWARMS = ("organize", "drive", "mixed")
+"""Families whose user asks for swarms (organize and disperse through the owner's watch)."""
+
+ORGANIZE_WITHIN_S = 4.0
+"""Liveness: an organize asked for once the faults have cleared ends (``watch_organized``, at least one member)
+within this time: the paper's protocol takes a few hundred ms, each step retries its missing answers."""
+LOSS_BOUND = 0.2
+"""Liveness: under loss of at most this probability on every reception (no other fault), a swarm still organizes
+within ``ORGANIZE_WITHIN_S``."""
+DISPERSE_WITHIN_S = 4.0
+"""Liveness: every member of a swarm its master disperses (faults over) is back in waiting within this time."""
+TOKEN_WITHIN_S = 6.0
+"""Liveness: after a swarm member holding (or due) the IR token dies, the schedule drops it and the other
+members get IR fixes again within this time (a member is dropped after a few silent rounds)."""
+SETTLE_S = 3.0
+"""A swarm counts as settled when none of its robots changed state or roster for this long (longer than a
+member's ``master_silence_s``, 2 s: by then a member cut off has left)."""
+PROGRAMMING_ERRORS = (
+    "IndexError",
+    "KeyError",
+    "AttributeError",
+    "TypeError",
+    "AssertionError",
+    "ZeroDivisionError",
+    "UnboundLocalError",
+    "NameError",
+    "RecursionError",
+)
+"""An ``error`` event naming one of these is a bug a handler caught, not a fault of the air."""
+SWARM_STATES = ("organizing", "slave-driving", "master-driving")
+HANDOVER_GRACE_S = 0.5
+"""A master handing over its role still counts its members until it hears the new master accept (one frame and
+its retries): that long, the two claims on a member may overlap."""
+
+
+@dataclass(frozen=True)
+class Violation:
+    """What failed, when (model seconds into the run) and who."""
+
+    what: str
+    when: float | None = None
+    who: tuple[str, ...] = ()
+
+    def to_dict(self) -> dict[str, Any]:
+        """For the results' JSON."""
+        return {"what": self.what, "when": self.when, "who": list(self.who)}
+
+
+@dataclass
+class Record:
+    """What a property may read of one case: the scenario, the family, every node's events, the world log,
+    the summary, the supervision log and, when the run raised, its traceback."""
+
+    scenario: Scenario
+    family: str
+    events: dict[str, list[dict[str, Any]]] = field(default_factory=dict)
+    summary: dict[str, Any] = field(default_factory=dict)
+    supervision: list[dict[str, Any]] = field(default_factory=list)
+    crash: str | None = None
+    path: Path | None = None
+    world_lines: list[str] = field(default_factory=list)
+
+    @classmethod
+    def read(cls, path: Path | None, scenario: Scenario, family: str, crash: str | None = None) -> Record:
+        """The record of a run directory (None: the run left none)."""
+        record = cls(scenario, family, crash=crash, path=path)
+        if path is None:
+            return record
+        for events in sorted((path / "events").glob("*.jsonl")):
+            record.events[events.stem] = read_events(events)
+        if (path / "summary.json").exists():
+            record.summary = json.loads((path / "summary.json").read_text())
+        if (path / "supervision.jsonl").exists():
+            record.supervision = read_events(path / "supervision.jsonl")
+        if (path / "world.jsonl").exists():
+            record.world_lines = (path / "world.jsonl").read_text().splitlines()
+        return record
+
+    @cached_property
+    def invariants(self) -> list[str]:
+        """The checker's invariants that failed (petswarm/lab/checker.py)."""
+        return check_record(self.path) if self.path is not None else ["no record"]
+
+    @cached_property
+    def world(self) -> list[dict[str, Any]]:
+        """The world log's ticks."""
+        return [json.loads(line) for line in self.world_lines]
+
+    @property
+    def robots(self) -> list[str]:
+        """Node names of the robots (``robot-1``...)."""
+        return [f"robot-{k}" for k in range(1, self.scenario.robot_count + 1)]
+
+    @cached_property
+    def clear_s(self) -> float:
+        """When the last fault is over (model s since the run's start; faults count from the traffic phase,
+        which starts within a tenth of a second)."""
+        return max((float(f["at"]) for f in self.scenario.faults), default=0.0) + 0.2
+
+    def active_faults(self, t: float) -> list[dict[str, Any]]:
+        """The faults active at ``t`` (chaos faults until their clear, kills until the restart, the wearable
+        link until it is back)."""
+        active: list[dict[str, Any]] = []
+        chaos_id = 0
+        for fault in sorted(self.scenario.faults, key=lambda f: float(f["at"])):
+            if float(fault["at"]) > t:
+                break
+            if fault.get("clear"):
+                active = [a for a in active if fault.get("id") is not None and a.get("_id") != fault["id"]]
+            elif fault.get("kind") == "restart":
+                active = [a for a in active if not (a["kind"] == "kill" and a.get("robot") == fault.get("robot"))]
+            elif fault.get("kind") == "wearable_back":
+                active = [a for a in active if a["kind"] != "wearable_lost"]
+            elif is_action(fault):
+                active.append(dict(fault))
+            else:
+                chaos_id += 1
+                active.append({**fault, "_id": chaos_id})
+        return active
+
+    def state_at(self, node: str, t: float) -> dict[str, Any]:
+        """``node``'s last state event at or before ``t`` (its ``to`` state; a restarted robot starts waiting)."""
+        state: dict[str, Any] = {"to": "waiting"}
+        for event in self.events.get(node, []):
+            if event["mono"] > t:
+                break
+            if event["kind"] == "start":
+                state = {"to": event.get("state", "waiting"), "mono": event["mono"]}
+            elif event["kind"] == "state":
+                session = state.get("session")
+                state = event
+                if "session" not in event and event.get("to") in SWARM_STATES and session is not None:
+                    state = {**event, "session": session}  # a handover's state change keeps the swarm's session
+        return state
+
+    def dead_at(self, node: str, t: float) -> bool:
+        """True when ``node`` was killed and not (yet) restarted at ``t``."""
+        dead = False
+        for entry in self.supervision:
+            if entry.get("process") == node and entry.get("mono", 0) <= t:
+                dead = entry.get("kind") == "died"
+        return dead
+
+
+@dataclass(frozen=True)
+class Property:
+    """A named predicate over a record, and the families it applies to."""
+
+    name: str
+    kind: str
+    """``safety`` or ``liveness``."""
+    families: tuple[str, ...]
+    check: Callable[[Record], list[Violation]]
+    doc: str
+
+
+PROPERTIES: dict[str, Property] = {}
+
+
+def prop(name: str, kind: str, families: Iterable[str]) -> Callable[[Callable[[Record], list[Violation]]], Any]:
+    """Register a property (the function's docstring says what it asks)."""
+
+    def register(check: Callable[[Record], list[Violation]]) -> Callable[[Record], list[Violation]]:
+        PROPERTIES[name] = Property(name, kind, tuple(families), check, (check.__doc__ or "").strip())
+        return check
+
+    return register
+
+
+def judge(record: Record, only: Iterable[str] | None = None) -> list[dict[str, Any]]:
+    """Every property that applies to the record's family (``only``: these), failed ones only, each with its
+    first violations."""
+    failures = []
+    for prop_ in PROPERTIES.values():
+        if record.family not in prop_.families or (only is not None and prop_.name not in only):
+            continue
+        if record.crash is not None and prop_.name != "no_exception":
+            continue  # a run that raised has no whole record to judge: its traceback is the verdict
+        violations = prop_.check(record)
+        if violations:
+            failures.append(
+                {"property": prop_.name, "kind": prop_.kind, "violations": [v.to_dict() for v in violations[:5]]}
+            )
+    return failures
+
+
+# == safety ==================================================================================================
+
+
+@prop("no_exception", "safety", ALL)
+def no_exception(record: Record) -> list[Violation]:
+    """No process raises: an uncaught exception in a robot, the user or the environment fails the case (its
+    traceback kept), and so does a programming error a handler caught and logged (``error`` events)."""
+    out = []
+    if record.crash is not None:
+        last = record.crash.strip().splitlines()[-1]
+        out.append(Violation(f"the run raised: {last}\n{record.crash}"))
+    for node, events in record.events.items():
+        for event in events:
+            error = str(event.get("error", ""))
+            if event["kind"] == "error" and error.split(":")[0] in PROGRAMMING_ERRORS:
+                out.append(Violation(f"handler error in {event.get('where')}: {error}", event["mono"], (node,)))
+    return out
+
+
+@prop("checker_invariants", "safety", ALL)
+def checker_invariants(record: Record) -> list[Violation]:
+    """The checker's invariants (counters add up, records complete and ordered, transitions chain, every robot
+    ends waiting or with its user, no two IR modules at once) and the run's own checks."""
+    out = [Violation(f"invariant violated: {text}") for text in record.invariants]
+    problems = [p for p in record.summary.get("problems", []) if not p.startswith("invariant violated")]
+    return out + [Violation(f"run check: {p}") for p in problems]
+
+
+def claims(record: Record) -> list[tuple[float, float, str, str, int]]:
+    """Masters' claims on members from their own events: (from, to, master, member, session). A claim starts
+    with ``organized`` (or a handover to the master), ends with ``member_lost``/``member_left``, the swarm's
+    dispersal, or the master leaving master-driving (dissolved, handed over, killed)."""
+    out: list[tuple[float, float, str, str, int]] = []
+    end_of_run = float(record.summary.get("model_time_s") or 1e9)
+    deaths = [(e["process"], e["mono"]) for e in record.supervision if e.get("kind") == "died"]
+    for node, events in record.events.items():
+        open_: dict[int, tuple[float, int]] = {}
+        session = None
+        for event in events:
+            kind, t = event["kind"], event["mono"]
+            for process, died in deaths:
+                if process == node and died <= t:
+                    _close(out, open_, node, died)
+            session = event.get("session", session)
+            if kind == "state" and event.get("cause") == "handover" and event.get("to") == "master-driving":
+                open_.update({member: (t, session) for member in event.get("members", [])})
+            if kind == "organized":
+                open_.update({member: (t, event["session"]) for member in event.get("members", [])})
+            elif kind in ("member_lost", "member_left"):
+                _close(out, open_, node, t, [event.get("member")])
+            elif kind in ("dispersed", "start") or (kind == "state" and event.get("frm") == "master-driving"):
+                _close(out, open_, node, t)
+        for process, died in deaths:
+            if process == node:
+                _close(out, open_, node, died)
+        _close(out, open_, node, end_of_run)
+    return out
+
+
+def _close(
+    out: list[tuple[float, float, str, str, int]],
+    open_: dict[int, tuple[float, int]],
+    node: str,
+    t: float,
+    members: Iterable[Any] | None = None,
+) -> None:
+    for member in list(open_) if members is None else list(members):
+        if member in open_:
+            since, session = open_.pop(member)
+            out.append((since, t, node, f"robot-{member}", session))
+
+
+@prop("one_master_per_robot", "safety", SWARMS)
+def one_master_per_robot(record: Record) -> list[Violation]:
+    """No robot is a member of two swarms, or claimed by two masters, at once: two masters' claims (from their
+    own ``organized`` and member-loss events) on one robot never overlap."""
+    out = []
+    by_member: dict[str, list[tuple[float, float, str, int]]] = {}
+    for since, until, master, member, session in claims(record):
+        by_member.setdefault(member, []).append((since, until, master, session))
+    handovers = {
+        (node, e["mono"])
+        for node, events in record.events.items()
+        for e in events
+        if e["kind"] == "state" and e.get("cause") == "handover" and e.get("to") == "master-driving"
+    }
+    for member, spans in by_member.items():
+        spans.sort()
+        for i, (since, until, master, _session) in enumerate(spans):
+            for since2, _until2, master2, _session2 in spans[i + 1 :]:
+                if (master2, since2) in handovers and until - since2 <= HANDOVER_GRACE_S:
+                    continue  # the old master hands over: it learns of the acceptance a frame later
+                if since2 < until and master2 != master:
+                    out.append(
+                        Violation(
+                            f"{member} claimed by {master} (from {since:.3f} s) and {master2} (from {since2:.3f} s)",
+                            since2,
+                            (member, master, master2),
+                        )
+                    )
+    return out
+
+
+@prop("roster_agreement", "safety", SWARMS)
+def roster_agreement(record: Record) -> list[Violation]:
+    """Once a swarm settles (no robot of it changed state or roster for ``SETTLE_S``), every member's state, PAN
+    and master agree with its master's roster, and every robot driving as a slave of that session is on it."""
+    out = []
+    changes = sorted(
+        {e["mono"] for ev in record.events.values() for e in ev if e["kind"] in _ROSTER_EVENTS}
+        | {e["mono"] for e in record.supervision}
+    )
+    end = float(record.summary.get("model_time_s") or 0.0)
+    spans = [(a, b) for a, b in zip(changes, [*changes[1:], end], strict=True) if b - a >= SETTLE_S]
+    claim_list = claims(record)
+    for a, b in spans:
+        t = b - 1e-6  # the end of a settled stretch: everything has had SETTLE_S to agree
+        if t < a + SETTLE_S:
+            continue
+        for since, until, master, member, session in claim_list:
+            if not since <= t < until or record.dead_at(member, t) or record.dead_at(master, t):
+                continue
+            own = record.state_at(member, t)
+            if own.get("to") != "slave-driving" or own.get("session") != session:
+                out.append(
+                    Violation(
+                        f"{master}'s roster (session {session}) counts {member}, settled in {own.get('to')}"
+                        f" (session {own.get('session')})",
+                        round(t, 3),
+                        (member, master),
+                    )
+                )
+        for node in record.robots:
+            own = record.state_at(node, t)
+            if own.get("to") != "slave-driving" or record.dead_at(node, t):
+                continue
+            if not any(c[3] == node and c[4] == own.get("session") and c[0] <= t < c[1] for c in claim_list):
+                out.append(
+                    Violation(
+                        f"{node} drives as a slave of session {own.get('session')} that no master's roster counts",
+                        round(t, 3),
+                        (node,),
+                    )
+                )
+    return out[:20]
+
+
+_ROSTER_EVENTS = ("state", "organized", "member_lost", "member_left", "dispersed", "handover", "start")
+
+
+@prop("pan_hearing", "safety", ALL)
+def pan_hearing(record: Record) -> list[Violation]:
+    """No robot hears a frame of a PAN it is not on (the robot notes any frame whose destination PAN is
+    neither its own nor the broadcast PAN: ``foreign_pan`` events)."""
+    return [
+        Violation(f"heard a frame for PAN {e.get('dst_pan'):#06x} while on {e.get('pan'):#06x}", e["mono"], (node,))
+        for node, events in record.events.items()
+        for e in events
+        if e["kind"] == "foreign_pan"
+    ]
+
+
+@prop("no_contact", "safety", ("organize", "drive", "follow", "mixed"))
+def no_contact(record: Record) -> list[Violation]:
+    """Where the driving law promises it (robots driving with their user, alone or as a swarm, whose safety
+    stage stops short of an echo): no robot touches another robot or an obstacle. Contacts with the user are
+    not judged: the scripted user walks blind, into a robot ahead of him as fast as 1.2 m/s."""
+    out = []
+    seen = 0
+    for tick in record.world:
+        count = tick.get("collisions", 0)
+        if count > seen:
+            who = _closest_pair(tick)
+            if "user" not in who:
+                out.append(Violation(f"contact {who[0]} / {who[1]}", round(tick["t_us"] / 1e6, 3), who))
+            seen = count
+    return out
+
+
+def _closest_pair(tick: dict[str, Any]) -> tuple[str, str]:
+    bodies = tick.get("bodies", [])
+    best, pair = float("inf"), ("?", "?")
+    for i, a in enumerate(bodies):
+        for b in bodies[i + 1 :]:
+            gap = ((a["x"] - b["x"]) ** 2 + (a["y"] - b["y"]) ** 2) ** 0.5 - a["radius"] - b["radius"]
+            if gap < best:
+                best, pair = gap, (a["id"], b["id"])
+    return pair if best < 0.05 else (pair[0] if bodies else "?", "an obstacle")
+
+
+# == liveness ================================================================================================
+
+
+def _requests(record: Record, request: str) -> list[tuple[str, dict[str, Any]]]:
+    """The watch's requests of one kind, each with the robot that took it (the owner, or after a master change
+    the robot the owner's role moved to)."""
+    return sorted(
+        (
+            (node, e)
+            for node in record.robots
+            for e in record.events.get(node, [])
+            if e["kind"] == "watch_request" and e.get("request") == request
+        ),
+        key=lambda pair: pair[1]["mono"],
+    )
+
+
+def _bounded_loss_only(record: Record, t: float) -> bool:
+    active = record.active_faults(t)
+    return bool(active) and all(
+        a["kind"] == "loss" and float(a.get("p", 1.0)) <= LOSS_BOUND and "node" not in a for a in active
+    )
+
+
+@prop("organize_completes", "liveness", SWARMS)
+def organize_completes(record: Record) -> list[Violation]:
+    """An organize asked for once the faults have cleared (or under loss of at most ``LOSS_BOUND`` alone), with
+    another robot waiting, completes with at least one member within ``ORGANIZE_WITHIN_S``."""
+    out = []
+    end = float(record.summary.get("model_time_s") or 0.0)
+    for owner, req in _requests(record, "organize"):
+        events = record.events.get(owner, [])
+        t = req["mono"]
+        if t + ORGANIZE_WITHIN_S > end or not (t >= record.clear_s or _bounded_loss_only(record, t)):
+            continue
+        before = t - 1e-6  # the request's own state change comes at the same instant
+        if record.state_at(owner, before).get("to") not in ("following", "leading"):
+            continue  # no swarm to lead from here (the watch refuses it): nothing was promised
+        waiting = [r for r in record.robots if r != owner and record.state_at(r, before).get("to") == "waiting"]
+        if not waiting:
+            continue
+        done = next((e for e in events if e["mono"] >= t and e["kind"] in _ORGANIZE_ENDS), None)
+        if done is None or done["kind"] != "watch_organized" or not done.get("members"):
+            what = "no answer" if done is None else f"{done['kind']} {done.get('members', done.get('error'))}"
+            out.append(Violation(f"organize asked at {t:.3f} s did not complete: {what}", t, (owner,)))
+        elif done["mono"] - t > ORGANIZE_WITHIN_S:
+            out.append(Violation(f"organize asked at {t:.3f} s took {done['mono'] - t:.3f} s", t, (owner,)))
+    return out
+
+
+_ORGANIZE_ENDS = ("watch_organized", "watch_organize_failed")
+
+
+@prop("disperse_returns_waiting", "liveness", SWARMS)
+def disperse_returns_waiting(record: Record) -> list[Violation]:
+    """Once the faults have cleared, every member of a swarm its master disperses is back in waiting within
+    ``DISPERSE_WITHIN_S``."""
+    out = []
+    end = float(record.summary.get("model_time_s") or 0.0)
+    for owner, req in _requests(record, "disperse"):
+        t = req["mono"]
+        if t < record.clear_s or t + DISPERSE_WITHIN_S > end:
+            continue
+        before = t - 1e-6
+        session = record.state_at(owner, before).get("session")
+        if record.state_at(owner, before).get("to") != "master-driving":
+            continue
+        for node in record.robots:
+            own = record.state_at(node, before)
+            if node == owner or own.get("to") != "slave-driving" or own.get("session") != session:
+                continue
+            later = record.state_at(node, t + DISPERSE_WITHIN_S)
+            if later.get("to") in SWARM_STATES and later.get("session") == session:
+                out.append(
+                    Violation(f"{node} still {later['to']} {DISPERSE_WITHIN_S:g} s after the dispersal", t, (node,))
+                )
+    return out
+
+
+@prop("token_regenerates", "liveness", SWARMS)
+def token_regenerates(record: Record) -> list[Violation]:
+    """The IR token schedule regenerates after a member dies: the swarm's other members get IR fixes again
+    within ``TOKEN_WITHIN_S`` of the death, while their master keeps driving them."""
+    out = []
+    end = float(record.summary.get("model_time_s") or 0.0)
+    for death in (e for e in record.supervision if e.get("kind") == "died"):
+        t, dead = death["mono"], death["process"]
+        own = record.state_at(dead, t - 1e-6)
+        if own.get("to") != "slave-driving" or t + TOKEN_WITHIN_S + 1.0 > end:
+            continue
+        session = own.get("session")
+        window = (t + TOKEN_WITHIN_S - 2.0, t + TOKEN_WITHIN_S + 1.0)
+        for node in record.robots:
+            if node == dead or any(record.dead_at(node, x) for x in (t, *window)):
+                continue
+            if not all(
+                record.state_at(node, x).get("to") == "slave-driving"
+                and record.state_at(node, x).get("session") == session
+                for x in (t, *window)
+            ):
+                continue  # not a member throughout: nothing promised
+            fixes = [
+                e for e in record.events.get(node, []) if e["kind"] == "ir_fix" and window[0] <= e["mono"] <= window[1]
+            ]
+            if not fixes:
+                out.append(
+                    Violation(
+                        f"no IR fix between {window[0]:.1f} and {window[1]:.1f} s after {dead} died", t, (node, dead)
+                    )
+                )
+    return out
