@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import json
 import os
 import signal
@@ -662,12 +663,17 @@ def _unwritable_record(record: str | None) -> str | None:
     from petswarm.lab.records import runs_dir
 
     where = Path(record) if record else runs_dir()
+    missing = [d for d in (where, *where.parents) if not d.exists()]  # deepest first; made for the probe only
     try:
         where.mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryFile(dir=where):
             pass
     except OSError as err:
         return f"cannot write the run record in {where}: {err.strerror or err}"
+    finally:
+        for made in missing:  # nothing is left behind by a run refused later, before it starts
+            with contextlib.suppress(OSError):
+                made.rmdir()
     return None
 
 
