@@ -45,6 +45,7 @@ from radio_hub.interface import (
     HubLink,
     HubUnavailable,
     Keys,
+    LinkSecurity,
     RadioClient,
     RadioError,
     RadioIdentity,
@@ -103,6 +104,10 @@ class RobotConfig:
     """The surround law's gains and the human's beacon id (used in ``surround`` mode)."""
     profile: str = DEFAULT_PROFILE
     """The testbed profile (``petswarm.profiles``): the robot's MCU and UART between middleware and radio."""
+    link_key: str | None = None
+    """802.15.4 link security's network key, 32 hex digits (docs/SECURITY.md); None: off (plain frames)."""
+    link_mic: int = 4
+    """Bytes of a secured frame's MIC (4 or 8)."""
 
     def __post_init__(self) -> None:
         if self.formation_mode not in FORMATIONS:
@@ -125,6 +130,20 @@ class RobotConfig:
         )
 
 
+EVENTS_ANSWER_BYTES = 3 << 20
+"""The longest ``events`` answer: zenoh carries nothing over 4 MB to or from a petswarm process
+(``radio_hub.interface.MAX_TRANSPORT_BYTES``); the record file keeps every event."""
+
+
+def events_answer(events: list[dict[str, Any]]) -> dict[str, Any]:
+    """The ``events`` command's answer: the latest events that fit in ``EVENTS_ANSWER_BYTES`` (``left_out``: the
+    number of older ones that did not)."""
+    kept = events
+    while kept and len(msgpack.packb(kept, use_bin_type=True, default=str)) > EVENTS_ANSWER_BYTES:
+        kept = kept[len(kept) // 2 :]
+    return {"events": kept, "left_out": len(events) - len(kept)} if len(kept) < len(events) else {"events": kept}
+
+
 class Robot:
     """One robot's middleware on top of its radio."""
 
@@ -133,6 +152,8 @@ class Robot:
         timing = robot_profile(config.profile).link
         # the link's own stream of draws: the robot's other draws stay what they are without a link
         link = None if timing.ideal else SerialLink(timing, Draws([config.seed, config.robot_id, LINK_STREAM]))
+        if config.link_key is not None:
+            radio.security = LinkSecurity(bytes.fromhex(config.link_key), config.link_mic)
         self.rf = RfCommunicationManager(radio, link)
         # numpy's default_rng draws, without loading numpy.random into every robot process
         self.rng = Draws([config.seed, config.robot_id])
@@ -157,7 +178,9 @@ class Robot:
             self.formation.note_answers,
         )
 
-        self.driver = Driver(config.robot_id, self.rf, self.sequence, self.formation, self.locations, self.log)
+        self.driver = Driver(
+            config.robot_id, self.rf, self.sequence, self.formation, self.locations, self.log, pairing_seed=config.seed
+        )
         self.formation.on_handover = self.driver.on_handover
         self.surround = (
             SurroundDriver(radio, self.ir, self.log, config.surround) if config.formation_mode == "surround" else None
@@ -387,7 +410,7 @@ class Robot:
             if name == "connect":
                 return self._connect_user(int(cmd.get("user", 1)), str(cmd.get("mode", "following")))
             if name == "events":
-                return {"events": list(self.log.events)}
+                return events_answer(list(self.log.events))
         except (FrameError, RadioError, HubUnavailable, FormationError, TransitionError, ValueError, TypeError) as err:
             return {"error": f"{type(err).__name__}: {err}"}
         return {"error": f"unknown command {name!r}; known: {', '.join(COMMANDS)}"}
@@ -436,6 +459,7 @@ class Robot:
             "malformed_payloads": self.rf.malformed,
             "tx_results": dict(self.rf.tx_results),
             "radio_malformed": radio.malformed,
+            "link_security": None if radio.security is None else radio.security.counters.to_dict(),
             "transport_gaps": radio.transport_gaps,
             "radio_dropped": {**radio.dropped, "link": radio.link_dropped},
             "faults": radio.faults.to_dict(),
@@ -454,6 +478,7 @@ class Robot:
                     round(v, 3) for v in (self.driver.command.vx, self.driver.command.vy, self.driver.command.omega)
                 ],
                 **self.driver.counters,
+                "unpaired": self.driver.core.unpaired,
             },
             "relative_location": self.locations.snapshot(clock.now()),
             "surround": None if self.surround is None else self.surround.status(),
