@@ -285,6 +285,8 @@ class DriverCore:
         self.owner: str | None = None
         self.fix: UserFix | None = None
         self.fix_at = -math.inf
+        self.reliable_at = -math.inf
+        """When the robot last had a reliable LF fix (inside the valid range), or ended a turn-about."""
         self.activity = Activity(Movement.STOP, False, 0.0, 0.0)
         self.sensors: OwnSensors | None = None
         """The latest own-body sample (AHRS yaw, odometry, ultrasonic ring)."""
@@ -293,6 +295,10 @@ class DriverCore:
         """What the controller wants before the safety stage: what the master broadcasts, so slaves ahead
         of it (leading) move on at the user's pace instead of waiting for a master they block."""
         self.mode = Mode.FOLLOWING
+        self.side_chosen = False
+        """Whether the user chose following or leading since pairing: until then the robot stands as he placed
+        it, and ``mode`` says nothing of which way it faces; after, it faces its user when following and away
+        from him when leading, and every change between them is a turn-about."""
         self.shape = self.config.shape
         self.spacing = self.config.spacing_m
         self.mirrored = False
@@ -531,9 +537,20 @@ class DriverCore:
         if state == RobotState.MASTER_DRIVING or turning_round:
             self._change_mode(Mode.LEADING if target == RobotState.LEADING else Mode.FOLLOWING, False)
             return
-        self.mode = Mode.LEADING if target == RobotState.LEADING else Mode.FOLLOWING
         if state != target:
-            self.sequence.transition(target, cause="watch")
+            self.sequence.transition(target, cause="watch")  # refused: nothing else changes
+        if target in STEERED:  # (remote control keeps the side the robot faces)
+            self._change_side(Mode.LEADING if target == RobotState.LEADING else Mode.FOLLOWING)
+
+    def _change_side(self, mode: Mode) -> None:
+        """Following or leading chosen outside a driving state (waiting for a command, remote control, an
+        emergency): the robot faces its user in one, away in the other, so a change of side turns it round
+        here too, as in ``_change_mode``; the first choice after pairing turns nothing (the robot stands as
+        the user placed it)."""
+        if self.side_chosen and mode != self.mode:
+            self._start_turn_about()
+            self._record("mode_change", frm=str(self.mode), to=str(mode))
+        self.mode, self.side_chosen = mode, True
 
     def gesture(self, gesture: Gesture, now: float) -> None:
         """A watch gesture: in remote control it moves the robot for ``REMOTE_HOLD_S``; a circle cancels."""
@@ -557,18 +574,22 @@ class DriverCore:
         to its other side. Change (``change_master``): the robot ``mode_change`` chooses takes the master's
         role (a ``HandOver`` action) and every robot keeps its place; when Table 3 chooses the master itself,
         or the handover fails, the No-change column applies."""
-        if mode == self.mode:
+        state = self.sequence.state
+        if mode == self.mode or (not self.side_chosen and state == RobotState.COMMAND_WAITING):
+            self.mode, self.side_chosen = mode, True  # (no side chosen yet: the robot stands as placed)
             return
         self._start_turn_about()
         swarm = self.formation.swarm
-        if self.sequence.state == RobotState.MASTER_DRIVING and swarm is not None:
+        target = RobotState.LEADING if mode == Mode.LEADING else RobotState.FOLLOWING
+        if state == RobotState.MASTER_DRIVING and swarm is not None:
             self._change_swarm_mode(swarm, mode, change_master)
         else:
             self._record("mode_change", frm=str(self.mode), to=str(mode))
-            target = RobotState.LEADING if mode == Mode.LEADING else RobotState.FOLLOWING
-            if self.sequence.state in (RobotState.FOLLOWING, RobotState.LEADING):
+            if state in (RobotState.FOLLOWING, RobotState.LEADING):
                 self.sequence.transition(target, cause="mode")
-        self.mode = mode
+            elif self.exception_from is not None:  # remote control or an emergency: "return" / "user found"
+                self.exception_from = target  # comes back to the side the robot now faces
+        self.mode, self.side_chosen = mode, True
 
     def _change_swarm_mode(self, swarm: SwarmInfo, mode: Mode, change_master: bool) -> None:
         chain = (swarm.master, *swarm.members)
@@ -627,7 +648,7 @@ class DriverCore:
         self.shape, self.spacing = shape, spacing
         self.tracker, self._fix_seen, self.drive_state_msg = RelativeTracker(), None, None
         if msg is not None:
-            self.mode = Mode(msg.mode)
+            self.mode, self.side_chosen = Mode(msg.mode), True
         if swarm.number == 0 and msg is not None:
             self.owner = msg.owner or None
             self._emit(SetUser(user_id(msg.owner)))
@@ -658,6 +679,7 @@ class DriverCore:
         error = wrap(self.turn_to - sensors.yaw_rad)
         if abs(error) < TURN_DONE_RAD:
             self.turn_to, self.fix, self.fix_at, self.opening_rate = None, None, now, None
+            self.reliable_at = now  # the lost-user time runs from here for the first fix facing the new way
             self._record("turn_about_done")
             return None
         limit = self.config.pet.limits.max_omega
@@ -707,6 +729,11 @@ class DriverCore:
         self.intent = MotorCommand()
         if state == RobotState.SLAVE_DRIVING:
             return self._slave(now, dt, self._ranges())
+        if state in (RobotState.REMOTE_CONTROL, RobotState.COMMAND_WAITING):
+            turn = self._turning(now)  # a change of side asked for here turns the robot round at once
+            if turn is not None:
+                self.intent = turn
+                return turn
         if state == RobotState.REMOTE_CONTROL:
             return safety(self.remote if now < self.remote_until else MotorCommand(), self._ranges(), self.config.pet)
         if not self._tracking(state) or state in (RobotState.COMMAND_WAITING, RobotState.ORGANIZING):
@@ -759,18 +786,23 @@ class DriverCore:
 
     def _lost(self, now: float, state: RobotState) -> bool:
         """Emergency per the spec: no reliable LF fix for LOST_AFTER_S; back when one comes again."""
-        # lost = too far (the LF fix's valid range is 2 m) or no fix at all; a user off the axis is not lost
+        # lost = too far (the LF fix's valid range is 2 m) or no fix at all, for LOST_AFTER_S; a user off the axis
+        # is not lost, and neither is one a fix or two puts just outside the range (a robot that overshot as its
+        # user stopped drives back meanwhile)
         if self.fix is not None and self.fix.distance_m <= LF_VALID_RANGE_M:
             self._far_limit_m = None  # back inside the LF's valid range: the single robot's rule again
         limit = max(LF_VALID_RANGE_M, self._far_limit_m or 0.0)
-        fresh = self.fix is not None and self.fix.distance_m <= limit and now - self.fix_at < LOST_AFTER_S
+        reliable = self.fix is not None and self.fix.distance_m <= limit
+        if reliable:
+            self.reliable_at = max(self.reliable_at, self.fix_at)
+        fresh = now - self.reliable_at < LOST_AFTER_S
         if state in (RobotState.FOLLOWING, RobotState.LEADING) and not fresh and self.fix_at > -math.inf:
             self.exception_from = state
             self.sequence.transition(RobotState.EMERGENCY, cause="user lost")
             if self.owner is not None:
                 self._emit(BleSend(self.owner, user_link.encode("alert", reason="user lost")))
             return True
-        if state == RobotState.EMERGENCY and fresh:
+        if state == RobotState.EMERGENCY and reliable and fresh:  # found only by a fix
             back, self.exception_from = self.exception_from or RobotState.FOLLOWING, None
             self.sequence.transition(back, cause="user found")
         return False

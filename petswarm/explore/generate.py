@@ -36,6 +36,9 @@ FAULT_KINDS = (
 """The fault kinds a case draws from: the hub's chaos kinds, a robot killed (and restarted), the wearable link lost."""
 SETTLE_S = 4.0
 """Fault-free model seconds a case keeps after its last fault clears and before its final requests."""
+TURN_ABOUT_S = 3.0
+"""How long the user stands after asking the robots to change sides (following <-> leading): they turn round in
+place on their AHRS, 180 degrees at the base's 1.5 rad/s slowing at the end, 2.4-2.6 s measured."""
 
 
 def rng_of(seed: int, i: int) -> np.random.Generator:
@@ -145,6 +148,117 @@ def _path(rng: np.random.Generator, seconds: float) -> list[dict[str, Any]]:
                 legs.append({"walk": 0.4, "speed": speed})
                 left -= 0.4 / speed
     return legs
+
+
+def leg_seconds(leg: dict[str, Any]) -> float:
+    """How long a path leg lasts (s)."""
+    if "walk" in leg:
+        return float(leg["walk"]) / float(leg["speed"])
+    if "turn" in leg:
+        return abs(float(leg["turn"])) / float(leg["rate"])
+    return float(leg["stop"])
+
+
+def _split_leg(leg: dict[str, Any], dt: float) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """``leg`` as the part of its first ``dt`` seconds and the rest, each as a list of one leg (or none, when
+    shorter than 10 ms)."""
+    rest = leg_seconds(leg) - dt
+    if "walk" in leg:
+        speed = leg["speed"]
+        parts = [{"walk": round(speed * dt, 3), "speed": speed}, {"walk": round(speed * rest, 3), "speed": speed}]
+    elif "turn" in leg:
+        rate, sign = leg["rate"], math.copysign(1.0, leg["turn"])
+        parts = [
+            {"turn": round(sign * rate * dt, 2), "rate": rate},
+            {"turn": round(sign * rate * rest, 2), "rate": rate},
+        ]
+    else:
+        parts = [{"stop": round(dt, 3)}, {"stop": round(rest, 3)}]
+    kept = [[p] if seconds >= 0.01 and leg_seconds(p) > 0 else [] for p, seconds in zip(parts, (dt, rest), strict=True)]
+    return kept[0], kept[1]
+
+
+def turns_about(path: list[dict[str, Any]]) -> bool:
+    """Whether the user's path has a turn-about before a change of side (a turn, then ``TURN_ABOUT_S`` standing)."""
+    return any("turn" in leg and path[k + 1 : k + 2] == [{"stop": TURN_ABOUT_S}] for k, leg in enumerate(path))
+
+
+def _heading_and_reference(user: dict[str, Any], t: float, changes: list[tuple[float, str]]) -> tuple[float, float]:
+    """The user's heading at ``t`` (degrees) and the heading the robots' side is taken from: following, the robots
+    are behind the way he last walked (they do not circle him when he turns on the spot); leading, ahead of the way
+    he faces (they drive an arc when he turns). ``changes``: (when, new side) of the changes of side before ``t``,
+    each made while he stands after his turn."""
+    heading = float(user["start"][2])
+    side, reference, clock = "following", heading, float(user["walk_at"])
+    pending = sorted(changes)
+    for leg in user["path"]:
+        if clock >= t:
+            break
+        seconds = leg_seconds(leg)
+        while pending and pending[0][0] < min(t, clock + seconds):  # a change made during this leg (a stop)
+            side, reference = pending.pop(0)[1], heading
+        if "turn" in leg:
+            heading += math.copysign(float(leg["rate"]) * min(seconds, t - clock), float(leg["turn"]))
+        elif "walk" in leg and side == "following":
+            reference = heading
+        clock += seconds
+    for _, new in (c for c in pending if c[0] < t):
+        side, reference = new, heading
+    return heading, (heading if side == "leading" else reference)
+
+
+def _turn_about_at(rng: np.random.Generator, user: dict[str, Any], t: float, angle: float) -> tuple[float, float]:
+    """Make the user turn by ``angle`` degrees at ``t`` (s after the start; a leg under way is cut there) and stand
+    ``TURN_ABOUT_S`` after it: (when the turn ends, the seconds added to the user's timeline)."""
+    turn = {"turn": round(angle, 1), "rate": round(float(rng.uniform(60, 120)), 1)}
+    added = [turn, {"stop": TURN_ABOUT_S}]
+    legs, walk_at = user["path"], float(user["walk_at"])
+    if t <= walk_at:  # still standing where the path starts: the path now starts with the turn
+        user["walk_at"] = round(t, 3)
+        user["path"] = [*added, *([{"stop": round(walk_at - t, 3)}] if walk_at - t >= 0.01 else []), *legs]
+    else:
+        clock, out = walk_at, []
+        for k, leg in enumerate(legs):
+            seconds = leg_seconds(leg)
+            if clock + seconds > t:
+                first, last = _split_leg(leg, t - clock)
+                out += [*first, *added, *last, *legs[k + 1 :]]
+                break
+            out.append(leg)
+            clock += seconds
+        else:  # past the path's end: stand until then
+            out += ([{"stop": round(t - clock, 3)}] if t - clock >= 0.01 else []) + added
+        user["path"] = out
+    return t + leg_seconds(turn), leg_seconds(turn) + TURN_ABOUT_S
+
+
+def _sides_with_turn_abouts(rng: np.random.Generator, user: dict[str, Any]) -> float:
+    """The user turns about before every request that makes the robots change sides, and stands while they turn.
+
+    Following and leading put the robots on opposite sides of the user (about 1 m behind, about 1 m ahead), and
+    the LF fix cannot tell front from back (pet-bot-wearable.md, "Locating the user": y >= 0), so a robot cannot
+    pass its user: a change between them is the user's turn-about (the paper's trajectory "a turn-about that
+    switches following into leading"), each robot turning round where it stands. The first choice (the robots
+    stand behind the user: following) turns nothing. Returns the seconds added to the timeline (every later
+    request moves on by the time the user spent turning and standing)."""
+    side, shift, changes = None, 0.0, []
+    for req in user["watch"]:
+        req["at"] = round(req["at"] + shift, 2)
+        want = {"follow": "following", "lead": "leading"}.get(req["request"], req.get("mode"))
+        if want is None or want == side:
+            continue
+        if side is not None:
+            heading, reference = _heading_and_reference(user, req["at"], changes)
+            # to leading: face the robots behind him; to following: turn his back on the robots ahead of him
+            angle = (reference + 180.0 - heading + 180.0) % 360.0 - 180.0 if side == "following" else 180.0
+            if abs(angle) > 179.5:
+                angle = float(rng.choice([-180.0, 180.0]))
+            end, added = _turn_about_at(rng, user, req["at"], angle if abs(angle) >= 1.0 else math.copysign(1.0, angle))
+            req["at"] = round(end + 0.05, 2)
+            shift += added
+            changes.append((req["at"], want))
+        side = want
+    return shift
 
 
 # -- faults ----------------------------------------------------------------------------------------------
@@ -275,6 +389,7 @@ def _drive(rng: np.random.Generator) -> dict[str, Any]:
     }
     if rng.random() < 0.5:
         data["obstacles"] = _obstacles(rng)
+    data["duration_s"] = round(duration + _sides_with_turn_abouts(rng, data["user"]), 2)
     return data
 
 
@@ -342,10 +457,12 @@ def _mixed(rng: np.random.Generator) -> dict[str, Any]:
         {"at": again + 3.0, "request": "disperse"},
     ]
     duration = again + 6.0
-    return {
+    data = {
         "duration_s": duration,
         "user": _user(rng, watch, 4.0, duration - 6.0),
         "robots": _robots(rng, n),
         "obstacles": _obstacles(rng) if rng.random() < 0.3 else [],
         "faults": _faults(rng, n, 2.0, faults_end, user=True),
     }
+    data["duration_s"] = round(duration + _sides_with_turn_abouts(rng, data["user"]), 2)
+    return data

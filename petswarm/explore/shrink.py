@@ -9,6 +9,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+from petswarm.explore.generate import turns_about
 from petswarm.explore.toml_out import dumps
 from petswarm.scenario import ACTIONS
 
@@ -99,10 +100,12 @@ def candidates(data: dict[str, Any]) -> Iterator[tuple[str, dict[str, Any]]]:
         for k in range(len(data["obstacles"])):
             yield f"without obstacle {k}", {**data, "obstacles": data["obstacles"][:k] + data["obstacles"][k + 1 :]}
     user = data.get("user")
-    if user and any("turn" in leg for leg in user.get("path", [])):
-        path = [leg for leg in user["path"] if "turn" not in leg]
-        yield "a straight path", {**data, "user": {**user, "path": path}}
-    if user and user.get("path"):
+    path = user.get("path", []) if user else []
+    # a path with the user's turn-abouts before changes of side stays whole: each turns him to face robots placed
+    # by the walks and turns before it, so without those it would ask what the generator never asks
+    if path and not turns_about(path):
+        if any("turn" in leg for leg in path):
+            yield "a straight path", {**data, "user": {**user, "path": [leg for leg in path if "turn" not in leg]}}
         yield "the user standing", {**data, "user": {**user, "path": []}}
     duration = float(data.get("duration_s", 30.0))
     last = max([float(f["at"]) for f in data.get("faults", [])] + [0.0])

@@ -413,3 +413,30 @@ def test_memory_comes_back_after_sessions_send_large_messages(make_air: Any) -> 
     assert air.cmd(2, "status")["robot_id"] == 2
     codes = air.close()
     assert codes["hub"] == 0, codes
+
+
+def test_megabyte_chaos_requests_are_refused_and_memory_comes_back(make_air: Any) -> None:
+    """20 chaos requests with a 2 MB selector each from one session took the hub 59 -> 196 MB, each answer 84 MB,
+    and clearing gave nothing back. Now each is refused in one short answer before it is unpacked, no fault is
+    kept, the stats still answer, and the hub's RSS ends within 10 % of where it started."""
+    air = make_air()
+    air.robot(2, (2.0, 0.0))
+    hub_pid = air.sup.children["hub"].pid
+    time.sleep(1.0)
+    base = rss_mb(hub_pid)
+    request = msgpack.packb({"op": "add", "fault": {"kind": "loss", "p": 1.0, "node": "x" * 2_000_000}})
+    session = zenoh.open(session_config("client", air.endpoint))
+    try:
+        for _ in range(20):
+            [reply] = list(session.get(air.keys.chaos, timeout=5.0, payload=request))
+            answer = reply.ok.payload.to_bytes()
+            assert len(answer) < 200 and b"at most" in answer
+    finally:
+        session.close()
+    time.sleep(2.0)
+    after = rss_mb(hub_pid)
+    print(f"hub RSS {base:.1f} -> {after:.1f} MB")
+    assert after <= base * 1.10
+    stats = air.stats()
+    assert stats["hub"]["faults"] == {} and stats["hub"]["chaos_refused"] >= 20
+    assert air.close()["hub"] == 0

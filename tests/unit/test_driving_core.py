@@ -265,6 +265,25 @@ def test_following_drives_toward_a_user_ahead_and_stops_when_the_fix_is_lost_the
     assert core.sequence.state == RobotState.FOLLOWING  # user found: back to the mode before the emergency
 
 
+def test_a_fix_just_outside_the_valid_range_loses_the_user_only_after_lost_after_s() -> None:
+    """A robot that overshot as its user stopped sees him at 2.1 m for a fix or two and drives back: it is
+    lost only when no fix inside the 2 m range has come for LOST_AFTER_S."""
+    core = paired(RobotState.LEADING, "lead")
+    core.sensors_sample(sensors(0.02), 0.02)
+    core.ble_message(BELT, lf_ahead(1.5), 0.03)
+    run_until(core, 0.1)
+    for k in range(int(LOST_AFTER_S / TRACK_PERIOD_S)):  # every fix outside the range, until just before 2 s
+        now = 0.35 + k * TRACK_PERIOD_S
+        core.ble_message(BELT, lf_ahead(2.1), now)
+        actions = run_until(core, now + 0.06)
+        assert core.sequence.state == RobotState.LEADING and not of(actions, BleSend)
+        assert drives(actions)[-1].vx < 0  # backing toward the user behind
+    core.ble_message(BELT, lf_ahead(2.1), 0.03 + LOST_AFTER_S + 0.05)
+    actions = run_until(core, 0.03 + LOST_AFTER_S + 0.11)
+    assert core.sequence.state == RobotState.EMERGENCY
+    assert {"k": "alert", "reason": "user lost"} in [user_link.decode(a.payload) for a in of(actions, BleSend)]
+
+
 def test_leading_takes_the_user_behind_and_keeps_ahead_of_him() -> None:
     core = paired(RobotState.LEADING, "lead")
     assert core.mode == Mode.LEADING
@@ -321,6 +340,56 @@ def test_a_single_robot_turns_round_on_its_ahrs_when_following_becomes_leading()
     actions = run_until(core, 0.11)
     assert logs(actions, "turn_about_done") == [{}]
     assert core.fix is None and core.turn_to is None  # the fix taken facing the other way is forgotten
+
+
+def test_a_turn_about_gives_the_first_fix_facing_the_new_way_the_lost_user_time() -> None:
+    core = paired()
+    core.sensors_sample(sensors(0.02, yaw=0.0), 0.02)
+    core.ble_message(BELT, lf_ahead(1.0), 0.03)
+    core.ble_message(BELT, ble("request", request="lead"), 0.04)
+    core.sensors_sample(sensors(0.07, yaw=math.pi - 0.05), 0.07)
+    actions = run_until(core, 0.11)
+    assert logs(actions, "turn_about_done") == [{}]
+    # no fix yet facing the new way: not lost until LOST_AFTER_S has passed without one
+    actions = run_until(core, 0.10 + LOST_AFTER_S - 0.1)
+    assert core.sequence.state == RobotState.LEADING and not of(actions, BleSend)
+    actions = run_until(core, 0.10 + LOST_AFTER_S + 0.1)
+    assert core.sequence.state == RobotState.EMERGENCY
+    assert {"k": "alert", "reason": "user lost"} in [user_link.decode(a.payload) for a in of(actions, BleSend)]
+
+
+def test_the_first_choice_after_pairing_turns_nothing_and_a_later_change_of_side_turns_in_any_state() -> None:
+    core = paired(RobotState.LEADING, "lead")  # the user placed the robot ahead of him: no turn
+    assert not logs(core.actions(), "turn_about") and core.turn_to is None
+    core.sensors_sample(sensors(0.02, yaw=0.0), 0.02)
+    core.ble_message(BELT, ble("request", request="cancel"), 0.03)
+    core.ble_message(BELT, ble("request", request="follow"), 0.04)  # from command-waiting: faces him now
+    assert core.sequence.state == RobotState.FOLLOWING and logs(core.actions(), "turn_about")
+    [cmd] = drives(run_until(core, 0.06))
+    assert cmd.vx == 0 and cmd.vy == 0 and abs(cmd.omega) == pytest.approx(1.5)
+
+
+def test_a_mode_change_in_command_waiting_or_remote_control_turns_the_robot_at_once() -> None:
+    core = paired(RobotState.LEADING, "lead")
+    core.sensors_sample(sensors(0.02, yaw=0.0), 0.02)
+    core.ble_message(BELT, ble("request", request="cancel"), 0.03)
+    core.ble_message(BELT, ble("request", request="mode", mode="following"), 0.04)
+    assert core.sequence.state == RobotState.COMMAND_WAITING and core.mode == Mode.FOLLOWING
+    [cmd] = drives(run_until(core, 0.06))
+    assert abs(cmd.omega) == pytest.approx(1.5)  # turning round while it waits for a command
+
+    core = paired(RobotState.LEADING, "lead")
+    core.sensors_sample(sensors(0.02, yaw=0.0, ranges=0.3), 0.02)
+    core.ble_message(BELT, lf_ahead(1.0), 0.03)
+    run_until(core, 0.06)  # an obstacle ahead: remote control, the user points the way
+    assert core.sequence.state == RobotState.REMOTE_CONTROL and core.exception_from == RobotState.LEADING
+    core.actions()
+    core.ble_message(BELT, ble("request", request="mode", mode="following"), 0.07)
+    assert core.exception_from == RobotState.FOLLOWING  # "return" comes back to the side it now faces
+    [cmd] = drives(run_until(core, 0.11))
+    assert abs(cmd.omega) == pytest.approx(1.5)
+    core.ble_message(BELT, ble("request", request="remote"), 0.12)  # remote control keeps the side
+    assert core.mode == Mode.FOLLOWING
 
 
 # -- the swarm: Table 3 ------------------------------------------------------------------------------

@@ -4,15 +4,16 @@ shrinker's fault units, and every property fed a record that breaks it (and one 
 from __future__ import annotations
 
 import json
+import math
 import tomllib
 from typing import Any
 
 import pytest
 
 from petswarm.explore import properties as P
-from petswarm.explore.generate import FAMILIES, FAULT_KINDS, case
+from petswarm.explore.generate import FAMILIES, FAULT_KINDS, TURN_ABOUT_S, case, turns_about
 from petswarm.explore.main import parse_families
-from petswarm.explore.shrink import fault_units, join_units
+from petswarm.explore.shrink import candidates, fault_units, join_units
 from petswarm.explore.toml_out import dumps
 from petswarm.scenario import parse
 
@@ -30,6 +31,52 @@ def test_a_case_is_a_pure_function_of_seed_and_index_and_a_valid_scenario_file()
         seen_kinds |= {f.get("kind") for f in data.get("faults", [])}
     assert seen_families == set(FAMILIES)
     assert set(FAULT_KINDS) <= seen_kinds
+
+
+def _angle(a: float, b: float) -> float:
+    """``a - b`` wrapped to [-pi, pi)."""
+    return (a - b + math.pi) % (2 * math.pi) - math.pi
+
+
+def test_the_user_turns_to_put_the_robots_on_their_new_side_before_every_change_and_stands() -> None:
+    """Following, the robots are behind the way the user last walked; leading, ahead of the way he faces. Each
+    request that changes the side comes right after the user turned so that they are on the new side (to
+    leading: he faces them; to following: a half turn), and he stands ``TURN_ABOUT_S`` while they turn round."""
+    switches = 0
+    for i in range(120):
+        data = case(1, i, "drive" if i % 2 else "mixed")
+        plan = parse(data).user
+        assert all(r.at < data["duration_s"] - 2.0 for r in plan.watch)  # the last request (disperse) still comes
+        side, since = None, 0.0
+        for req in plan.watch:
+            want = {"follow": "following", "lead": "leading"}.get(req.request, req.args.get("mode"))
+            if want is None or want == side:
+                continue
+            if side is None:
+                assert want == "following"  # the robots stand behind the user
+            else:
+                switches += 1
+                turn_start = max(t for t in plan.turn_starts() if t <= req.at)
+                assert req.at - turn_start <= 3.1  # the turn (at most 180 degrees at 60 deg/s or more) just ended
+                if want == "leading":  # faces the robots: behind the way he last walked (or faced, at the start)
+                    samples = [since + 0.01 * k for k in range(int((turn_start - since) / 0.01) + 1)]
+                    walked = [plan.pose_at(t)[2] for t in samples if plan.pose_at(t)[3:5] != (0.0, 0.0)]
+                    reference = walked[-1] if walked else plan.pose_at(since)[2]
+                else:  # turns his back on the robots ahead of him
+                    reference = plan.pose_at(turn_start)[2]
+                assert abs(_angle(plan.pose_at(req.at)[2], reference + math.pi)) < math.radians(1.5)
+                for dt in (0.0, 1.0, 2.0, TURN_ABOUT_S - 0.1):  # standing while the robots turn round
+                    assert plan.pose_at(req.at + dt)[3:] == (0.0, 0.0, 0.0)
+            side, since = want, req.at
+    assert switches > 20
+
+
+def test_shrinking_keeps_a_path_with_turn_abouts_whole() -> None:
+    turned = case(1, 8, "mixed")
+    assert turns_about(turned["user"]["path"])
+    assert not {"a straight path", "the user standing"} & {what for what, _ in candidates(turned)}
+    plain = case(1, 0, "follow")
+    assert not turns_about(plain["user"]["path"]) and "the user standing" in {what for what, _ in candidates(plain)}
 
 
 def test_families_and_weights_are_checked() -> None:
@@ -120,6 +167,67 @@ def test_roster_agreement_fails_a_settled_member_the_roster_does_not_match() -> 
         }
     )
     assert P.roster_agreement(agreed) == []
+
+
+def test_roster_agreement_gives_a_master_its_rounds_to_drop_a_member_that_left_unheard() -> None:
+    def killed_member(dropped_at: float | None) -> P.Record:
+        master = [_state(3.0, "following", "master-driving", session=7), _ev("organized", 3.0, session=7, members=[2])]
+        if dropped_at is not None:
+            master += [
+                _ev("member_lost", dropped_at, session=7, member=2),
+                _state(dropped_at, "master-driving", "following", session=7),
+            ]
+        member = [_state(3.0, "waiting", "slave-driving", session=7), _ev("start", 7.1, state="waiting")]
+        record = _record(**{"robot-1": master, "robot-2": member})
+        record.supervision = [
+            {"kind": "died", "process": "robot-2", "mono": 6.5},
+            {"kind": "restarted", "process": "robot-2", "mono": 7.1},
+        ]
+        return record
+
+    # killed at 6.5 s, back in waiting at 7.1 s, dropped after three silent rounds (5.5 s): not a disagreement
+    assert P.roster_agreement(killed_member(12.0)) == []
+    # never dropped: counted in waiting from 6.5 s to the end of the run
+    [violation, *_] = P.roster_agreement(killed_member(None))
+    assert violation.who == ("robot-2", "robot-1") and violation.when > 6.5 + P.MEMBER_DROP_S
+    # dropped, but later than a master's rounds allow
+    assert P.roster_agreement(killed_member(6.5 + P.MEMBER_DROP_S + 3.5))
+
+
+def test_checker_invariants_pass_a_robot_lost_when_asked_to_follow_from_beyond_the_lf_range() -> None:
+    ends = "robot-1: ends in emergency, not waiting or driving with its user"
+
+    def asked(before: str, user_m: float) -> P.Record:
+        robot = [
+            _state(1.0, "command-waiting", "following", cause="watch"),
+            _state(2.0, "following", before, cause="cancel" if before == "command-waiting" else "obstacle ahead"),
+            _ev("watch_request", 5.8, request="follow"),
+            _state(5.8, before, "following", cause="watch"),
+            _state(5.85, "following", "emergency", cause="user lost"),
+            _ev("watch_request", 11.4, request="organize"),
+            _state(11.4, "emergency", "organizing", session=3),
+            _state(11.5, "organizing", "master-driving", session=3),
+            _state(14.4, "master-driving", "emergency", session=3),  # the dispersal restores it
+        ]
+        record = _record(**{"robot-1": robot})
+        record.__dict__["invariants"] = [ends]
+        tick = {
+            "t_us": 5_800_000,
+            "bodies": [{"id": "robot-1", "x": 0.0, "y": 0.0}, {"id": "user", "x": 0.0, "y": user_m}],
+        }
+        record.world_lines = [json.dumps(tick)]
+        return record
+
+    # the user walked away from a robot waiting for a command (or in remote control), then asked from 2.6 m
+    assert P.checker_invariants(asked("command-waiting", 2.6)) == []
+    assert P.checker_invariants(asked("remote-control", 2.6)) == []
+    # asked from 1.5 m: the robot should have found him
+    [violation] = P.checker_invariants(asked("command-waiting", 1.5))
+    assert "ends in emergency" in violation.what
+    # lost while following him (no request): a failure whatever the distance
+    driving = asked("command-waiting", 2.6)
+    driving.events["robot-1"] = [e for e in driving.events["robot-1"] if e["kind"] != "watch_request"]
+    assert P.checker_invariants(driving)
 
 
 def _pan_life(*frames: dict[str, Any]) -> list[dict[str, Any]]:
