@@ -90,6 +90,17 @@ def _robots(rng: np.random.Generator, count: int, spread: float = 0.6) -> dict[s
     return {"count": count, "positions": positions}
 
 
+def _owner_faces_user(robots: dict[str, Any]) -> dict[str, Any]:
+    """Robot 1, the user's own, turned to face him (the user at the origin) when it was drawn facing away: LF
+    cannot tell front from back (pet-bot-wearable.md: y >= 0), so a robot with its user behind it takes him for
+    one ahead, and following drives it away from him. The others may face anywhere."""
+    x, y, heading = robots["positions"][0]
+    toward = math.degrees(math.atan2(-y, -x))
+    if abs((heading - toward + 180.0) % 360.0 - 180.0) > 90.0:
+        robots["positions"][0] = [x, y, round(toward, 1)]
+    return robots
+
+
 def _obstacles(rng: np.random.Generator, far: float = 3.0) -> list[dict[str, Any]]:
     """Walls, corridors of any width and length, cylinders, pairs and rows, kept clear of the start area."""
     out: list[dict[str, Any]] = []
@@ -354,7 +365,7 @@ def _organize(rng: np.random.Generator) -> dict[str, Any]:
     return {
         "duration_s": duration,
         "user": _user(rng, watch, duration, 0),
-        "robots": _robots(rng, n),
+        "robots": _owner_faces_user(_robots(rng, n)),
         "faults": _faults(rng, n, 2.0, faults_end, user=True),
     }
 
@@ -384,7 +395,7 @@ def _drive(rng: np.random.Generator) -> dict[str, Any]:
     data = {
         "duration_s": duration,
         "user": _user(rng, sorted(watch, key=lambda r: r["at"]), 4.5, duration - 8.0),
-        "robots": _robots(rng, n),
+        "robots": _owner_faces_user(_robots(rng, n)),
         "faults": _faults(rng, n, 2.0, faults_end, user=True),
     }
     if rng.random() < 0.5:
@@ -427,7 +438,7 @@ def _follow(rng: np.random.Generator) -> dict[str, Any]:
     data = {
         "duration_s": duration,
         "user": _user(rng, watch, 3.0, duration - 4.0),
-        "robots": _robots(rng, n),
+        "robots": _owner_faces_user(_robots(rng, n)),
         "faults": _faults(rng, n, 2.0, duration - 2.0, user=True),
     }
     if rng.random() < 0.5:
@@ -460,7 +471,7 @@ def _mixed(rng: np.random.Generator) -> dict[str, Any]:
     data = {
         "duration_s": duration,
         "user": _user(rng, watch, 4.0, duration - 6.0),
-        "robots": _robots(rng, n),
+        "robots": _owner_faces_user(_robots(rng, n)),
         "obstacles": _obstacles(rng) if rng.random() < 0.3 else [],
         "faults": _faults(rng, n, 2.0, faults_end, user=True),
     }

@@ -79,6 +79,16 @@ def test_shrinking_keeps_a_path_with_turn_abouts_whole() -> None:
     assert not turns_about(plain["user"]["path"]) and "the user standing" in {what for what, _ in candidates(plain)}
 
 
+def test_the_users_own_robot_never_starts_with_its_back_to_him() -> None:
+    for i in range(200):
+        data = case(2, i)
+        if "owner" not in data.get("user", {}):
+            continue
+        x, y, heading = data["robots"]["positions"][0]
+        off = _angle(math.radians(heading), math.atan2(-y, -x))
+        assert abs(off) <= math.pi / 2, (i, data["robots"]["positions"][0])
+
+
 def test_families_and_weights_are_checked() -> None:
     assert parse_families("organize,drive:2") == {"organize": 3.0, "drive": 2.0}
     with pytest.raises(ValueError, match="no family 'organise'"):
