@@ -475,8 +475,10 @@ def _pans_at(changes: list[tuple[int, int]], t_us: int) -> set[int]:
 
 
 PUSHED_S = 0.1
-"""A robot the user walked into within this long (five world ticks) is excused its contacts meanwhile: the world
-pushes it out of the user's way, into whatever is beside it, faster than any law can react."""
+"""A robot the user walked into within this long (five world ticks), or one pressed by such a robot, is excused its
+contacts meanwhile: the world pushes it out of the user's way, into whatever is beside it, faster than any law can
+react. A pair that parted for no longer than this and touches again is the same contact going on (bodies pressed
+together part and touch again tick by tick as the world pushes them apart)."""
 
 
 @prop("no_contact", "safety", ("organize", "drive", "follow", "mixed"))
@@ -484,27 +486,43 @@ def no_contact(record: Record) -> list[Violation]:
     """Where the driving law promises it (robots driving with their user, alone or as a swarm, whose safety
     stage stops short of an echo): no robot touches another robot or an obstacle. Contacts with the user are
     not judged: the scripted user walks blind, into a robot ahead of him as fast as 1.2 m/s, and into walls
-    (so are a robot's contacts while the user pushes it, ``PUSHED_S``). Who touched what is the world log's
-    ``contacts`` (the pairs touching at each tick): a pair counts once, when it begins to touch."""
+    (so are the contacts of a robot he pushes, directly or through the robots it presses, ``PUSHED_S``). Who
+    touched what is the world log's ``contacts`` (the pairs touching at each tick): a pair counts once, when it
+    begins to touch."""
     out = []
-    before: set[tuple[str, str]] = set()
+    touched: dict[tuple[str, str], float] = {}  # each pair's last tick in contact
     pushed: dict[str, float] = {}
     seen = 0
     for tick in record.world:
         t = tick["t_us"] / 1e6
         now = {(str(a), str(b)) for a, b in tick.get("contacts", [])}
-        for pair in now:
-            if "user" in pair:
-                pushed.update({who: t for who in pair if who != "user"})
-        for a, b in sorted(now - before):
-            if "user" in (a, b) or any(t - pushed.get(who, -1.0) <= PUSHED_S for who in (a, b)):
+        pushed.update({who: t for who in _pressed_by_the_user(now)})
+        for a, b in sorted(now):
+            begins = t - touched.get((a, b), -math.inf) > PUSHED_S + 1e-9
+            touched[(a, b)] = t
+            if not begins or "user" in (a, b) or any(t - pushed.get(who, -1.0) <= PUSHED_S for who in (a, b)):
                 continue
             out.append(Violation(f"contact {a} / {_name(tick, b)}", round(t, 3), (a, b)))
         count = int(tick.get("collisions", 0))
         if count > seen and "contacts" not in tick:  # a world log that does not name who touched (an older hub's)
             out.append(Violation("a contact the world log names no pair of", round(t, 3)))
-        before, seen = now, max(seen, count)
+        seen = max(seen, count)
     return out
+
+
+def _pressed_by_the_user(pairs: set[tuple[str, str]]) -> set[str]:
+    """The bodies the user touches, and those they touch in turn (an obstacle passes no push on): the user's
+    connected part of the contact graph."""
+    reached, frontier = set(), {"user"}
+    while frontier:
+        reached |= frontier
+        frontier = {
+            other
+            for a, b in pairs
+            for me, other in ((a, b), (b, a))
+            if me in frontier and other not in reached and not other.startswith("obstacle-")
+        }
+    return reached - {"user"}
 
 
 def _name(tick: dict[str, Any], who: str) -> str:

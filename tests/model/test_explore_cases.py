@@ -97,3 +97,18 @@ def test_a_killed_robot_keeps_its_body_and_restarts_where_it_stood(tmp_path: Pat
     still = [(x, y) for t, x, y in poses if t >= died]
     assert max(abs(x - still[0][0]) + abs(y - still[0][1]) for x, y in still) < 0.01  # and where it stopped
     assert result["ok"], result["failures"]
+
+
+@pytest.mark.timeout(120)
+def test_robots_the_user_presses_through_another_are_not_robots_touching(tmp_path: Path) -> None:
+    """Seed 1 case 396: the user walks into robot-5, which presses robot-6 against robot-2: the last contact is no
+    robot's doing either (the judge excused only the robots the user touched himself)."""
+    result, world = _replay("seed-1-case-396-no_contact.toml", tmp_path / "run")
+    chained = [
+        tick["t_us"]
+        for tick in world
+        if {("robot-2", "robot-6"), ("robot-5", "robot-6"), ("robot-5", "user")}
+        <= {tuple(p) for p in tick.get("contacts", [])}
+    ]
+    assert chained  # the user, robot-5, robot-6 and robot-2 touching in a row
+    assert result["ok"], result["failures"]

@@ -325,6 +325,38 @@ def test_no_contact_excuses_a_robot_the_user_pushes_into_another_but_not_long_af
     assert violation.who == ("robot-1", "robot-2")
 
 
+def test_no_contact_excuses_robots_the_user_presses_through_another() -> None:
+    """Seed 1 case 396: the user walks into robot-1, which presses robot-2 against a third (here: the wall does not
+    pass a push on)."""
+    chain = [["robot-1", "robot-2"], ["robot-1", "user"], ["robot-2", "obstacle-0"]]
+    record = _record()
+    record.world_lines = [_tick(0, 0, []), _tick(20_000, 3, chain)]
+    assert P.no_contact(record) == []
+    walled = [["user", "obstacle-0"], ["robot-2", "obstacle-0"]]  # the user at the wall pushes nobody through it
+    record = _record()
+    record.world_lines = [_tick(0, 0, []), _tick(20_000, 2, walled)]
+    [violation] = P.no_contact(record)
+    assert violation.who == ("robot-2", "obstacle-0")
+
+
+def test_no_contact_takes_a_pair_that_parts_for_a_tick_as_one_contact_going_on() -> None:
+    """Seed 1 case 193: a robot the user pressed against another slides along it after the push; the pair parts for
+    one tick as the world pushes them apart and touches again: the contact that began under the push, going on."""
+    pair, pushed = [["robot-1", "robot-2"]], [["robot-1", "robot-2"], ["robot-1", "user"]]
+    record = _record()
+    record.world_lines = [
+        _tick(0, 0, []),
+        _tick(20_000, 2, pushed),
+        *(_tick(20_000 * k, 2, pair) for k in range(2, 20)),
+        _tick(400_000, 2, []),
+        _tick(420_000, 3, pair),
+        _tick(440_000, 3, []),
+        _tick(700_000, 4, pair),  # parted for a quarter second: a new contact
+    ]
+    [violation] = P.no_contact(record)
+    assert violation.who == ("robot-1", "robot-2") and violation.when == 0.7
+
+
 def test_no_contact_fails_a_contact_a_world_log_does_not_name() -> None:
     record = _record()
     record.world_lines = [_tick(0, 0, []), _tick(20_000, 1, [])]
