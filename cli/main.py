@@ -4,14 +4,17 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import json
 import os
 import signal
 import sys
+import tempfile
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from cli.explore import add_explore, explore
-from petswarm.lab.arguments import CLOCKS, CommandParser, bounded, robot_id, seed
+from petswarm.lab.arguments import CLOCKS, CommandParser, add_link_security, bounded, robot_id, seed, world_name
 from petswarm.lab.robot_command import add_hub as _add_hub
 from petswarm.lab.robot_command import add_node_clock as _add_node_clock
 from petswarm.lab.robot_command import add_profile, add_robot_arguments, robot_config
@@ -215,7 +218,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="seconds between each robot's broadcast pings (default 0.5, and 0.05 s per robot beyond 10, so the "
         "pongs of a large run stay within what the 250 kbit/s channel carries)",
     )
-    run.add_argument("--world", help="key prefix of the run (default: derived from pid and seed)")
+    run.add_argument("--world", type=world_name, help="key prefix of the run (default: derived from pid and seed)")
     run.add_argument("--config", help="hub medium config file (see petswarm hub --help)")
     run.add_argument("--pcap", metavar="FILE", help="the hub writes the run's 802.15.4 frames to this pcap file")
     run.add_argument("--json", action="store_true", help="print the summary as JSON on stdout")
@@ -251,6 +254,7 @@ def build_parser() -> argparse.ArgumentParser:
         "model time goes on without it (longer to hold a robot in a debugger)",
     )
     add_profile(run, "hub, robots and user alike (MAC, BLE, IR noise; MCU and UART per frame; recognition)")
+    add_link_security(run)
     _add_foxglove(run, "stream the run live to Foxglove while it goes, in any clock")
     run.add_argument(
         "--fail-fast",
@@ -371,6 +375,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_profile(borg, "hub and robots; the paper's figure printed beside the bench's, with the ratio")
     borg.add_argument("--seed", type=seed, default=1, help="seed of the hub and the robots (default %(default)s)")
+    add_link_security(borg)
     borg.add_argument("--out", default="bench-results", help="directory for JSON and plots (default %(default)s)")
     borg.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
     from petswarm.bench.ir import add_arguments as add_bench_ir_arguments
@@ -653,6 +658,25 @@ SCENARIO_SETS = {
 """Options of ``petswarm run`` that a scenario decides for itself, with where (given with one, they were ignored)."""
 
 
+def _unwritable_record(record: str | None) -> str | None:
+    """Why the run's record cannot be written where it goes (``--record``, else the runs directory), or None."""
+    from petswarm.lab.records import runs_dir
+
+    where = Path(record) if record else runs_dir()
+    missing = [d for d in (where, *where.parents) if not d.exists()]  # deepest first; made for the probe only
+    try:
+        where.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=where):
+            pass
+    except OSError as err:
+        return f"cannot write the run record in {where}: {err.strerror or err}"
+    finally:
+        for made in missing:  # nothing is left behind by a run refused later, before it starts
+            with contextlib.suppress(OSError):
+                made.rmdir()
+    return None
+
+
 def _run(args: argparse.Namespace) -> int:
     from petswarm.lab.launch import run
     from petswarm.lab.run import RunOptions, default_ping_interval
@@ -678,6 +702,10 @@ def _run(args: argparse.Namespace) -> int:
     if args.dead_after is not None and args.clock != "lockstep":
         print("petswarm run: --dead-after is the lockstep hub's patience; it needs --clock lockstep", file=sys.stderr)
         return 2
+    unwritable = _unwritable_record(args.record)
+    if unwritable:
+        print(f"petswarm run: {unwritable}", file=sys.stderr)
+        return 2
     chosen_seed = args.seed if args.seed is not None else int.from_bytes(os.urandom(4), "big")
     opts = RunOptions(
         robots=args.robots,
@@ -696,6 +724,8 @@ def _run(args: argparse.Namespace) -> int:
         fail_fast=args.fail_fast,
         profile=args.profile,
         dead_after_s=args.dead_after,
+        link_key=args.link_key,
+        link_mic=args.link_mic,
         foxglove=args.foxglove,
     )
     return run(opts)

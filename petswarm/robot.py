@@ -45,6 +45,7 @@ from radio_hub.interface import (
     HubLink,
     HubUnavailable,
     Keys,
+    LinkSecurity,
     RadioClient,
     RadioError,
     RadioIdentity,
@@ -59,9 +60,6 @@ COMMANDS = ("status", "ping", "send", "configure", "received", "organize", "disp
 AUTO_ID = 0
 """``--id auto``: claim the lowest id no live robot of the world uses."""
 FORMATIONS = ("swarm", "surround")
-PAN_CHANGE_GRACE_S = 0.05
-"""After its PAN changes, how long a robot may still get frames sent to the old one: the radio takes the new PAN
-as its own when it asks the hub, which applies it a round trip later (``RadioClient.configure``)."""
 """``swarm``: the leader-follower middleware (organize, token IR, master and slaves); ``surround``: every
 robot runs the surround law on its own beacons and echoes (docs/SURROUND.md)."""
 LINK_STREAM = 0x5E7A
@@ -106,6 +104,10 @@ class RobotConfig:
     """The surround law's gains and the human's beacon id (used in ``surround`` mode)."""
     profile: str = DEFAULT_PROFILE
     """The testbed profile (``petswarm.profiles``): the robot's MCU and UART between middleware and radio."""
+    link_key: str | None = None
+    """802.15.4 link security's network key, 32 hex digits (docs/SECURITY.md); None: off (plain frames)."""
+    link_mic: int = 4
+    """Bytes of a secured frame's MIC (4 or 8)."""
 
     def __post_init__(self) -> None:
         if self.formation_mode not in FORMATIONS:
@@ -128,6 +130,20 @@ class RobotConfig:
         )
 
 
+EVENTS_ANSWER_BYTES = 3 << 20
+"""The longest ``events`` answer: zenoh carries nothing over 4 MB to or from a petswarm process
+(``radio_hub.interface.MAX_TRANSPORT_BYTES``); the record file keeps every event."""
+
+
+def events_answer(events: list[dict[str, Any]]) -> dict[str, Any]:
+    """The ``events`` command's answer: the latest events that fit in ``EVENTS_ANSWER_BYTES`` (``left_out``: the
+    number of older ones that did not)."""
+    kept = events
+    while kept and len(msgpack.packb(kept, use_bin_type=True, default=str)) > EVENTS_ANSWER_BYTES:
+        kept = kept[len(kept) // 2 :]
+    return {"events": kept, "left_out": len(events) - len(kept)} if len(kept) < len(events) else {"events": kept}
+
+
 class Robot:
     """One robot's middleware on top of its radio."""
 
@@ -136,6 +152,8 @@ class Robot:
         timing = robot_profile(config.profile).link
         # the link's own stream of draws: the robot's other draws stay what they are without a link
         link = None if timing.ideal else SerialLink(timing, Draws([config.seed, config.robot_id, LINK_STREAM]))
+        if config.link_key is not None:
+            radio.security = LinkSecurity(bytes.fromhex(config.link_key), config.link_mic)
         self.rf = RfCommunicationManager(radio, link)
         # numpy's default_rng draws, without loading numpy.random into every robot process
         self.rng = Draws([config.seed, config.robot_id])
@@ -160,23 +178,32 @@ class Robot:
             self.formation.note_answers,
         )
 
-        self.driver = Driver(config.robot_id, self.rf, self.sequence, self.formation, self.locations, self.log)
+        self.driver = Driver(
+            config.robot_id, self.rf, self.sequence, self.formation, self.locations, self.log, pairing_seed=config.seed
+        )
         self.formation.on_handover = self.driver.on_handover
         self.surround = (
             SurroundDriver(radio, self.ir, self.log, config.surround) if config.formation_mode == "surround" else None
         )
         radio.on_reattach.append(self._reattached)
         radio.on_relayed = answer_relayed(self.handle, radio, self._spawn)
+        pan, pan_at_us = radio.pan_on_air or (radio.identity.pan_id, 0)
         self.log.record(
-            "start", robot_id=config.robot_id, state=self.sequence.state.label, user=config.user, seed=config.seed
+            "start",
+            robot_id=config.robot_id,
+            state=self.sequence.state.label,
+            user=config.user,
+            seed=config.seed,
+            pan=pan,
+            pan_at_us=pan_at_us,
         )
+        # the hub's PAN for us and since when (its model time): what a frame handed up late is judged by
+        radio.on_pan_change.append(lambda pan, at_us: self.log.record("pan", pan=pan, at_us=at_us))
 
         self.started = clock.now()
         self.pings_sent = 0
         self.pings_answered = 0
         self.heard_from: Counter[int] = Counter()
-        self._pan: tuple[int, int | None, float] = (radio.identity.pan_id, None, 0.0)
-        """The PAN frames last came on, the one before it, and when the change was first seen."""
         self.recent: deque[dict[str, Any]] = deque(maxlen=200)
         self.stopping = asyncio.Event()
         self._nonce = 0
@@ -218,17 +245,23 @@ class Robot:
                 self.rf.radio.faults.record("receive", err, type(incoming.message).__name__)
 
     def _check_pan(self, incoming: Incoming) -> None:
-        """Note a frame whose destination PAN is neither ours nor the broadcast PAN (``foreign_pan``): the MAC
-        filters those, so one here means a filter or a PAN change went wrong (``petswarm explore`` checks it)."""
-        dst_pan, pan = incoming.rx.frame.dst_pan, self.rf.radio.identity.pan_id
-        if pan != self._pan[0]:  # our PAN changed since the last frame: the old one's frames may still come a while
-            self._pan = (pan, self._pan[0], incoming.received_at)
-        if dst_pan in (pan, BROADCAST):
+        """Note a frame whose destination PAN is neither the one we asked for nor the broadcast PAN
+        (``foreign_pan``, with its air time): one the hub's MAC took on the PAN we had before a change (applied a
+        round trip after we ask), or held up by a delay fault or the UART, is fine; one for a PAN we were not on
+        when it was on the air means a filter went wrong. ``petswarm explore`` tells the two apart from the
+        ``pan`` events' times (``pan_hearing``), by what was on the air, not by how late the frame came."""
+        frame = incoming.rx.frame
+        pan = self.rf.radio.identity.pan_id
+        if frame.dst_pan in (pan, BROADCAST):
             return
-        _, previous, changed_at = self._pan
-        if dst_pan == previous and incoming.received_at - changed_at <= PAN_CHANGE_GRACE_S:
-            return  # sent to us on the old PAN before the hub applied the change (the radio asks, then adopts)
-        self.log.record("foreign_pan", dst_pan=dst_pan, pan=pan, src=incoming.sender)
+        self.log.record(
+            "foreign_pan",
+            dst_pan=frame.dst_pan,
+            pan=pan,
+            src=incoming.sender,
+            seq=frame.seq,
+            air_end_us=incoming.rx.end_us,
+        )
 
     async def _on_message(self, incoming: Incoming) -> None:
         msg = incoming.message
@@ -377,7 +410,7 @@ class Robot:
             if name == "connect":
                 return self._connect_user(int(cmd.get("user", 1)), str(cmd.get("mode", "following")))
             if name == "events":
-                return {"events": list(self.log.events)}
+                return events_answer(list(self.log.events))
         except (FrameError, RadioError, HubUnavailable, FormationError, TransitionError, ValueError, TypeError) as err:
             return {"error": f"{type(err).__name__}: {err}"}
         return {"error": f"unknown command {name!r}; known: {', '.join(COMMANDS)}"}
@@ -426,6 +459,7 @@ class Robot:
             "malformed_payloads": self.rf.malformed,
             "tx_results": dict(self.rf.tx_results),
             "radio_malformed": radio.malformed,
+            "link_security": None if radio.security is None else radio.security.counters.to_dict(),
             "transport_gaps": radio.transport_gaps,
             "radio_dropped": {**radio.dropped, "link": radio.link_dropped},
             "faults": radio.faults.to_dict(),
@@ -444,6 +478,7 @@ class Robot:
                     round(v, 3) for v in (self.driver.command.vx, self.driver.command.vy, self.driver.command.omega)
                 ],
                 **self.driver.counters,
+                "unpaired": self.driver.core.unpaired,
             },
             "relative_location": self.locations.snapshot(clock.now()),
             "surround": None if self.surround is None else self.surround.status(),

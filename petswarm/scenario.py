@@ -190,11 +190,34 @@ class Scenario:
         return {**self.hub, "obstacles": self.obstacles}
 
 
+MAX_FILE_BYTES = 1 << 20
+"""A scenario (or experiment) file's size at most: the shipped ones are a few kB; ``/dev/zero`` is endless."""
+MAX_DURATION_S = 86400.0
+"""The longest duration a scenario (or one leg of its walk) takes: a day, as ``petswarm run --duration``."""
+
+
+def read_bounded(path: Path, limit: int = MAX_FILE_BYTES) -> str:
+    """A text file's contents, refused (ValueError) past ``limit`` bytes without reading further."""
+    with path.open("rb") as stream:
+        data = stream.read(limit + 1)
+    if len(data) > limit:
+        raise ValueError(f"{path} is longer than {limit} bytes: not a scenario file")
+    return data.decode()
+
+
+def parse_toml(text: str) -> dict[str, Any]:
+    """TOML that may come from anyone: nesting deeper than the parser's recursion is refused (ValueError)."""
+    try:
+        return tomllib.loads(text)
+    except RecursionError:
+        raise ValueError("nested too deeply") from None
+
+
 def load(path: str | Path) -> Scenario:
     """Read and check a scenario file; ScenarioError names the first problem."""
     path = Path(path)
     try:
-        data = tomllib.loads(path.read_text())
+        data = parse_toml(read_bounded(path))
     except FileNotFoundError:
         raise ScenarioError(f"no scenario file {path}") from None
     except IsADirectoryError:
@@ -203,11 +226,11 @@ def load(path: str | Path) -> Scenario:
         ) from None
     except (OSError, UnicodeDecodeError) as err:
         raise ScenarioError(f"cannot read scenario file {path}: {err}") from None
-    except tomllib.TOMLDecodeError as err:
+    except (tomllib.TOMLDecodeError, ValueError) as err:
         raise ScenarioError(f"{path}: not TOML: {err}") from None
     try:
         return parse(data, path)
-    except (TypeError, KeyError, ValueError) as err:
+    except (TypeError, KeyError, ValueError, RecursionError) as err:
         raise ScenarioError(f"{path}: {err}") from None
 
 
@@ -366,6 +389,6 @@ def _ping_interval(value: Any) -> float:
 
 def _positive(value: Any, where: str) -> float:
     number = float(value)
-    if not number > 0 or not math.isfinite(number):
-        raise ValueError(f"{where} must be a positive number, got {value!r}")
+    if not 0 < number <= MAX_DURATION_S:  # also refuses NaN and infinity
+        raise ValueError(f"{where} must be a positive number of seconds up to {MAX_DURATION_S:g}, got {value!r}")
     return number

@@ -18,6 +18,7 @@ import itertools
 import json
 import math
 import operator
+import re
 import resource
 import sys
 import threading
@@ -142,6 +143,11 @@ class HubCounters:
     """Frames whose source address is not the sender's own (refused)."""
     forgotten: int = 0
     """Departed ids whose bookkeeping was dropped (``GONE_KEPT``)."""
+    chaos_refused: int = 0
+    """Chaos requests refused (malformed, a selector out of its bounds, too many faults, too long)."""
+    relay_refused: int = 0
+    """Relays from a node that is not a run's orchestrator, and orchestrator attaches under a robot's or a
+    user's id (refused): a relay must not grant what the same request, asked directly, would be denied."""
     lag_us: deque[int] = field(default_factory=lambda: deque(maxlen=20000))
 
     def to_dict(self) -> dict[str, Any]:
@@ -157,6 +163,8 @@ class HubCounters:
             "foreign": self.foreign,
             "spoofed": self.spoofed,
             "forgotten": self.forgotten,
+            "relay_refused": self.relay_refused,
+            "chaos_refused": self.chaos_refused,
             "lag_p50_us": float(np.percentile(lags, 50)),
             "lag_p99_us": float(np.percentile(lags, 99)),
             "lag_samples": len(self.lag_us),
@@ -409,7 +417,7 @@ class Environment:
         wall = round((self.wall_epoch_us + now) / 1e6, 4)
         return (
             f'{{"v":1,"t_us":{_json_number(now)},"wall":{_json_number(wall)},"bodies":[{template % tuple(values)}],'
-            f'"obstacles":{self._obstacles_text()},"collisions":{_json_number(world.collisions)},'
+            f'"obstacles":{self._obstacles_text()},"collisions":{_json_number(world.collisions)},{_contacts_text(world)}'
             f'"radio":{{"delivered":{radio[0]},"collided":{radio[1]},"lost":{radio[2]}}}}}'
         )
 
@@ -502,6 +510,7 @@ class Environment:
             "bodies": bodies,
             "obstacles": [o.to_dict() for o in self.world.obstacles],
             "collisions": self.world.collisions,
+            **({"contacts": [list(pair) for pair in contacts]} if (contacts := self.world.contacts) else {}),
             "radio": totals,
         }
 
@@ -598,7 +607,14 @@ class Environment:
         self._dispatch(self.medium.submit(node_id, msg.psdu, msg.token, self.now_us(), frame))
 
     def _on_relay(self, node_id: str, msg: wire.Relay) -> None:
-        """The control channel: to another node as it is, or a question to the hub answered at once."""
+        """The control channel: to another node as it is, or a question to the hub answered at once. Only a run's
+        orchestrator (kind ``control``) asks; a robot or a user only answers it (relays to a control node): asking
+        through the hub, it would get what access control refuses it when it asks directly (the hub's stats and
+        chaos, another robot's control)."""
+        if self._kinds[node_id] != "control" and self._kinds.get(msg.to) != "control":
+            self.counters.relay_refused += 1
+            self._send_down(node_id, wire.Error(reason="only a run's orchestrator relays"))
+            return
         if msg.to == HUB:
             self._send_down(node_id, wire.Relayed(frm=HUB, body=self._hub_answer(msg.body)))
         elif msg.to in self._kinds:
@@ -642,6 +658,11 @@ class Environment:
         try:
             if msg.kind not in NODE_KINDS:
                 raise ValueError(f"kind must be one of {NODE_KINDS}, not {msg.kind!r}")
+            if msg.kind == "control" and is_node_identity(node_id):
+                # under access control a certificate publishes only on its own node's key: an orchestrator under
+                # that id would let it relay what it may not ask directly
+                self.counters.relay_refused += 1
+                raise ValueError(f"{node_id} is a robot's or a user's id, not a run's orchestrator")
             if msg.kind == "robot":
                 self.medium.attach(node)
             if msg.kind != "control":
@@ -765,7 +786,8 @@ class Environment:
             elif op != "list":
                 raise ValueError(f"op must be add, clear or list, not {op!r}")
         except Exception as err:  # a bad request must not hurt the hub
-            return {"error": f"{type(err).__name__}: {err}"}
+            self.counters.chaos_refused += 1
+            return {"error": f"{type(err).__name__}: {str(err)[:300]}"}
         return {"faults": [f.to_dict() for f in chaos.faults.values()], "log": chaos.log}
 
     def _attached(self, node_id: str, token: int) -> wire.Attached:
@@ -965,6 +987,15 @@ def _tx_done(report: TxReport) -> wire.TxDone:
     )
 
 
+def _contacts_text(world: World) -> str:
+    """The world line's ``"contacts":[[a,b],...],`` (the pairs touching now, so a judge can tell who touched what:
+    the collision counter alone cannot), or nothing at all while nothing touches."""
+    contacts = world.contacts
+    if not contacts:
+        return ""
+    return f'"contacts":{json.dumps([list(pair) for pair in contacts], separators=(",", ":"))},'
+
+
 _KIND, _RADIUS, _PAN_ID = (operator.attrgetter(name) for name in ("kind", "radius", "pan_id"))
 _RADIO_TOTALS = tuple(map(operator.attrgetter, ("delivered", "collided", "lost")))
 """The medium's counts a world line sums over nodes, in its order."""
@@ -1006,6 +1037,15 @@ def _frame_of(psdu: bytes) -> Frame | None:
         return Frame.decode(psdu)
     except FrameError:
         return None
+
+
+_NODE_IDENTITY = re.compile(r"(robot|user)-[0-9]+")
+
+
+def is_node_identity(node_id: str) -> bool:
+    """Whether ``node_id`` is a robot's or a user's id (``robot-<n>``, ``user-<n>``): the ids access control
+    gives a certificate of that name, and the only ids a robot or a user process attaches under."""
+    return _NODE_IDENTITY.fullmatch(node_id) is not None
 
 
 def _is_name(node_id: str) -> bool:

@@ -18,6 +18,7 @@ import importlib
 from typing import Any
 
 from radio_hub.air.mac import BROADCAST, MAX_PSDU, Frame, FrameError, FrameType, TxStatus, max_payload
+from radio_hub.air.security import LinkSecurity, SecurityError, load_key, read_key_file, swarm_key
 from radio_hub.config import MediumConfig, airtime_us
 from radio_hub.link.keys import DEFAULT_ENDPOINT, DEFAULT_WORLD, WORLD_THREAD, Keys
 from radio_hub.link.port import (
@@ -60,19 +61,24 @@ __all__ = [
     "IrSweep",
     "Keys",
     "LfBurstHeard",
+    "LinkSecurity",
     "MediumConfig",
     "OwnSensors",
     "RadioClient",
     "RadioError",
     "RadioIdentity",
     "RxFrame",
+    "SecurityError",
     "TxResult",
     "TxStatus",
     "ZenohLink",
     "airtime_us",
+    "load_key",
     "max_payload",
     "open_session",
     "query_hub",
+    "read_key_file",
+    "swarm_key",
 ]
 
 

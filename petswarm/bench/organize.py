@@ -30,6 +30,7 @@ from petswarm import control
 from petswarm.bench.hub import HubRun, check_alive, progress, start_hub, stopping, wait_attached
 from petswarm.bench.nodes import BenchFailed
 from petswarm.bench.organize_report import report, summarise, write_results
+from petswarm.lab.arguments import link_argv
 from petswarm.lab.processes import Supervisor, run_supervised
 from petswarm.managers.exchange import StepTiming
 from petswarm.managers.formation import PROTOCOLS, FormationConfig
@@ -118,7 +119,7 @@ class Swarm:
 def robot_argv(rid: int, endpoint: str, world: str, args: argparse.Namespace) -> list[str]:
     """``petswarm robot`` arguments: robot 1 is the master (connected to the user), the rest wait."""
     argv = ["robot", "--id", str(rid), "--hub", endpoint, "--world", world, "--seed", str(args.seed)]
-    argv += ["--profile", args.profile]
+    argv += ["--profile", args.profile, *link_argv(args)]
     if rid == MASTER:
         argv += ["--user", str(USER)]
     if args.step_deadline is not None:

@@ -72,12 +72,15 @@ class Driver:
         locations: RelativeLocationManager,
         log: EventLog,
         config: DrivingConfig | None = None,
+        pairing_seed: int = 0,
     ) -> None:
         self.rf = rf
         self.radio = rf.radio
         self.formation = formation
         self.log = log
-        self.core = DriverCore(robot_id, sequence, formation, locations, clock.now(), config, self._execute)
+        self.core = DriverCore(
+            robot_id, sequence, formation, locations, clock.now(), config, self._execute, pairing_seed=pairing_seed
+        )
         if self.radio.sensors is not None:  # a sample that came while the robot attached
             self.core.sensors_sample(self.radio.sensors, clock.now())
         self.radio.on_sensors.append(self._on_sensors)

@@ -31,6 +31,7 @@ records (the run's digest depends on that order).
 
 from __future__ import annotations
 
+import hashlib
 import math
 import zlib
 from collections import deque
@@ -114,6 +115,11 @@ class DrivingConfig:
     spacing_m: float = 0.6
     pet: PetControllerConfig = field(default_factory=PetControllerConfig)
     slave: SlaveControllerConfig = field(default_factory=SlaveControllerConfig)
+
+
+CHALLENGES_KEPT = 2
+"""Wake bursts whose challenge an owner claim may echo: the latest, and the one before it (a reply to a burst can
+arrive after the next one fired, 3 s later, only if BLE lags that long)."""
 
 
 # -- what the core reads of its neighbours ----------------------------------------------------------
@@ -256,8 +262,16 @@ class DriverCore:
         now: float,
         config: DrivingConfig | None = None,
         on_action: Callable[[DriverAction], None] | None = None,
+        pairing_seed: int = 0,
     ) -> None:
         self.robot_id = robot_id
+        self._pairing_key = hashlib.blake2b(f"pairing/{pairing_seed}/{robot_id}".encode(), digest_size=16).digest()
+        """What makes the wake bursts' challenges this robot's own (from the run's seed: no draw of any stream)."""
+        self._challenges: deque[int] = deque(maxlen=CHALLENGES_KEPT)
+        """The challenges of the latest wake bursts: an owner claim must echo one (it heard the LF within 1 m)."""
+        self.unpaired = 0
+        """BLE messages refused from a wearable this robot did not pair with: an owner claim that echoes no
+        challenge of a recent wake burst, and anything but an owner claim from a user who is not the owner."""
         self.sequence = sequence
         self.formation = formation
         self.locations = locations
@@ -387,7 +401,9 @@ class DriverCore:
         self._lf_seq = (self._lf_seq + 1) & 0xFF
         if state == RobotState.WAITING and self.owner is None:
             self.counters["wake_bursts"] += 1
-            self._emit(LfBurst("left", self.pattern, user_link.lf_data(self.robot_id, self._lf_seq, user_link.LF_WAKE)))
+            challenge = self._challenge(self.counters["wake_bursts"])
+            self._challenges.append(challenge)
+            self._emit(LfBurst("left", self.pattern, user_link.lf_data(self.robot_id, challenge, user_link.LF_WAKE)))
             self._set_timer(LF, now + WAKE_PERIOD_S)
         elif self.owner is not None and self._tracking(state):
             self.counters["track_bursts"] += 1
@@ -421,11 +437,18 @@ class DriverCore:
         """The robot's own body sensors (read by the next control step, the turn-about and the broadcast)."""
         self.sensors = sensors
 
+    def _challenge(self, burst: int) -> int:
+        """The sequence byte of wake burst number ``burst``: unpredictable without the robot's key, so only a belt
+        that heard the burst (LF carries about 1 m) can echo it. The LF data section has 4 bytes, two of them the
+        robot's id and one the purpose: this byte is the challenge (docs/SECURITY.md)."""
+        return hashlib.blake2b(burst.to_bytes(8, "big"), key=self._pairing_key, digest_size=1).digest()[0]
+
     def _on_ble(self, src: str, body: dict[str, Any], now: float) -> None:
         kind = body["k"]
         if kind == "owner":
-            self._on_owner(src, float(body["d"]))
+            self._on_owner(src, float(body["d"]), body.get("seq"))
         elif src != self.owner:
+            self.unpaired += 1
             self._record("ble_ignored", src=src, message=kind)  # only the owner's wearables count
         elif kind == "lf":
             self.lf_sample(float(body["dl"]), float(body["dr"]), now)
@@ -434,9 +457,19 @@ class DriverCore:
         elif kind == "request":
             self.user_request(body, now)
 
-    def _on_owner(self, src: str, distance: float) -> None:
+    def _on_owner(self, src: str, distance: float, echoed: Any) -> None:
         if self.owner is not None or self.sequence.state != RobotState.WAITING or distance > self.lf.wake_range_m:
+            if src != self.owner:
+                self.unpaired += 1
             return
+        if echoed not in self._challenges:
+            # a claim that heard no wake burst of ours: refused, and every pending challenge with it, so a guesser
+            # gets one try per burst (one in 256) however many ids it sends from
+            self.unpaired += 1
+            self._challenges.clear()
+            self._record("owner_refused", src=src)
+            return
+        self._challenges.clear()
         self.owner = src
         self._emit(SetUser(user_id(src)))
         self.sequence.transition(RobotState.COMMAND_WAITING, owner=src, distance=round(distance, 3))

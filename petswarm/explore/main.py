@@ -15,6 +15,7 @@ from petswarm.explore.campaign import Progress, run_dask, run_local, run_seed
 from petswarm.explore.generate import DEFAULT_WEIGHTS, FAMILIES, case, pick_family
 from petswarm.explore.report import plot, table, write_json
 from petswarm.explore.shrink import shrink, write_scenario
+from petswarm.lab.processes import Interrupts
 
 
 def parse_families(text: str | None) -> dict[str, float]:
@@ -51,22 +52,52 @@ def explore(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     indices = [args.case] if args.case is not None else list(range(args.cases))
     progress = Progress(len(indices))
+    # SIGTERM stops the campaign as Ctrl-C does; a second signal waits for the workers' stop and the report
+    interrupts = Interrupts()
     started = time.perf_counter()
     if args.scheduler:
         stream = run_dask(args.seed, indices, args.scheduler, weights)
     else:
         stream = run_local(args.seed, indices, args.workers, weights)
     results: list[dict[str, Any]] = []
-    with (out / "results.jsonl").open("w") as partial:  # as they finish: a campaign cut short keeps what it ran
-        for result in stream:
-            results.append(result)
-            partial.write(json.dumps(result) + "\n")
-            partial.flush()
-            progress.step(result["ok"])
-    wall = time.perf_counter() - started
-    failed = [r for r in results if not r["ok"]]
-    for result in sorted(failed, key=lambda r: r["index"])[: args.shrink]:
-        _shrink_one(result, weights, out)
+    interrupted = False
+    try:
+        with (out / "results.jsonl").open("w") as partial:  # as they finish: a campaign cut short keeps what it ran
+            for result in stream:
+                results.append(result)
+                partial.write(json.dumps(result) + "\n")
+                partial.flush()
+                progress.step(result["ok"])
+        wall = time.perf_counter() - started
+        for result in sorted((r for r in results if not r["ok"]), key=lambda r: r["index"])[: args.shrink]:
+            _shrink_one(result, weights, out)
+    except KeyboardInterrupt:
+        interrupted = True
+        wall = time.perf_counter() - started
+    finally:
+        with interrupts.deferred():
+            if interrupted:
+                print(
+                    f"\ninterrupted: stopping the workers; {len(results)} of {len(indices)} cases ran", file=sys.stderr
+                )
+            stream.close()  # an interrupted campaign's workers stopped, its Dask futures cancelled
+            if interrupted:
+                _report(args, weights, out, results, wall, interrupted=True)
+    if interrupted:
+        return 130
+    _report(args, weights, out, results, wall)
+    return 1 if any(not r["ok"] for r in results) else 0
+
+
+def _report(
+    args: argparse.Namespace,
+    weights: dict[str, float],
+    out: Path,
+    results: list[dict[str, Any]],
+    wall: float,
+    interrupted: bool = False,
+) -> None:
+    """Write results.json, results.txt and failures.png, and print the table."""
     meta = {
         "seed": args.seed,
         "cases": len(results),
@@ -74,14 +105,19 @@ def explore(args: argparse.Namespace) -> int:
         "where": args.scheduler or f"{args.workers} local workers",
         "wall_s": round(wall, 3),
     }
+    if interrupted:
+        meta["interrupted"] = True
     write_json(out / "results.json", meta, results)
     text = table(results, wall)
+    if interrupted:
+        asked = 1 if args.case is not None else args.cases
+        cut = "shrinking cut short" if len(results) == asked else "none shrunk"
+        text = f"interrupted after {len(results)} of {asked} cases ({cut})\n{text}"
     (out / "results.txt").write_text(text + "\n")
     with contextlib.suppress(ImportError):  # matplotlib comes with the package; a stripped install gets the table
         plot(out / "failures.png", results)
     print(text)
     print(f"\nresults: {out / 'results.json'}, {out / 'results.txt'}, {out / 'failures.png'}")
-    return 1 if failed else 0
 
 
 def _shrink_one(result: dict[str, Any], weights: dict[str, float], out: Path) -> None:

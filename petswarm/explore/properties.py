@@ -434,42 +434,111 @@ _ROSTER_EVENTS = ("state", "organized", "member_lost", "member_left", "dispersed
 
 @prop("pan_hearing", "safety", ALL)
 def pan_hearing(record: Record) -> list[Violation]:
-    """No robot hears a frame of a PAN it is not on (the robot notes any frame whose destination PAN is
-    neither its own nor the broadcast PAN: ``foreign_pan`` events)."""
-    return [
-        Violation(f"heard a frame for PAN {e.get('dst_pan'):#06x} while on {e.get('pan'):#06x}", e["mono"], (node,))
-        for node, events in record.events.items()
-        for e in events
-        if e["kind"] == "foreign_pan"
-    ]
+    """No robot hears a frame of a PAN it is not on: every frame a robot was handed for a PAN other than the one
+    it asked for (``foreign_pan``, with the frame's air time) was sent to the PAN the hub's MAC filtered that
+    robot's frames by when the frame ended on the air (the robot's ``start`` and ``pan`` events: each PAN and
+    the hub's model time it applied it). A frame held up after the air (a delay fault, the UART) or received
+    before a change took effect is fine however late it comes; one for a PAN the robot was not on is not."""
+    out = []
+    for node, events in record.events.items():
+        changes: list[tuple[int, int]] = []  # (model us, PAN) of this life of the robot
+        for e in events:
+            if e["kind"] == "start":
+                changes = [(int(e.get("pan_at_us", 0)), int(e["pan"]))] if "pan" in e else []
+            elif e["kind"] == "pan":
+                changes.append((int(e["at_us"]), int(e["pan"])))
+            elif e["kind"] == "foreign_pan":
+                air_end = e.get("air_end_us")
+                on_air = None if air_end is None else _pans_at(changes, int(air_end))
+                if on_air is not None and e.get("dst_pan") in on_air:
+                    continue
+                was = "an unknown PAN" if not on_air else " or ".join(f"{p:#06x}" for p in sorted(on_air))
+                at = "" if air_end is None else f" (on the air until {int(air_end) / 1e6:.6f} s)"
+                out.append(
+                    Violation(f"heard a frame for PAN {e.get('dst_pan'):#06x}{at} while on {was}", e["mono"], (node,))
+                )
+    return out
+
+
+def _pans_at(changes: list[tuple[int, int]], t_us: int) -> set[int]:
+    """The PAN in force at ``t_us`` by the changes (model us, PAN) in time order; both PANs of a change made at
+    that very microsecond (the hub may have handled the frame's end or the change first)."""
+    pans: set[int] = set()
+    for at_us, pan in changes:
+        if at_us < t_us:
+            pans = {pan}
+        elif at_us == t_us:
+            pans.add(pan)
+        else:
+            break
+    return pans
+
+
+PUSHED_S = 0.1
+"""A robot the user walked into within this long (five world ticks), or one pressed by such a robot, is excused its
+contacts meanwhile: the world pushes it out of the user's way, into whatever is beside it, faster than any law can
+react. A pair that parted for no longer than this and touches again is the same contact going on (bodies pressed
+together part and touch again tick by tick as the world pushes them apart)."""
 
 
 @prop("no_contact", "safety", ("organize", "drive", "follow", "mixed"))
 def no_contact(record: Record) -> list[Violation]:
     """Where the driving law promises it (robots driving with their user, alone or as a swarm, whose safety
     stage stops short of an echo): no robot touches another robot or an obstacle. Contacts with the user are
-    not judged: the scripted user walks blind, into a robot ahead of him as fast as 1.2 m/s."""
+    not judged: the scripted user walks blind, into a robot ahead of him as fast as 1.2 m/s, and into walls
+    (so are the contacts of a robot he pushes, directly or through the robots it presses, ``PUSHED_S``). Who
+    touched what is the world log's ``contacts`` (the pairs touching at each tick): a pair counts once, when it
+    begins to touch."""
     out = []
+    touched: dict[tuple[str, str], float] = {}  # each pair's last tick in contact
+    pushed: dict[str, float] = {}
     seen = 0
     for tick in record.world:
-        count = tick.get("collisions", 0)
-        if count > seen:
-            who = _closest_pair(tick)
-            if "user" not in who:
-                out.append(Violation(f"contact {who[0]} / {who[1]}", round(tick["t_us"] / 1e6, 3), who))
-            seen = count
+        t = tick["t_us"] / 1e6
+        now = {(str(a), str(b)) for a, b in tick.get("contacts", [])}
+        pushed.update({who: t for who in _pressed_by_the_user(now)})
+        for a, b in sorted(now):
+            begins = t - touched.get((a, b), -math.inf) > PUSHED_S + 1e-9
+            touched[(a, b)] = t
+            if not begins or "user" in (a, b) or any(t - pushed.get(who, -1.0) <= PUSHED_S for who in (a, b)):
+                continue
+            out.append(Violation(f"contact {a} / {_name(tick, b)}", round(t, 3), (a, b)))
+        count = int(tick.get("collisions", 0))
+        if count > seen and "contacts" not in tick:  # a world log that does not name who touched (an older hub's)
+            out.append(Violation("a contact the world log names no pair of", round(t, 3)))
+        seen = max(seen, count)
     return out
 
 
-def _closest_pair(tick: dict[str, Any]) -> tuple[str, str]:
-    bodies = tick.get("bodies", [])
-    best, pair = float("inf"), ("?", "?")
-    for i, a in enumerate(bodies):
-        for b in bodies[i + 1 :]:
-            gap = ((a["x"] - b["x"]) ** 2 + (a["y"] - b["y"]) ** 2) ** 0.5 - a["radius"] - b["radius"]
-            if gap < best:
-                best, pair = gap, (a["id"], b["id"])
-    return pair if best < 0.05 else (pair[0] if bodies else "?", "an obstacle")
+def _pressed_by_the_user(pairs: set[tuple[str, str]]) -> set[str]:
+    """The bodies the user touches, and those they touch in turn (an obstacle passes no push on): the user's
+    connected part of the contact graph."""
+    reached, frontier = set(), {"user"}
+    while frontier:
+        reached |= frontier
+        frontier = {
+            other
+            for a, b in pairs
+            for me, other in ((a, b), (b, a))
+            if me in frontier and other not in reached and not other.startswith("obstacle-")
+        }
+    return reached - {"user"}
+
+
+def _name(tick: dict[str, Any], who: str) -> str:
+    """A body's id, or an obstacle as the world log lists it (``obstacle-2 (wall (0, 1)-(0, 5))``)."""
+    if not who.startswith("obstacle-"):
+        return who
+    obstacles = tick.get("obstacles", [])
+    k = int(who.rsplit("-", 1)[1])
+    if not 0 <= k < len(obstacles):
+        return who
+    o = obstacles[k]
+    if o.get("kind") == "circle":
+        return f"{who} (circle r {o['r']:g} at ({o['x']:g}, {o['y']:g}))"
+    if o.get("kind") == "wall":
+        return f"{who} (wall ({o['x0']:g}, {o['y0']:g})-({o['x1']:g}, {o['y1']:g}))"
+    return f"{who} ({o.get('kind')})"
 
 
 # == liveness ================================================================================================

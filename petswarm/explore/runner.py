@@ -41,11 +41,11 @@ def run_case(data: dict[str, Any], seed: int, family: str, *, keep: Path | None 
     crash = None
     summary: dict[str, Any] = {}
     try:
-        with contextlib.redirect_stderr(io.StringIO()), contextlib.redirect_stdout(io.StringIO()):
-            summary = execute(opts, scenario)
-    except Exception:  # the case's verdict, not the campaign's end
-        crash = traceback.format_exc()
-    try:
+        try:
+            with contextlib.redirect_stderr(io.StringIO()), contextlib.redirect_stdout(io.StringIO()):
+                summary = execute(opts, scenario)
+        except Exception:  # the case's verdict, not the campaign's end (an interrupt is the campaign's)
+            crash = traceback.format_exc()
         path = Path(summary["record"]) if "record" in summary else (record_dir if record_dir.exists() else None)
         record = Record.read(path, scenario, family, crash)
         failures = judge(record)

@@ -66,12 +66,57 @@ def position(text: str) -> tuple[float, float]:
     return (x, y)
 
 
+MAX_SEED = (1 << 64) - 1
+"""The largest seed: every seed travels in msgpack (the hub's stats, a run's manifest), which stops at 2^64 - 1."""
+
+
 def seed(text: str) -> int:
-    """A non-negative integer seed."""
+    """A non-negative integer seed, at most ``MAX_SEED``."""
     value = int_auto(text)
-    if value < 0:
-        raise argparse.ArgumentTypeError("seed must be >= 0")
+    if not 0 <= value <= MAX_SEED:
+        raise argparse.ArgumentTypeError(f"seed must be in 0..2^64-1, got {text[:40]}")
     return value
+
+
+def link_key_file(text: str) -> str:
+    """A file holding a 128-bit 802.15.4 network key (32 hex digits), made absolute for child processes."""
+    from radio_hub.interface import read_key_file
+
+    try:
+        read_key_file(text)
+    except (OSError, ValueError) as err:
+        raise argparse.ArgumentTypeError(f"{text}: {getattr(err, 'strerror', None) or err}") from None
+    return os.path.abspath(text)
+
+
+def add_link_security(p: argparse.ArgumentParser) -> None:
+    """``--link-key`` and ``--link-mic``: 802.15.4 link security (docs/SECURITY.md), off without a key."""
+    p.add_argument(
+        "--link-key",
+        type=link_key_file,
+        metavar="FILE",
+        help="802.15.4 link security (AES-CCM*, docs/SECURITY.md) with the network key in FILE (32 hex digits); "
+        "default: off",
+    )
+    p.add_argument(
+        "--link-mic", type=int, choices=(4, 8), default=4, help="bytes of the frames' MIC with --link-key (default 4)"
+    )
+
+
+def link_argv(args: argparse.Namespace) -> list[str]:
+    """The robot options that pass ``--link-key`` and ``--link-mic`` on (none without a key)."""
+    key = getattr(args, "link_key", None)
+    return ["--link-key", key, "--link-mic", str(args.link_mic)] if key else []
+
+
+def world_name(text: str) -> str:
+    """A world name: it becomes a chunk of every key (``radio_hub.interface.Keys``)."""
+    from radio_hub.interface import Keys
+
+    try:
+        return Keys(text).world
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
 
 
 def robot_id(text: str) -> int:

@@ -49,6 +49,7 @@ from petswarm.lab.arguments import CLOCKS
 from petswarm.lab.launch import run
 from petswarm.lab.records import runs_dir
 from petswarm.lab.run import RunOptions
+from petswarm.scenario import parse_toml, read_bounded
 from radio_hub.datasheet import check_keys
 from radio_hub.interface import check_timed_fault
 
@@ -71,8 +72,8 @@ def load(path: Path) -> dict[str, Any]:
     """The experiment file, checked (every table, and the hub config file ``[run] config`` names);
     ValueError naming the file, the table and what is wrong."""
     try:
-        return _check(tomllib.loads(path.read_text()))
-    except ValueError as err:
+        return _check(parse_toml(read_bounded(path)))
+    except (ValueError, RecursionError) as err:
         raise ValueError(f"{path}: {err}") from None
 
 

@@ -535,21 +535,37 @@ class Cast:
         self.tasks: list[asyncio.Task[None]] = []
         self._dead: set[int] = set()
         self._ble: Any = None
+        self._died_at: dict[int, tuple[float, float, float]] = {}
+        """Where a killed robot's body stands (x, y, heading in degrees) until it restarts there."""
 
     def dead(self) -> frozenset[int]:
         """The robots killed and not restarted (neither asked nor expected to do anything)."""
         return frozenset(self._dead)
 
     def start(self, rid: int) -> None:
-        """Robot ``rid``'s process starts (again)."""
-        self.tasks.append(asyncio.get_running_loop().create_task(_run_robot(self.argvs[rid], self.air, self.running)))
+        """Robot ``rid``'s process starts (again: where its body stood when it died, as a robot restarted in place,
+        not back at its start pose, into whatever drove there since)."""
+        argv = self.argvs[rid]
+        if rid in self._died_at:
+            x, y, heading = self._died_at.pop(rid)
+            argv = [*argv, f"--pos={x!r},{y!r}", f"--heading={heading!r}"]  # the last of an option counts
+        self.tasks.append(asyncio.get_running_loop().create_task(_run_robot(argv, self.air, self.running)))
 
     async def act(self, action: dict[str, Any]) -> None:
         """Carry out one scenario action now."""
         kind, rid = action["kind"], action.get("robot")
         if kind == "kill" and rid not in self._dead and rid in self.running:
             self._dead.add(rid)
+            world = self.air.env.world
+            body = world.bodies.get(f"robot-{rid}")
             await self.running[rid].kill()
+            if body is not None:
+                # the environment forgot the node (its radio is off the air), but a dead robot's body still
+                # stands where it stopped: others must drive round it, and it restarts there
+                x, y, yaw = (float(v) for v in body.pose)
+                self._died_at[rid] = (x, y, math.degrees(yaw))
+                if body.body_id not in world.bodies:
+                    world.add(body.body_id, body.kind, x, y, yaw)
             self._supervision("died", rid, cause="killed by the scenario")
         elif kind == "restart" and rid in self._dead:
             self._dead.discard(rid)

@@ -45,12 +45,18 @@ def _die_with_parent(signum: int) -> Callable[[], None]:
     parent = os.getpid()
 
     def arm() -> None:
-        with contextlib.suppress(OSError, AttributeError):
-            ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signum)
-        if os.getppid() != parent:
-            os._exit(1)
+        arm_parent_death(signum, parent)
 
     return arm
+
+
+def arm_parent_death(signum: int, parent: int) -> None:
+    """In a child of ``parent``: have the kernel send ``signum`` when the parent dies (Linux), and end at once if
+    it died already (the child, someone else's by then, would otherwise run for good)."""
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signum)
+    if os.getppid() != parent:
+        os._exit(1)
 
 
 def parent_death_signal(name: str) -> int:

@@ -8,7 +8,17 @@ from __future__ import annotations
 import argparse
 from typing import TYPE_CHECKING
 
-from petswarm.lab.arguments import bounded, int_auto, position, readable_file, robot_id, seed, surround_config
+from petswarm.lab.arguments import (
+    add_link_security,
+    bounded,
+    int_auto,
+    position,
+    readable_file,
+    robot_id,
+    seed,
+    surround_config,
+    world_name,
+)
 
 if TYPE_CHECKING:
     from petswarm.robot import RobotConfig
@@ -66,6 +76,7 @@ def add_robot_arguments(robot: argparse.ArgumentParser) -> None:
     )
     robot.add_argument("--record", metavar="FILE", help="append every event to this JSON-lines file as it happens")
     add_profile(robot, "the robot's MCU and UART latency per frame, its organizing steps' deadline")
+    add_link_security(robot)
     robot.add_argument(
         "--heading",
         type=bounded(float, -360, 360),
@@ -139,6 +150,7 @@ def robot_config(args: argparse.Namespace) -> RobotConfig:
     from petswarm.managers.relative_location import TokenConfig
     from petswarm.profiles import robot_profile
     from petswarm.robot import RobotConfig
+    from radio_hub.interface import read_key_file
 
     profile = robot_profile(args.profile)
     deadline = args.step_deadline if args.step_deadline is not None else profile.step_deadline_s
@@ -163,6 +175,8 @@ def robot_config(args: argparse.Namespace) -> RobotConfig:
         formation_mode=args.formation,
         surround=SurroundDriverConfig(law=args.surround_config or SurroundConfig(), human_id=args.surround_human),
         profile=args.profile,
+        link_key=read_key_file(args.link_key).hex() if args.link_key else None,
+        link_mic=args.link_mic,
     )
 
 
@@ -180,7 +194,12 @@ def add_profile(p: argparse.ArgumentParser, sets: str) -> None:
 
 
 def add_world(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--world", default="default", help="key prefix shared by a hub and its nodes (default %(default)s)")
+    p.add_argument(
+        "--world",
+        type=world_name,
+        default="default",
+        help="key prefix shared by a hub and its nodes (default %(default)s)",
+    )
 
 
 def add_hub(p: argparse.ArgumentParser) -> None:

@@ -57,6 +57,10 @@ class RunOptions:
     """End the run at a robot's unexpected death instead of recording it and going on without the robot."""
     profile: str = "ideal"
     """The testbed profile (``petswarm.profiles``, ``radio_hub.profiles``) of the hub, the robots and the user."""
+    link_key: str | None = None
+    """A file with the 802.15.4 network key: every robot secures its frames (docs/SECURITY.md); None: off."""
+    link_mic: int = 4
+    """Bytes of a secured frame's MIC (4 or 8)."""
     dead_after_s: float | None = None
     """``lockstep``: wall seconds the hub waits for a granted process's idle before it takes the process as gone
     (None: the hub's own default)."""
@@ -213,6 +217,7 @@ def ping_robot_argv(opts: RunOptions, rid: int, endpoint: str, world: str, recor
     if rid == 1 and opts.organize:
         argv += ["--user", "1", "--protocol", opts.protocol]
     argv += ["--profile", opts.profile] if opts.profile != "ideal" else []
+    argv += ["--link-key", opts.link_key, "--link-mic", str(opts.link_mic)] if opts.link_key else []
     return [*argv, "--ping-interval", str(opts.ping_interval), "--seed", str(opts.seed)]
 
 

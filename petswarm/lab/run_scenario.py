@@ -78,6 +78,7 @@ def scenario_robot_argv(
     argv += _surround_args(scenario)
     argv += ["--ping-interval", str(scenario.ping_interval)] if scenario.ping_interval else []
     argv += ["--profile", opts.profile] if opts.profile != "ideal" else []
+    argv += ["--link-key", opts.link_key, "--link-mic", str(opts.link_mic)] if opts.link_key else []
     return [*argv, "--record", str(record.events_of(f"robot-{rid}"))]
 
 

@@ -160,6 +160,16 @@ class JoinNotice(SwarmMessage):
     members: int
     number: int
     slot_ms: int
+    key: bytes = b""
+    """With link security: the swarm's key (802.15.4 key index 2), handed over in the join handshake inside a
+    frame secured with the network key. Left out of the payload when empty, so a plain notice is as before."""
+
+    def encode(self) -> bytes:
+        """The frame payload (without the key field when there is no key)."""
+        fields = astuple(self)
+        return msgpack.packb(
+            [MESSAGE_VERSION, int(self.TYPE), *(fields if self.key else fields[:-1])], use_bin_type=True
+        )
 
 
 @dataclass(frozen=True)
@@ -363,6 +373,8 @@ def decode(payload: bytes) -> SwarmMessage:
     if cls is None:
         raise MessageError(f"unknown message type {code!r}")
     names = [(f, t) for f, t in cls.__annotations__.items() if f != "TYPE"]
+    if cls is JoinNotice and len(values) == len(names) - 1:
+        names = names[:-1]  # a notice without a key (no link security)
     if len(values) != len(names):
         raise MessageError(f"{cls.__name__} needs {len(names)} fields, got {len(values)}")
     checked = []

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 from collections import Counter
 from dataclasses import dataclass, field
 
 from petswarm import clock
-from petswarm.managers.messages import MessageError, SwarmMessage, decode
+from petswarm.managers.messages import JoinNotice, MessageError, SwarmMessage, decode
 from petswarm.managers.serial_link import SerialLink
-from radio_hub.interface import BROADCAST, RadioClient, RxFrame, TxResult
+from radio_hub.interface import BROADCAST, RadioClient, RxFrame, TxResult, swarm_key
 
 
 @dataclass(frozen=True)
@@ -41,7 +42,13 @@ class RfCommunicationManager:
         self.malformed = 0
 
     async def send(self, dst: int, message: SwarmMessage, *, dst_pan: int | None = None, ack: bool = True) -> TxResult:
-        """Send one message in one frame; unicast is acknowledged unless ``ack`` is False."""
+        """Send one message in one frame; unicast is acknowledged unless ``ack`` is False. With link security a
+        join notice carries the swarm's key (the master uses it from now on for the swarm's PAN)."""
+        security = self.radio.security
+        if security is not None and isinstance(message, JoinNotice):
+            key = swarm_key(security.network_key, self.radio.identity.short_addr, message.session)
+            security.set_swarm_key(key, message.pan_id)
+            message = dataclasses.replace(message, key=key)
         payload = message.encode()
         if self.link is not None:
             await _until(self.link.tx_ready(clock.now(), len(payload)))
@@ -66,6 +73,10 @@ class RfCommunicationManager:
                 self.radio.faults.record("swarm message", err)
                 continue
             self.received += 1
+            security = self.radio.security
+            if security is not None and isinstance(message, JoinNotice) and len(message.key) == 16:
+                # the join handshake: the notice came secured under the network key, so from a key holder
+                security.set_swarm_key(message.key, message.pan_id)
             return Incoming(message, rx)
 
 

@@ -167,7 +167,9 @@ class User:
         distance = rssi_to_distance(burst.rssi_dbm, self.lf_config)
         if purpose == user_link.LF_WAKE:
             if distance <= self.lf_config.wake_range_m:
-                self.client.ble_send(user_link.robot_node(robot_id), user_link.encode("owner", d=round(distance, 3)))
+                # the burst's sequence byte is the robot's challenge: echoing it proves the belt heard the LF
+                owner = user_link.encode("owner", d=round(distance, 3), seq=seq)
+                self.client.ble_send(user_link.robot_node(robot_id), owner)
                 self.log.record("owner_reply", robot=robot_id, d=round(distance, 3))
             return
         pair = self._pairs.setdefault(seq, {})

@@ -151,9 +151,8 @@ def parse_fault(fault_id: int, spec: dict[str, Any], where: str = "the fault") -
     spec = dict(spec)
     del spec["kind"]
     p = _probability("p", spec.get("p", 1.0))
+    _check_selectors(spec)
     link = spec.get("link")
-    if link is not None and (len(link) != 2 or not all(isinstance(n, str) for n in link)):
-        raise ValueError("link is a pair of node ids [sender, receiver]")
     fault = Fault(
         fault_id,
         kind,
@@ -173,6 +172,47 @@ def parse_fault(fault_id: int, spec: dict[str, Any], where: str = "the fault") -
         raise ValueError("a partition needs a group of node ids")
 
     return fault
+
+
+MAX_GROUP = 256
+"""Node ids a partition's ``group`` or ``others`` lists at most (a swarm of the benches' largest size fits)."""
+MAX_NODE_ID = 64
+"""Characters of a node id in a selector (as in a key: ``radio_hub.link.keys.check_name``)."""
+
+
+def _node_id(name: str, value: Any) -> str:
+    if not isinstance(value, str) or len(value) > MAX_NODE_ID:  # an empty one is judged where it matters
+        raise ValueError(f"{name} must be a node id (at most {MAX_NODE_ID} characters), not {_short(value)}")
+    return value
+
+
+def _short(value: Any) -> str:
+    """A value for an error message: its type only, past a few characters (a selector may be megabytes deep)."""
+    text = repr(value) if isinstance(value, (str, int, float, bool)) or value is None else ""
+    return text if 0 < len(text) <= 40 else f"a {type(value).__name__}"
+
+
+def _check_selectors(spec: dict[str, Any]) -> None:
+    """Each selector's type, range and size, before anything is stored: a fault is kept for the run and sent in
+    every stats and chaos answer, so a selector nested 600 deep or megabytes long must never get that far."""
+    if spec.get("node") is not None:
+        _node_id("node", spec["node"])
+    link = spec.get("link")
+    if link is not None:
+        if not isinstance(link, (list, tuple)) or len(link) != 2:
+            raise ValueError("link is a pair of node ids [sender, receiver]")
+        for end in link:
+            _node_id("link", end)
+    for name, low, high in (("pan", 0, 0xFFFF), ("channel", 11, 26)):
+        value = spec.get(name)
+        if value is not None and (not isinstance(value, int) or isinstance(value, bool) or not low <= value <= high):
+            raise ValueError(f"{name} must be an integer in [{low}, {high}], not {_short(value)}")
+    for name in ("group", "others"):
+        ids = spec.get(name, ())
+        if not isinstance(ids, (list, tuple)) or len(ids) > MAX_GROUP:
+            raise ValueError(f"{name} must be a list of at most {MAX_GROUP} node ids, not {_short(ids)}")
+        for node in ids:
+            _node_id(name, node)
 
 
 def describe_fault(fault: dict[str, Any]) -> str:

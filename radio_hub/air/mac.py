@@ -62,6 +62,9 @@ class Frame:
     src: int = BROADCAST
     payload: bytes = b""
     ack_request: bool = False
+    secured: bool = False
+    """Security Enabled (802.15.4-2011 clause 9): the payload field starts with the auxiliary security header and
+    ends with the MIC (``radio_hub.air.security``); such a frame is frame version 1."""
 
     @property
     def is_broadcast(self) -> bool:
@@ -73,18 +76,23 @@ class Frame:
         """Intra-PAN frames omit the source PAN ID (PAN ID compression)."""
         return self.dst_pan == self.src_pan
 
+    def header(self) -> bytes:
+        """The MAC header (MHR) as it goes on the air, without the payload field (of a secured frame: without the
+        auxiliary security header, which leads the payload field)."""
+        if self.frame_type == FrameType.ACK:
+            return struct.pack("<HB", int(FrameType.ACK), self.seq & 0xFF)
+        fc = int(self.frame_type) | _FC_ADDR_SHORT << 10 | _FC_ADDR_SHORT << 14
+        fc |= (1 << 5) if self.ack_request else 0
+        fc |= (1 << 6) if self.pan_compressed else 0
+        fc |= (1 << 3 | 1 << 12) if self.secured else 0  # Security Enabled; frame version 1 (2006 and later)
+        header = struct.pack("<HBHH", fc, self.seq & 0xFF, self.dst_pan, self.dst)
+        if not self.pan_compressed:
+            header += struct.pack("<H", self.src_pan)
+        return header + struct.pack("<H", self.src)
+
     def encode(self) -> bytes:
         """The PSDU: MAC header, payload and FCS. Raises FrameError when over 127 bytes."""
-        if self.frame_type == FrameType.ACK:
-            body = struct.pack("<HB", int(FrameType.ACK), self.seq & 0xFF)
-        else:
-            fc = int(self.frame_type) | _FC_ADDR_SHORT << 10 | _FC_ADDR_SHORT << 14
-            fc |= (1 << 5) if self.ack_request else 0
-            fc |= (1 << 6) if self.pan_compressed else 0
-            header = struct.pack("<HBHH", fc, self.seq & 0xFF, self.dst_pan, self.dst)
-            if not self.pan_compressed:
-                header += struct.pack("<H", self.src_pan)
-            body = header + struct.pack("<H", self.src) + self.payload
+        body = self.header() if self.frame_type == FrameType.ACK else self.header() + self.payload
         if len(body) + FCS_LEN > MAX_PSDU:
             raise FrameError(
                 f"PSDU of {len(body) + FCS_LEN} bytes exceeds the 802.15.4 limit of {MAX_PSDU} "
@@ -117,7 +125,8 @@ class Frame:
         dst_pan, dst = _TWO_U16.unpack_from(body, 3)
         src_pan = dst_pan if compressed else _U16.unpack_from(body, 7)[0]
         (src,) = _U16.unpack_from(body, header_len - 2)
-        return cls(frame_type, seq, dst_pan, dst, src_pan, src, bytes(body[header_len:]), bool(fc & (1 << 5)))
+        payload = bytes(body[header_len:])
+        return cls(frame_type, seq, dst_pan, dst, src_pan, src, payload, bool(fc & (1 << 5)), bool(fc & (1 << 3)))
 
 
 _U16, _TWO_U16, _FC_SEQ = struct.Struct("<H"), struct.Struct("<HH"), struct.Struct("<HB")

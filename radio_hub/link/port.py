@@ -23,6 +23,7 @@ from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any, Protocol
 
 from radio_hub.air.mac import BROADCAST, Frame, FrameError, FrameType, TxStatus
+from radio_hub.air.security import LinkSecurity, SecurityError
 from radio_hub.guard import Faults
 from radio_hub.lazy import lazy_numpy
 from radio_hub.link import wire
@@ -289,6 +290,10 @@ QUEUE_LIMIT = 1000
 oldest is dropped and counted (``RadioClient.dropped``): a flood costs the node messages, not memory."""
 LF_MAX_DATA = 4
 """User data bytes an LF burst carries."""
+MAX_GAP = 1 << 32
+"""Missing messages one message's number may account for (as the hub counts its own uplink gaps)."""
+MAX_COUNT = (1 << 63) - 1
+"""Where a node's counters stop: every count stays packable (msgpack takes integers below 2^64)."""
 ERRORS_KEPT = 100
 """The hub's latest error reasons a radio keeps (``RadioClient.errors``)."""
 
@@ -322,6 +327,9 @@ class RadioClient:
         self.on_sensors: list[Callable[[OwnSensors], None]] = []
         self.on_relayed: Callable[[wire.Relayed], None] | None = None
         """Where control messages relayed by the hub go (model and lockstep runs); None: counted as malformed."""
+        self.security: LinkSecurity | None = None
+        """802.15.4 link security (``radio_hub.air.security``): None, the default, sends and takes plain frames;
+        set, every data frame leaves secured and only authentic, fresh secured frames are handed up."""
         self._ultrasonic_deg: tuple[float, ...] = ()
         """The ultrasonic ring's axes (degrees from the heading), as the hub gave them on attaching."""
         self._ultrasonic_rad: np.ndarray | None = None
@@ -349,6 +357,12 @@ class RadioClient:
 
         self.on_reattach: list[Callable[[], None]] = []
         """Called after the radio attached again to a restarted hub (the hub forgot IR modes and the like)."""
+        self.pan_on_air: tuple[int, int] | None = None
+        """(PAN, model us): the PAN the hub's MAC filters this radio's frames by, and when the hub applied it (its
+        answer's time). ``identity.pan_id`` is what we asked for, which the hub applies a round trip later; a
+        frame's ``RxFrame.end_us`` against this tells which PAN it was received on, however late it is handed up."""
+        self.on_pan_change: list[Callable[[int, int], None]] = []
+        """Called with (PAN, model us the hub applied it) when the hub's PAN for this radio changes."""
         self._attached_once = False
         self._ir_wanted = "idle"
         """The IR mode last asked for: a switch retried after a re-attach must not undo a later one."""
@@ -425,6 +439,11 @@ class RadioClient:
 
     async def send(self, frame: Frame) -> TxResult:
         """Hand a frame to the MAC and wait for its result. FrameError if it cannot be encoded."""
+        if self.security is not None:
+            try:
+                frame = self.security.protect_auto(frame)
+            except SecurityError as err:
+                raise FrameError(f"cannot secure the frame: {err}") from None
         psdu = frame.encode()
         for attempt in range(2):
             token = next(self._tokens)
@@ -575,6 +594,10 @@ class RadioClient:
     # -- plumbing ----------------------------------------------------------------------------------
 
     def _adopt(self, attached: wire.Attached) -> None:
+        if self.pan_on_air is None or self.pan_on_air[0] != attached.pan_id:
+            self.pan_on_air = (attached.pan_id, attached.now_us)
+            for callback in self.on_pan_change:
+                callback(attached.pan_id, attached.now_us)
         self.identity = replace(
             self.identity,
             ext_addr=attached.ext_addr,
@@ -683,11 +706,17 @@ class RadioClient:
         except Exception as err:
             self.faults.record("downlink", err, msg.TYPE)
 
+    def _count_gap(self, n: int) -> None:
+        """Messages missing before number ``n``: at most ``MAX_GAP`` per message, and the sum saturates below
+        2^63, so forged numbers can never make the counter unpackable (a status answer that cannot be encoded
+        is never sent: the robot's status query went unanswered for good)."""
+        self.transport_gaps = min(self.transport_gaps + min(n - self._down_seq - 1, MAX_GAP), MAX_COUNT)
+
     def _on_message(self, msg: wire.Message) -> None:
         kind = type(msg)
         if kind is wire.Sensors or kind is wire.IrBeacons:  # most of the traffic, by its exact type
             if msg.n > self._down_seq + 1:
-                self.transport_gaps += msg.n - self._down_seq - 1
+                self._count_gap(msg.n)
             if msg.n > self._down_seq:
                 self._down_seq = msg.n
             if kind is wire.Sensors:
@@ -700,7 +729,7 @@ class RadioClient:
         if isinstance(msg, wire.Attached) and msg.token == 0:
             self._down_seq = msg.n - 1  # the hub numbers afresh on every attach
         if msg.n > self._down_seq + 1:
-            self.transport_gaps += msg.n - self._down_seq - 1
+            self._count_gap(msg.n)
         self._down_seq = max(self._down_seq, msg.n)
         if isinstance(msg, wire.Received):
             self._on_received(msg)
@@ -754,6 +783,11 @@ class RadioClient:
         except FrameError:
             self.malformed += 1
             return
+        if self.security is not None:
+            try:
+                frame = self.security.unprotect(frame)
+            except SecurityError:
+                return  # counted by kind in the security's counters
         rx = RxFrame(frame, msg.rssi_dbm, msg.lqi, msg.start_us, msg.end_us, msg.submitted_us)
         if self.on_frame is not None:
             self.on_frame(rx)

@@ -30,8 +30,10 @@ UP_KEYS_MAX = 1024
 """Node ids with an open up key at once; a token of a further id opens none (counted in ``refused``). Five times
 the largest swarm a bench runs (200 nodes), and no more: a router's declare_subscriber takes time in proportion
 to the subscriptions it has (0.27 ms of CPU at 512, 4.4 ms at 4,096), and each subscription with a Python
-callback has a Python thread of its own in zenoh-python (about 17 kB resident), so a rogue's tokens at a cap of
-4,096 added 88-93 MB and 4,096 threads to the hub (tests/process/test_up_keys_bound.py)."""
+callback had a Python thread of its own in zenoh-python (about 17 kB resident), so a rogue's tokens at a cap of
+4,096 added 88-93 MB and 4,096 threads to the hub. The up keys' callbacks now run in zenoh's own receiving thread
+(``indirect=False``; the callback is a hand-off to the inbox and never calls zenoh): 1,088 tokens added 1,024
+threads and 22 MB before, no thread and 5 MB since (tests/process/test_up_keys_bound.py)."""
 UP_KEYS_WAITING_MAX = UP_KEYS_MAX
 """Node ids refused for want of room whose tokens the hub remembers, oldest first, to open their keys as room
 frees (a node whose key the cap withheld while a rogue held it is heard once the rogue goes); ids past this are
@@ -162,7 +164,10 @@ class UpKeys:
                 self._closing[node_id] = time.monotonic() + self._grace_s
 
     def _open_key(self, node_id: str, instances: set[str]) -> None:
-        self._open[node_id] = self._session.declare_subscriber(self._keys.up(node_id), self._on_up)
+        # in zenoh's receiving thread, not a Python thread per subscription (see UP_KEYS_MAX)
+        self._open[node_id] = self._session.declare_subscriber(
+            self._keys.up(node_id), zenoh.handlers.Callback(self._on_up, indirect=False)
+        )
         self._instances[node_id] = instances
 
     def _close_due(self, now: float) -> None:

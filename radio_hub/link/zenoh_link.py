@@ -48,6 +48,10 @@ def use_security(security: TransportSecurity) -> None:
     _security = security
 
 
+MAX_TRANSPORT_BYTES = 4 << 20
+"""The longest message a petswarm process takes from zenoh at all (anything longer ends the sender's link)."""
+
+
 def session_config(mode: str, endpoint: str) -> zenoh.Config:
     """A zenoh config: ``router`` listens on ``endpoint``, ``client`` connects to it; no multicast. The
     process's TransportSecurity adds TLS (and, on a router asking for client certificates, access control)
@@ -64,6 +68,14 @@ def session_config(mode: str, endpoint: str) -> zenoh.Config:
     where = "listen/endpoints" if mode == "router" else "connect/endpoints"
     config.insert_json5(where, f'["{endpoint}"]')
     config.insert_json5("scouting/multicast/enabled", "false")
+    # Zenoh hands large payloads between processes of one host in shared memory, and a session's segments stayed
+    # mapped in its peer after it closed: 26 sessions sending 300 x 60 kB took the hub from 54 to 170-300 MB for
+    # good (a bare zenoh router: 23 -> 173 MB; 23 -> 25 MB without). Nothing of ours is large enough to gain by it.
+    config.insert_json5("transport/shared_memory/enabled", "false")
+    # Zenoh reassembles a message of up to 1 GB by default, and the buffers of a session's large messages stayed
+    # with the process after it closed (8 sessions of 20 x 10 MB: hub 60 -> 249 MB, robot 56 -> 240 MB). Nothing of
+    # ours is longer than a robot's events answer (20,000 events, a few MB) or ``wire.MAX_MESSAGE_BYTES``.
+    config.insert_json5("transport/link/rx/max_message_size", str(MAX_TRANSPORT_BYTES))
     if mode == "client":
         # A restarted hub must get its nodes back at once. Zenoh's default backoff retries 1 s, then 2, then
         # 4 s after the router went away: a client unlucky with a hub down 1.5 s came back 5 s late, missed

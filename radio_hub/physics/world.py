@@ -325,6 +325,13 @@ class World:
             rows.velocity[at], rows.pose[at] = velocity, pose  # the robots' own arrays are views of these rows
         self._settle_contacts()
 
+    @property
+    def contacts(self) -> list[tuple[str, str]]:
+        """The pairs in contact after the last step, sorted: two bodies (ids in order), or a body and
+        ``obstacle-K`` (K its index in ``obstacles``). A contact is counted in ``collisions`` when its pair
+        first appears here."""
+        return sorted(self._contacts)
+
     def _settle_contacts(self) -> None:
         if not self._may_touch():
             contacts: set[tuple[str, str]] = set()

@@ -417,3 +417,46 @@ def test_organizing_more_robots_than_the_run_has_warns_and_says_why_fewer_joined
     [note] = summary["notes"]
     assert "--organize 10" in note and "at most 2 can join" in note
     assert f"note: {note}" in proc.stdout and proc.stdout.rstrip().endswith("OK")
+
+
+def _deep_toml(path: Path) -> Path:
+    path.write_text("a = " + "[" * 100_000 + "]" * 100_000 + "\n")
+    return path
+
+
+def _scenario(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize(
+    ("args", "why"),
+    [
+        # an endless file was read for 4.7 GB in 7 s
+        (lambda tmp: ["/dev/zero"], "longer than 1048576 bytes"),
+        # a duration of 1e300 s ran until killed
+        (lambda tmp: [str(_scenario(tmp / "long.toml", "duration_s = 1e300\n"))], "up to 86400"),
+        (lambda tmp: [str(_scenario(tmp / "walk.toml", "[user]\npath = [{walk = 1e300}]\n"))], "up to 86400"),
+        # TOML nested 100,000 deep: a RecursionError traceback
+        (lambda tmp: [str(_deep_toml(tmp / "deep.toml"))], "nested too deeply"),
+        # a seed past msgpack's range: a traceback after the hub could not answer
+        (lambda tmp: ["--seed", str(2**64), "--robots", "2", "--duration", "1"], "seed must be in 0..2^64-1"),
+        # a world name that is a key expression: a ValueError traceback
+        (lambda tmp: ["--world", "a/b*", "--robots", "2", "--duration", "1"], "must be 1-64 letters"),
+        # a record directory that cannot be written: an OSError traceback
+        (
+            lambda tmp: ["--record", "/sys/petswarm-record", "--robots", "2", "--duration", "1"],
+            "cannot write the run record",
+        ),
+    ],
+)
+def test_bad_run_input_is_refused_in_one_line_with_status_2(tmp_path: Path, args, why: str) -> None:
+    done = subprocess.run(
+        _petswarm("run", *args(tmp_path), "--clock", "model"),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    lines = done.stderr.strip().splitlines()
+    assert done.returncode == 2 and why in lines[-1], done.stderr[-2000:]
+    assert "Traceback" not in done.stderr and not done.stdout

@@ -14,15 +14,18 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
+import msgpack
 import pytest
 import zenoh
 
 from petswarm.lab.certs import make_certificates
 from petswarm.lab.processes import Supervisor, free_tcp_port
 from radio_hub.interface import HubUnavailable, Keys, open_session, query_hub
-from radio_hub.link import zenoh_link
+from radio_hub.link import wire, zenoh_link
 from radio_hub.link.trust import OPERATOR, TransportSecurity
+from radio_hub.link.up_keys import wait_for_up_key
 from tests.process import test_cross_host as cross
+from tests.waiting import once_settled
 
 pytestmark = pytest.mark.process
 
@@ -203,3 +206,46 @@ def test_a_hub_refuses_tls_options_that_would_not_protect_it(args: list[str], wh
     argv = [sys.executable, "-m", "cli", "hub", "--listen", "tcp/127.0.0.1:1", *args]
     done = subprocess.run(argv, capture_output=True, text=True, timeout=60, env=cross._env())
     assert done.returncode == 2 and why in done.stderr, done.stderr
+
+
+def test_a_relay_gets_the_access_decision_of_the_same_request_asked_directly(tmp_path: Path) -> None:
+    """A client with a robot's certificate (robot-3, not running) is denied the hub's stats and chaos directly;
+    wrapped in a ``Relay`` on its own up key the same requests used to be answered (a loss fault with p = 1
+    added, robot-1 told to stop). Now the hub refuses them, counted, and the robots go on."""
+    certs = _certificates(tmp_path / "certs", "127.0.0.1", 3)
+    endpoint, keys = f"tls/127.0.0.1:{free_tcp_port()}", Keys(f"tls{free_tcp_port()}")
+    sup = Supervisor(tmp_path / "logs")
+    sup.spawn("hub", ["hub", "--listen", endpoint, "--world", keys.world, *_hub_tls(certs)])
+    where = ["--hub", endpoint, "--world", keys.world]
+    for rid in (1, 2):
+        argv = ["robot", "--id", str(rid), *where, *_tls(certs, f"robot-{rid}"), "--ping-interval", "0.2"]
+        sup.spawn(f"robot-{rid}", argv)
+    operator = _session_as(certs, OPERATOR, endpoint)
+    rogue = _session_as(certs, "robot-3", endpoint)
+    try:
+        _wait_both_attached(operator, keys, sup)
+        answers: list[wire.Message] = []
+        rogue.declare_subscriber(keys.down("robot-3"), lambda s: answers.extend(wire.decode_all(s.payload.to_bytes())))
+        token = rogue.liveliness().declare_token(keys.alive("robot-3", "r"))
+        up = rogue.declare_publisher(keys.up("robot-3"))
+        assert wait_for_up_key(up)
+        assert [r for r in rogue.get(keys.stats, timeout=2.0) if r.ok is not None] == []  # directly: denied
+        up.put(wire.Attach(short_addr=3, pan_id=0x1000, instance="r", n=1, s=9).encode())
+        loss = {"op": "chaos", "request": {"op": "add", "fault": {"kind": "loss", "p": 1.0}}}
+        for n, (to, body) in enumerate(
+            (("hub", {"op": "stats"}), ("hub", loss), ("robot-1", {"cmd": "stop"})), start=2
+        ):
+            up.put(wire.Relay(to=to, body=msgpack.packb(body), n=n, s=9).encode())
+        up.put(wire.Attach(short_addr=3, pan_id=0x1000, instance="r", kind="control", n=5, s=9).encode())
+        stats = once_settled(lambda: query_hub(operator, keys.stats), lambda s: s["hub"]["relay_refused"] >= 4, 10)
+        assert stats["hub"]["relay_refused"] == 4, stats["hub"]
+        assert not [m for m in answers if isinstance(m, wire.Relayed)], answers
+        assert query_hub(operator, keys.chaos, payload=msgpack.packb({"op": "list"}))["faults"] == []
+        time.sleep(0.5)
+        assert not sup.dead(), {n: sup.log_tail(n) for n in sup.dead()}  # robot-1 was not stopped
+        token.undeclare()
+    finally:
+        rogue.close()
+        operator.close()
+        codes = sup.stop_all()
+    assert all(code == 0 for code in codes.values()), codes

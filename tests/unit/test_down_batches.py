@@ -101,3 +101,20 @@ def test_a_lockstep_node_batch_stays_within_what_the_hub_takes_from_a_node() -> 
 def test_nothing_to_put_is_no_put() -> None:
     """A lockstep link closing with nothing held puts nothing (an empty batch would be malformed)."""
     assert put_batches(None, [], UP_BATCH_BYTES) == 0  # no publisher: any put would raise HubUnavailable
+
+
+def test_forged_message_numbers_cannot_push_the_gap_counter_out_of_msgpack():
+    """Forged down messages once pushed a robot's gap counter to 2^64 - 4: its status answer could not be packed,
+    so its status query never answered again."""
+
+    async def scenario() -> None:
+        radio, link = _radio()
+        for _ in range(8):
+            # the hub's attach answer numbers afresh; a forged message far ahead of it adds a gap each time
+            link.on_down(wire.Attached(token=0, n=1, instance=radio.instance).encode())
+            link.on_down(wire.IrSample(t_us=1, n=2**63 - 1).encode())
+            link.on_down(wire.Error(reason="forged", n=2**63 - 1).encode())
+        assert 0 < radio.transport_gaps < 2**63
+        msgpack.packb({"gaps": radio.transport_gaps})
+
+    asyncio.run(scenario())

@@ -124,11 +124,16 @@ def run_until(core: DriverCore, end: float) -> list[Any]:
 def paired(state: RobotState = RobotState.FOLLOWING, request: str = "follow") -> DriverCore:
     """A robot whose owner's belt answered its wake-up, with ``request`` chosen on the watch."""
     core, *_ = make()
-    core.ble_message(BELT, ble("owner", d=0.8), 0.01)
+    core.ble_message(BELT, ble("owner", d=0.8, seq=challenge(run_until(core, 0.0))), 0.01)
     core.ble_message(BELT, ble("request", request=request), 0.02)
     assert core.sequence.state == state
     core.actions()
     return core
+
+
+def challenge(actions: list[Any]) -> int:
+    """The sequence byte of the latest wake burst among ``actions``: what the belt that heard it echoes."""
+    return user_link.parse_lf_data(of(actions, LfBurst)[-1].data)[1]
 
 
 def drives(actions: list[Any]) -> list[Any]:
@@ -158,9 +163,10 @@ def test_a_waiting_robot_fires_a_wake_up_burst_every_3_s_and_takes_a_belt_within
     assert [user_link.parse_lf_data(b.data)[2] for b in bursts] == [user_link.LF_WAKE] * 3
     assert core.timer("lf") == pytest.approx(3 * WAKE_PERIOD_S)
 
-    core.ble_message("user-2", ble("owner", d=1.4), 6.1)  # beyond the wake range: not an owner
+    heard = user_link.parse_lf_data(bursts[-1].data)[1]
+    core.ble_message("user-2", ble("owner", d=1.4, seq=heard), 6.1)  # beyond the wake range: not an owner
     assert core.owner is None and core.actions() == []
-    core.ble_message(BELT, ble("owner", d=0.7), 6.2)
+    core.ble_message(BELT, ble("owner", d=0.7, seq=heard), 6.2)
     actions = core.actions()
     assert core.owner == BELT and core.sequence.state == RobotState.COMMAND_WAITING
     assert of(actions, SetUser) == [SetUser(user_id(BELT))]
@@ -168,6 +174,29 @@ def test_a_waiting_robot_fires_a_wake_up_burst_every_3_s_and_takes_a_belt_within
     core.ble_message("user-2", ble("request", request="follow"), 6.3)  # not the owner's watch
     assert logs(core.actions(), "ble_ignored") == [{"src": "user-2", "message": "request"}]
     assert core.sequence.state == RobotState.COMMAND_WAITING
+
+
+def test_only_a_belt_that_heard_the_wake_burst_becomes_the_owner_and_only_its_user_commands() -> None:
+    """An outsider (user-9) became robot 2's owner over BLE with a bare owner claim and had it organize a swarm.
+    A claim must echo the challenge of a recent wake burst (the LF reaches about 1 m); a wrong one is refused,
+    counted, and spends the pending challenges, so a guesser gets one try per burst."""
+    core, *_ = make(robot_id=2)
+    heard = challenge(run_until(core, 0.0))
+    for claim in ({"d": 0.3}, {"d": 0.3, "seq": (heard + 1) % 256}, {"d": 0.3, "seq": "x"}):
+        core.ble_message("user-9", ble("owner", **claim), 0.1)
+        assert core.owner is None and core.sequence.state == RobotState.WAITING
+    assert core.unpaired == 3 and len(logs(core.actions(), "owner_refused")) == 3
+    core.ble_message(BELT, ble("owner", d=0.7, seq=heard), 0.2)  # spent by the refused guess: wait for a burst
+    assert core.owner is None and core.unpaired == 4
+    core.ble_message(BELT, ble("owner", d=0.7, seq=challenge(run_until(core, 3.0))), 3.1)
+    assert core.owner == BELT and core.sequence.state == RobotState.COMMAND_WAITING
+    core.ble_message("user-9", ble("request", request="organize", robots=3), 3.2)
+    core.ble_message("user-9", ble("owner", d=0.1, seq=heard), 3.3)
+    actions = core.actions()
+    assert of(actions, Organize) == [] and core.owner == BELT and core.unpaired == 6
+    # challenges differ from burst to burst and from robot to robot (unpredictable without the robot's key)
+    seen = {challenge(run_until(c, t)) for c in (make(robot_id=2)[0], make(robot_id=3)[0]) for t in (0.0, 3.0, 6.0)}
+    assert len(seen) >= 4
 
 
 def test_malformed_or_refused_ble_messages_are_logged_and_dropped() -> None:
@@ -194,7 +223,7 @@ def test_tracking_fires_both_antennas_5_ms_apart_every_350_ms() -> None:
     start = core.timer("lf")
     assert start is not None
     times = []
-    while (when := core.next_timer()) is not None and when < start + 2 * TRACK_PERIOD_S:
+    while (when := core.next_timer()) is not None and when < start + 2 * TRACK_PERIOD_S - 1e-3:
         core.handle_timer(when)
         times += [(when, b.antenna) for b in of(core.actions(), LfBurst)]
     assert [a for _, a in times] == ["left", "right", "left", "right"]

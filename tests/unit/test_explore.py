@@ -265,24 +265,138 @@ def test_a_master_killed_and_restarted_claims_the_members_of_its_new_swarm() -> 
     assert P.roster_agreement(record) == []
 
 
-def test_pan_hearing_fails_a_foreign_pan_frame() -> None:
-    [violation] = P.pan_hearing(_record(**{"robot-2": [_ev("foreign_pan", 2.5, dst_pan=0x1000, pan=0x2222, src=3)]}))
-    assert violation.who == ("robot-2",) and "0x1000" in violation.what
+def _pan_life(*frames: dict[str, Any]) -> list[dict[str, Any]]:
+    """robot-2 starts on PAN 0x1000; the hub applies its swarm's PAN 0x2222 at 3.000000 s (it asked at 2.99 s)."""
+    start = _ev("start", 0.0, pan=0x1000, pan_at_us=5_000)
+    return [start, _ev("pan", 3.01, pan=0x2222, at_us=3_000_000), *frames]
 
 
-def test_no_contact_fails_two_robots_touching_but_not_the_user_walking_into_one() -> None:
-    def tick(t_us: int, collisions: int, x2: float) -> str:
-        bodies = [
-            {"id": "robot-1", "x": 0.0, "y": 0.0, "radius": 0.15},
-            {"id": "robot-2", "x": x2, "y": 0.0, "radius": 0.15},
-            {"id": "user", "x": 5.0, "y": 5.0, "radius": 0.25},
-        ]
-        return json.dumps({"t_us": t_us, "bodies": bodies, "collisions": collisions})
+def test_pan_hearing_keeps_a_frame_received_on_the_old_pan_and_handed_up_late() -> None:
+    """Case 130 of seed 1: a delay fault hands a frame the MAC took on the old PAN up 0.18 s after the change."""
+    late = _ev("foreign_pan", 3.18, dst_pan=0x1000, pan=0x2222, src=3, seq=9, air_end_us=2_999_000)
+    asked = _ev("foreign_pan", 2.995, dst_pan=0x1000, pan=0x2222, src=3, seq=8, air_end_us=2_994_000)
+    assert P.pan_hearing(_record(**{"robot-2": _pan_life(asked, late)})) == []
 
+
+def test_pan_hearing_fails_a_frame_for_a_pan_the_robot_was_not_on_when_it_was_on_the_air() -> None:
+    # sent to the old PAN after the hub had applied the new one, handed up at once: the filter let it through
+    wrong = _ev("foreign_pan", 3.02, dst_pan=0x1000, pan=0x2222, src=3, seq=9, air_end_us=3_015_000)
+    [violation] = P.pan_hearing(_record(**{"robot-2": _pan_life(wrong)}))
+    assert violation.who == ("robot-2",) and violation.when == 3.02
+    assert violation.what == "heard a frame for PAN 0x1000 (on the air until 3.015000 s) while on 0x2222"
+    other = _ev("foreign_pan", 1.0, dst_pan=0x3333, pan=0x1000, src=3, seq=1, air_end_us=990_000)  # never ours
+    assert len(P.pan_hearing(_record(**{"robot-2": _pan_life(other)}))) == 1
+    restarted = [*_pan_life(), _ev("start", 5.0, pan=0x1000, pan_at_us=5_000_000)]  # a new life: the old PAN gone
+    late = _ev("foreign_pan", 5.2, dst_pan=0x2222, pan=0x1000, src=3, seq=2, air_end_us=5_100_000)
+    assert len(P.pan_hearing(_record(**{"robot-2": [*restarted, late]}))) == 1
+    unknown = _ev("foreign_pan", 2.5, dst_pan=0x1000, pan=0x2222, src=3)  # no air time: cannot be excused
+    assert "unknown PAN" in P.pan_hearing(_record(**{"robot-2": [unknown]}))[0].what
+
+
+def _tick(t_us: int, collisions: int, contacts: list[list[str]], robot_1: tuple[float, float] = (0.0, 0.0)) -> str:
+    """A world log line: robot-1 (where given), robot-2 beside it, the user at (0, 3) near a wall at x = -0.2."""
+    bodies = [
+        {"id": "robot-1", "x": robot_1[0], "y": robot_1[1], "radius": 0.15},
+        {"id": "robot-2", "x": 0.3, "y": 0.0, "radius": 0.15},
+        {"id": "user", "x": 0.0, "y": 3.0, "radius": 0.25},
+    ]
+    obstacles = [{"kind": "wall", "x0": -0.2, "y0": 1.0, "x1": -0.2, "y1": 9.0}]
+    line: dict[str, Any] = {"t_us": t_us, "bodies": bodies, "obstacles": obstacles, "collisions": collisions}
+    if contacts:
+        line["contacts"] = contacts
+    return json.dumps(line)
+
+
+def test_no_contact_fails_two_robots_touching_once_per_contact() -> None:
     record = _record()
-    record.world_lines = [tick(0, 0, 1.0), tick(20_000, 1, 0.3)]
+    pair = [["robot-1", "robot-2"]]
+    record.world_lines = [_tick(0, 0, []), _tick(20_000, 1, pair), _tick(40_000, 1, pair), _tick(60_000, 1, [])]
     [violation] = P.no_contact(record)
     assert violation.who == ("robot-1", "robot-2") and violation.when == 0.02
+
+
+def test_no_contact_names_the_robot_that_touched_an_obstacle_not_the_closest_pair_of_bodies() -> None:
+    record = _record()
+    record.world_lines = [_tick(0, 0, []), _tick(20_000, 1, [["robot-2", "obstacle-0"]])]
+    [violation] = P.no_contact(record)
+    assert violation.who == ("robot-2", "obstacle-0")
+    assert violation.what == "contact robot-2 / obstacle-0 (wall (-0.2, 1)-(-0.2, 9))"
+
+
+def test_no_contact_keeps_the_user_walking_into_a_wall_or_a_robot() -> None:
+    """The scripted user walks blind: his own contacts are not the robots' (the counter counted them, and the
+    judge once blamed the first robot of the closest pair of bodies for the user's wall)."""
+    record = _record()
+    record.world_lines = [
+        _tick(0, 0, []),
+        _tick(20_000, 1, [["user", "obstacle-0"]]),
+        _tick(40_000, 2, [["robot-1", "user"], ["user", "obstacle-0"]]),
+    ]
+    assert P.no_contact(record) == []
+
+
+def test_no_contact_excuses_a_robot_the_user_pushes_into_another_but_not_long_after() -> None:
+    pushed = [["robot-1", "robot-2"], ["robot-1", "user"]]
+    record = _record()
+    record.world_lines = [_tick(0, 0, []), _tick(20_000, 1, [["robot-1", "user"]]), _tick(40_000, 2, pushed)]
+    assert P.no_contact(record) == []
+    record = _record()
+    record.world_lines = [
+        _tick(0, 0, []),
+        _tick(20_000, 1, [["robot-1", "user"]]),
+        _tick(20_000 + 200_000, 2, pushed[:1]),
+    ]
+    [violation] = P.no_contact(record)
+    assert violation.who == ("robot-1", "robot-2")
+
+
+def test_no_contact_excuses_robots_the_user_presses_through_another() -> None:
+    """Seed 1 case 396: the user walks into robot-1, which presses robot-2 against a third (here: the wall does not
+    pass a push on)."""
+    chain = [["robot-1", "robot-2"], ["robot-1", "user"], ["robot-2", "obstacle-0"]]
+    record = _record()
+    record.world_lines = [_tick(0, 0, []), _tick(20_000, 3, chain)]
+    assert P.no_contact(record) == []
+    walled = [["user", "obstacle-0"], ["robot-2", "obstacle-0"]]  # the user at the wall pushes nobody through it
+    record = _record()
+    record.world_lines = [_tick(0, 0, []), _tick(20_000, 2, walled)]
+    [violation] = P.no_contact(record)
+    assert violation.who == ("robot-2", "obstacle-0")
+
+
+def test_no_contact_takes_a_pair_that_parts_for_a_tick_as_one_contact_going_on() -> None:
+    """Seed 1 case 193: a robot the user pressed against another slides along it after the push; the pair parts for
+    one tick as the world pushes them apart and touches again: the contact that began under the push, going on."""
+    pair, pushed = [["robot-1", "robot-2"]], [["robot-1", "robot-2"], ["robot-1", "user"]]
+    record = _record()
+    record.world_lines = [
+        _tick(0, 0, []),
+        _tick(20_000, 2, pushed),
+        *(_tick(20_000 * k, 2, pair) for k in range(2, 20)),
+        _tick(400_000, 2, []),
+        _tick(420_000, 3, pair),
+        _tick(440_000, 3, []),
+        _tick(700_000, 4, pair),  # parted for a quarter second: a new contact
+    ]
+    [violation] = P.no_contact(record)
+    assert violation.who == ("robot-1", "robot-2") and violation.when == 0.7
+
+
+def test_no_contact_fails_a_contact_a_world_log_does_not_name() -> None:
+    record = _record()
+    record.world_lines = [_tick(0, 0, []), _tick(20_000, 1, [])]
+    [violation] = P.no_contact(record)
+    assert "names no pair" in violation.what and violation.when == 0.02
+
+
+def test_no_contact_counts_a_pair_touching_on_as_one_contact_though_the_world_counts_it_again() -> None:
+    """A robot killed while touching another keeps its body, taken out of the world and put back: the world counts
+    the pair again; the log shows one contact going on (seed 3 case 100, with the user)."""
+    record = _record()
+    pair = [["robot-1", "robot-2"]]
+    record.world_lines = [_tick(0, 0, []), _tick(20_000, 1, pair), _tick(40_000, 2, pair)]
+    [violation] = P.no_contact(record)
+    assert violation.when == 0.02
 
 
 def test_organize_completes_fails_an_organize_with_no_member_after_the_faults() -> None:

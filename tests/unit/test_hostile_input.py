@@ -132,10 +132,59 @@ def test_chaos_and_relay_requests_never_raise(request):
     env, down = _environment()
     answer = env.chaos_request(request, 10, 0.0)
     assert isinstance(answer, dict)
-    relay = wire.Relay(to="hub", body=msgpack.packb(request, use_bin_type=True), n=2, s=KEY)
-    env.receive("node-1", relay.encode(), 20)
+    env.receive("run", wire.Attach(kind="control", instance="c", n=1, s=77).encode(), 15)
+    relay = wire.Relay(to="hub", body=msgpack.packb(request, use_bin_type=True), n=2, s=77)
+    env.receive("run", relay.encode(), 20)
     assert isinstance(down.sent[-1][1], wire.Relayed)
     assert env.faults.total == 0
+    msgpack.packb(env.stats(), use_bin_type=True)  # whatever was asked, the stats can still be sent
+
+
+def _ask_hub(env: Environment, down: Recorder, node: str, key: int, n: int, request: dict[str, Any]) -> Any:
+    env.receive(node, wire.Relay(to="hub", body=msgpack.packb(request), n=n, s=key).encode(), 30)
+    return down.sent[-1]
+
+
+def test_a_robot_or_user_relays_nothing_it_could_not_ask_directly():
+    """Access control denies a robot's certificate the hub's stats and chaos and the other robots' control keys;
+    wrapped in a Relay on its own up key the same requests got all three. Only a run's orchestrator relays."""
+    env, down = _environment()
+    loss = {"op": "chaos", "request": {"op": "add", "fault": {"kind": "loss", "p": 1.0}}}
+    for node, key in (("node-1", KEY), ("node-9", KEY + 8)):
+        for n, request in enumerate(({"op": "stats"}, loss), start=2):
+            to, answer = _ask_hub(env, down, node, key, n, request)
+            assert to == node and isinstance(answer, wire.Error), answer
+        env.receive(node, wire.Relay(to="node-2", body=b"\x81\xa3cmd\xa4stop", n=4, s=key).encode(), 30)
+        assert down.sent[-1][0] == node and isinstance(down.sent[-1][1], wire.Error)
+    assert env.medium.chaos.faults == {} and env.counters.relay_refused == 6
+    # an orchestrator under a robot's id (a robot certificate may publish only there) is refused too
+    env.receive("robot-2", wire.Attach(kind="control", instance="c", n=1, s=5).encode(), 30)
+    assert "robot-2" not in env.kinds and env.counters.relay_refused == 7
+    env.receive("run", wire.Attach(kind="control", instance="c", n=1, s=77).encode(), 30)
+    to, answer = _ask_hub(env, down, "run", 77, 2, loss)
+    assert to == "run" and isinstance(answer, wire.Relayed) and len(env.medium.chaos.faults) == 1
+
+
+def test_chaos_selectors_are_bounded_before_the_fault_is_kept():
+    """A selector nested 600 deep was stored and then broke every stats answer; 2 MB strings were kept."""
+    env, _ = _environment()
+    deep: Any = "robot-1"
+    for _ in range(600):
+        deep = [deep]
+    for fault in (
+        {"kind": "loss", "node": deep},
+        {"kind": "loss", "node": "x" * 2_000_000},
+        {"kind": "loss", "link": ["a", deep]},
+        {"kind": "partition", "group": ["a"] * 100_000},
+        {"kind": "partition", "group": [deep]},
+        {"kind": "loss", "pan": 2**70},
+        {"kind": "loss", "channel": "11"},
+    ):
+        answer = env.chaos_request({"op": "add", "fault": fault}, 10, 0.0)
+        assert "error" in answer and len(answer["error"]) < 400, str(answer)[:200]
+    assert env.medium.chaos.faults == {} and env.counters.chaos_refused == 7
+    msgpack.packb(env.stats(), use_bin_type=True)
+    assert "faults" in env.chaos_request({"op": "add", "fault": {"kind": "loss", "link": ["a", "b"], "pan": 5}}, 11, 0)
 
 
 def test_extreme_sequence_numbers_are_refused_and_the_gap_counter_stays_in_range():

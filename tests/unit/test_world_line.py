@@ -140,3 +140,22 @@ def test_the_world_line_takes_the_radio_counts_from_a_snapshot_as_world_state_do
     live["n-1"] = Meanwhile(delivered=2, collided=1)
     line = env.world_line()
     assert '"radio":{"delivered":2,"collided":1,"lost":0}' in line
+
+
+def test_the_world_line_names_the_pairs_in_contact_while_they_touch() -> None:
+    """The collision counter says that something touched, not what: the line carries the pairs touching now (a
+    body and a body, or a body and ``obstacle-K``), in world_state's JSON too, and nothing once they part."""
+    env = Environment(EnvironmentConfig(), 1, Quiet())
+    env.receive("n-1", wire.Attach(ext_addr=1, position=[0.0, 0.0], kind="robot", n=1), 0)
+    env.receive("n-2", wire.Attach(ext_addr=2, position=[3.0, 0.0], kind="robot", n=1), 0)
+    env.receive("u", wire.Attach(ext_addr=3, position=[0.0, 3.0], kind="user", n=1), 0)
+    env.world.set_obstacles([Obstacle("wall", x0=0.1, y0=-1, x1=0.1, y1=1), Obstacle("circle", x=0, y=3.3, r=0.1)])
+    env.advance(20_000)
+    line = env.world_line()
+    assert line == _as_json(env)
+    assert json.loads(line)["contacts"] == [["n-1", "obstacle-0"], ["u", "obstacle-1"]]
+    assert env.world.collisions == 2
+    env.world.place("u", 0.0, 6.0, 0.0)
+    env.world.bodies["n-1"].pose[0] = -1.0
+    env.advance(40_000)
+    assert '"contacts"' not in env.world_line() and env.world_line() == _as_json(env)

@@ -1,0 +1,114 @@
+"""Failures ``petswarm explore`` found, each replayed from its shrunk scenario (tests/model/explore_cases/) in model
+time, exactly as ``petswarm explore --replay FILE`` does: the property it failed holds now.
+
+- ``no_contact``, seed 1 cases 78, 138 and 179: the user, who walks blind, walked into a wall (78, 138) or into a
+  robot and pushed it against another (179); the judge, which had only the world's collision counter, blamed the
+  first robot of the closest pair of bodies. The world log now names the pairs touching, and the judge keeps the
+  user's contacts (and a robot's while the user pushes it) out of the robots' record.
+- ``pan_hearing``, seed 1 case 130: a delay fault handed frames up after the receiver's PAN change, later than
+  the 50 ms the judge allowed; it now judges each frame by the PAN the robot was on when the frame was on the air.
+"""
+
+from __future__ import annotations
+
+import json
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from petswarm.explore.runner import run_case
+
+pytestmark = pytest.mark.long
+
+CASES = Path(__file__).parent / "explore_cases"
+
+
+def _replay(name: str, keep: Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """The case's result (as ``--replay`` gives it) and its world log's lines."""
+    data = tomllib.loads((CASES / name).read_text())
+    meta = data["explore"]
+    result = run_case(data, int(meta["seed"]), meta["family"], keep=keep)
+    world = [json.loads(line) for line in (keep / "world.jsonl").read_text().splitlines()]
+    return result, world
+
+
+def _contacts(world: list[dict[str, Any]]) -> set[tuple[str, str]]:
+    return {(a, b) for tick in world for a, b in tick.get("contacts", [])}
+
+
+@pytest.mark.timeout(120)
+@pytest.mark.parametrize("case", [78, 138])
+def test_the_user_walking_into_a_wall_is_not_a_robot_touching_it(tmp_path: Path, case: int) -> None:
+    result, world = _replay(f"seed-1-case-{case}-no_contact.toml", tmp_path / "run")
+    assert _contacts(world) == {("user", "obstacle-0")}  # what the collision counter counted
+    assert result["ok"], result["failures"]
+
+
+@pytest.mark.timeout(120)
+def test_a_robot_the_user_pushes_into_another_is_not_a_robot_touching_it(tmp_path: Path) -> None:
+    result, world = _replay("seed-1-case-179-no_contact.toml", tmp_path / "run")
+    touching = _contacts(world)
+    assert ("robot-1", "robot-3") in touching and ("robot-1", "user") in touching
+    for tick in world:  # robot-1 touches robot-3 only while the user presses it against it
+        pairs = {tuple(p) for p in tick.get("contacts", [])}
+        if ("robot-1", "robot-3") in pairs:
+            assert ("robot-1", "user") in pairs, tick["t_us"]
+    assert result["ok"], result["failures"]
+
+
+@pytest.mark.timeout(120)
+def test_a_frame_a_delay_fault_hands_up_after_a_pan_change_is_judged_by_its_air_time(tmp_path: Path) -> None:
+    """Seed 1 case 130: under a 139 ms delay fault frames the MAC took on the waiting PAN come up after the
+    robot's swarm PAN took effect; each was on the air before the change (its ``air_end_us`` before the
+    ``pan`` event's ``at_us``), and the judge no longer asks how late it came."""
+    result, _ = _replay("seed-1-case-130-pan_hearing.toml", tmp_path / "run")
+    late = 0
+    for robot in ("robot-1", "robot-2"):
+        events = [json.loads(line) for line in (tmp_path / "run" / "events" / f"{robot}.jsonl").open()]
+        changes = [e for e in events if e["kind"] == "pan"]
+        for frame in (e for e in events if e["kind"] == "foreign_pan"):
+            change = max((c for c in changes if c["at_us"] <= frame["mono"] * 1e6), key=lambda c: c["at_us"])
+            assert frame["air_end_us"] < change["at_us"]  # taken on the PAN before
+            late += frame["mono"] - change["at_us"] / 1e6 > 0.05  # and more than 50 ms after the change
+    assert late >= 1
+    assert result["ok"], result["failures"]
+
+
+@pytest.mark.timeout(120)
+@pytest.mark.parametrize("name", ["seed-2-case-57-shrunk-no_contact.toml", "seed-2-case-57-no_contact.toml"])
+def test_a_killed_robot_keeps_its_body_and_restarts_where_it_stood(tmp_path: Path, name: str) -> None:
+    """Seed 2 case 57: robot-4's body vanished from the world while its process was dead (robot-5 drove into its
+    place), and it restarted at its start pose, on top of whoever stood there (robot-2 in the shrunk case)."""
+    result, world = _replay(name, tmp_path / "run")
+    died = restarted = None
+    for line in (tmp_path / "run" / "supervision.jsonl").read_text().splitlines():
+        entry = json.loads(line)
+        died, restarted = (entry["mono"], restarted) if entry["kind"] == "died" else (died, entry["mono"])
+    assert died is not None and restarted is not None
+    poses = [
+        (tick["t_us"] / 1e6, body["x"], body["y"])
+        for tick in world
+        for body in tick["bodies"]
+        if body["id"] == "robot-4" and died - 0.1 <= tick["t_us"] / 1e6 <= restarted + 0.1
+    ]
+    assert poses[0][0] <= died - 0.05 and poses[-1][0] >= restarted + 0.05  # there throughout, dead or alive
+    still = [(x, y) for t, x, y in poses if t >= died]
+    assert max(abs(x - still[0][0]) + abs(y - still[0][1]) for x, y in still) < 0.01  # and where it stopped
+    assert result["ok"], result["failures"]
+
+
+@pytest.mark.timeout(120)
+def test_robots_the_user_presses_through_another_are_not_robots_touching(tmp_path: Path) -> None:
+    """Seed 1 case 396: the user walks into robot-5, which presses robot-6 against robot-2: the last contact is no
+    robot's doing either (the judge excused only the robots the user touched himself)."""
+    result, world = _replay("seed-1-case-396-no_contact.toml", tmp_path / "run")
+    chained = [
+        tick["t_us"]
+        for tick in world
+        if {("robot-2", "robot-6"), ("robot-5", "robot-6"), ("robot-5", "user")}
+        <= {tuple(p) for p in tick.get("contacts", [])}
+    ]
+    assert chained  # the user, robot-5, robot-6 and robot-2 touching in a row
+    assert result["ok"], result["failures"]
