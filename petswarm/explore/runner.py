@@ -17,8 +17,7 @@ from typing import Any
 
 from petswarm.explore.properties import Record, judge
 from petswarm.lab.digest import record_digest
-from petswarm.lab.model_run import execute
-from petswarm.lab.run import RunOptions
+from petswarm.lab.model_run import execute, scenario_options
 from petswarm.scenario import parse
 
 
@@ -29,15 +28,7 @@ def run_case(data: dict[str, Any], seed: int, family: str, *, keep: Path | None 
     started = time.process_time()
     workdir = Path(tempfile.mkdtemp(prefix="petswarm-explore-"))
     record_dir = keep if keep is not None else workdir / "record"
-    opts = RunOptions(
-        robots=scenario.robot_count,
-        seed=seed,
-        duration=scenario.duration_s,
-        ping_interval=0.0,
-        record_dir=str(record_dir),
-        as_json=True,
-        clock="model",
-    )
+    opts = scenario_options(scenario, seed, record_dir)
     crash = None
     summary: dict[str, Any] = {}
     try:

@@ -415,6 +415,20 @@ def run_model(opts: RunOptions, scenario: Scenario | None) -> int:
     return 0 if summary["ok"] else 1
 
 
+def scenario_options(scenario: Scenario, seed: int, record_dir: str | Path) -> RunOptions:
+    """``petswarm run SCENARIO --clock model --seed SEED --record DIR --json`` without pings: how the exploration
+    and the model-time tests run a scenario."""
+    return RunOptions(
+        robots=scenario.robot_count,
+        seed=seed,
+        duration=scenario.duration_s,
+        ping_interval=0.0,
+        record_dir=str(record_dir),
+        as_json=True,
+        clock="model",
+    )
+
+
 def execute(opts: RunOptions, scenario: Scenario | None) -> dict[str, Any]:
     """Run in model time and leave the record (``summary.json`` too, also when interrupted); the summary."""
     if scenario is not None:

@@ -45,10 +45,10 @@ from petswarm.lab.model_run import (
     cancel_leftovers,
     execute,
     robot_config_of,
+    scenario_options,
     start_robot,
     start_user,
 )
-from petswarm.lab.run import RunOptions
 from petswarm.managers.sequence import EventLog
 from petswarm.robot import DEFAULT_PAN, Robot, RobotConfig
 from petswarm.scenario import Scenario, UserPlan, load
@@ -237,15 +237,7 @@ def run_scenario(scenario: str | Path | Scenario, seed: int, record: Path, **cha
     loaded = scenario if isinstance(scenario, Scenario) else load(Path(scenario))
     if changes:
         loaded = replace(loaded, **changes)
-    opts = RunOptions(
-        robots=loaded.robot_count,
-        seed=seed,
-        duration=loaded.duration_s,
-        ping_interval=0.0,
-        record_dir=str(record),
-        as_json=True,
-        clock="model",
-    )
+    opts = scenario_options(loaded, seed, record)
     return execute(opts, loaded)
 
 
