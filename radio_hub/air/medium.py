@@ -416,7 +416,7 @@ class Medium:
         2011 8.2.7). ``overlap``: any transmission inside the interference disk."""
         if self._sinr:
             heard = [
-                (max(tx.start_us, start_us), min(tx.end_us, end_us), self._power_mw(tx.position, node.position))
+                (max(tx.start_us, start_us), min(tx.end_us, end_us), self._power_at(tx, node))
                 for tx in self._on_air_for(node, start_us, end_us)
             ]
             return any(power > self._ed_threshold_mw for _, _, power in _pieces(heard, start_us, end_us))
