@@ -352,8 +352,13 @@ def test_with_link_security_the_air_hijacks_fail_and_are_counted(make_air: Any, 
         time.sleep(0.3)
         session = air.cmd(1, "status")["swarm"]["session"]
         disperse = m.Disperse(session=session, slot_ms=4).encode()
-        rogue.send(Frame(FrameType.DATA, 21, swarm_pan, 2, swarm_pan, 1, disperse).encode())
-        time.sleep(1.0)
+        # one frame may be lost on the air (the swarm's own traffic, no ACK asked): send until one reaches robot 2
+        for seq in range(21, 41):
+            rogue.send(Frame(FrameType.DATA, seq, swarm_pan, 2, swarm_pan, 1, disperse).encode())
+            time.sleep(0.2)
+            if _security(air, 2)["unsecured"] > 0:
+                break
+        time.sleep(0.5)
         # a replay: a secured frame of robot 1 heard on the swarm's PAN, sent again
         heard = [msg.psdu for msg in rogue.heard if isinstance(msg, wire.Received)]
         secured_frames = [p for p in heard if Frame.decode(p).secured and Frame.decode(p).src == 1]
