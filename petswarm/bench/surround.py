@@ -70,10 +70,28 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--law",
-        choices=("paper", "improved", "both"),
+        choices=("paper", "improved", "safe", "both", "all"),
         default="paper",
-        help="the law the robots run, whatever the scenario file says: the paper's, the improved one "
-        "(docs/SURROUND.md), or each in turn (default %(default)s)",
+        help="the law the robots run, whatever the scenario file says: the paper's, the improved one, the safe one "
+        "(docs/SURROUND.md), paper and improved in turn (both), or all three in turn (default %(default)s)",
+    )
+    parser.add_argument(
+        "--train",
+        type=bounded(int, 0, 10000),
+        default=0,
+        help="run this many generated training courses instead of scenario files (model time; default 0)",
+    )
+    parser.add_argument(
+        "--test",
+        type=bounded(int, 0, 10000),
+        default=0,
+        help="run this many generated test courses instead of scenario files (model time; default 0)",
+    )
+    parser.add_argument(
+        "--first-course",
+        type=bounded(int, 0, 1000000),
+        default=0,
+        help="index of the first course of each set (default 0)",
     )
     parser.add_argument(
         "--clock",
@@ -100,6 +118,8 @@ def bench_surround(args: argparse.Namespace) -> int:
     from petswarm.bench.surround_sim import surround_figures
     from petswarm.scenario import load
 
+    if args.train or args.test:
+        return bench_courses(args)
     results: dict[str, Any] = {"first_seed": args.seed, "laws": _laws(args.law), "clock": args.clock, "runs": {}}
     try:  # every file is read before the long runs start
         scenarios = [load(path) for path in args.scenarios]
@@ -139,7 +159,27 @@ def bench_surround(args: argparse.Namespace) -> int:
 
 
 def _laws(choice: str) -> list[str]:
-    return ["paper", "improved"] if choice == "both" else [choice]
+    return {"both": ["paper", "improved"], "all": ["paper", "improved", "safe"]}.get(choice, [choice])
+
+
+def bench_courses(args: argparse.Namespace) -> int:
+    """Each law on ``--train`` training and ``--test`` test courses (``surround_bench_courses``): JSON, table and
+    plot (``bench_surround_courses``). Exit code 0: every run finished (the bounds are figures, not a verdict)."""
+    from petswarm.bench import surround_bench_courses as courses
+
+    if args.clock != "model":
+        print("petswarm bench surround: generated courses run in model time only (--clock model)", file=sys.stderr)
+        return 2
+    laws = _laws(args.law)
+    jobs = courses.course_jobs(args.train, args.test, laws, args.first_course)
+    runs = courses.run_all(jobs, args.jobs)
+    results: dict[str, Any] = {"laws": laws, "first_course": args.first_course, "runs": runs}
+    results["summary"] = courses.summarise(runs)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    save(results, out, "bench_surround_courses", courses.plot)
+    emit(courses.lines(results["summary"]), results, args.json)
+    return 0
 
 
 def with_law(scenario: Scenario, law: str) -> Scenario:
