@@ -47,7 +47,7 @@ else:
 MIN_RANGE_M = 0.02
 """Sensed points closer than this are taken to be this far: a point at the centre has no direction, and
 the repulsion Q / d^2 must stay finite (robots touch at 0.2 m, walls at 0.1 m, far above it)."""
-LAWS = ("paper", "improved")
+LAWS = ("paper", "improved", "safe")
 """The surround laws a robot can run (``SurroundConfig.law``)."""
 STILL_MPS = 1e-3
 """Below this speed the robot's own heading theta_v is undefined: the velocity factor of c_i is then 1/2."""
@@ -89,8 +89,9 @@ class SurroundConfig:
     drag: float = 0.3
     centroid_filter_s: float = 0.0
     law: str = "paper"
-    """Which law the robots run: ``paper`` (this module, the spec's) or ``improved`` (``surround_improved``,
-    beyond the paper: docs/SURROUND.md). The fields below are the improved law's only; the paper's ignores them."""
+    """Which law the robots run: ``paper`` (this module, the spec's), ``improved`` (``surround_improved``, beyond
+    the paper) or ``safe`` (``surround_safe``: the paper's forces under a safety filter; docs/SURROUND.md). The
+    fields below are the improved law's (the safe law reads the few its docstring names); the paper's ignores them."""
     pull_force: float = 1.5
     """Improved law: the pull (m/s^2) toward the human on a robot he left behind (farther than ``pull_radius_m``)."""
     pull_radius_m: float = 0.8

@@ -43,6 +43,7 @@ from petswarm.controllers.surround_commit import Commitment
 from petswarm.controllers.surround_free import FreeSpace
 from petswarm.controllers.surround_improved import ImprovedSurroundController
 from petswarm.controllers.surround_memory import EchoMemory
+from petswarm.controllers.surround_safe import SafeSurroundController
 from petswarm.controllers.surround_sensing import (
     BeaconTracker,
     SensingConfig,
@@ -105,7 +106,14 @@ class SurroundPilot:
     def __init__(self, config: SurroundDriverConfig) -> None:
         self.config = config
         improved = config.law.law == "improved"
-        self.controller = ImprovedSurroundController(config.law) if improved else SurroundController(config.law)
+        safe = config.law.law == "safe"
+        self.controller: SurroundController
+        if improved:
+            self.controller = ImprovedSurroundController(config.law)
+        elif safe:
+            self.controller = SafeSurroundController(config.law, config.person_radius_m)
+        else:
+            self.controller = SurroundController(config.law)
         self.tracker = BeaconTracker()
         self._command = (0.0, 0.0)
         self.engaged = False
@@ -134,7 +142,7 @@ class SurroundPilot:
                 law.commit_room > 0,
                 law.commit_arc_share,
             )
-        self._safety = SafetyStage(SAFETY_IMPROVED if improved else SAFETY)
+        self._safety = SafetyStage(SAFETY_IMPROVED if improved or safe else SAFETY)
         self._sensing = config.sensing
         self._last_us: int | None = None
         self._sweep_t_us = 0
@@ -253,11 +261,18 @@ class SurroundPilot:
                 radius = config.law.robot_radius_m
                 commit.step(points, explained, human, own, velocity, dt, radius, neighbours, others)
             vx, vy = controller.step_plain(neighbours, echoes, human, velocity, dt, own, others, walls, free, commit)
+        elif isinstance(controller, SafeSurroundController):
+            names, moving = tracker.names, tracker.velocities.tolist()
+            others = [v for name, v in zip(names, moving, strict=True) if name != config.human_id]
+            own = tracker.velocity_of(config.human_id)
+            walls = self._remember(sensors, tracker.names, tracker.positions, velocity, dt)[0]
+            vx, vy = controller.step_plain(neighbours, obstacles, human, velocity, dt, own, others, walls)
         else:
             vx, vy = controller.step_plain(neighbours, obstacles, human, velocity, dt)
         # the law's repulsion acts on IR estimates up to a sweep old; the ultrasonic ring is the last word
         angles, echo_ranges, receding = self._echoes.floats(sensors, ranges)
-        if isinstance(controller, ImprovedSurroundController) and config.law.safety_tracked > 0:
+        filtered = isinstance(controller, ImprovedSurroundController | SafeSurroundController)
+        if filtered and config.law.safety_tracked > 0:
             receding = self._tracked_receding(sensors, receding)
         vx, vy = self._safety.translation(vx, vy, angles, echo_ranges, receding)
         self._command = (vx, vy)
