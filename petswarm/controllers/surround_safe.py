@@ -134,6 +134,8 @@ class SafeSurroundController(SurroundController):
         if walker:
             lost *= _along_share(ux, uy, nx, ny)
         away = ux * nx + uy * ny - lost
+        if walker and away > 0:
+            away = 0.0  # he may stop at any step (a person stops within a stride): none of his speed away counts
         return nx, ny, away + self._stoppable(h)
 
     def _points(self, points: Sequence[Sequence[float]]) -> list[tuple[float, float, Constraint]]:
