@@ -21,8 +21,8 @@ Two parts (docs/SURROUND.md, "The safe law"):
    brakes no harder than a (the braking barrier of safety barrier certificates, Wang, Ames and Egerstedt 2017),
    and m holds the sensing error. The small QP (2 unknowns, a few dozen half-planes) is solved exactly: u_nom when
    it keeps every constraint, else the nearest of its projections on each boundary and each pair's corner that
-   keeps them all. When none does (a robot between the walking human and a slower robot ahead), the neighbours'
-   constraints are dropped first (obstacles and the human are hard), then the least-violating candidate is taken.
+   keeps them all. When none does (a robot between the walking human and a slower robot ahead), obstacles and the
+   human stay hard and the neighbours' constraints are all eased by the least common slack that leaves a velocity.
 
 The human's allowance a tau counts along his walk only (|cos| of the angle between his velocity and the line to
 the robot): a walker brakes along his walk, and the full allowance made every robot level with him back off.
@@ -43,6 +43,12 @@ SECTORS = 16
 robot: an echo's remembered arc is several points a few degrees apart, and each sector's nearest binds first."""
 TIGHT = 1e-9
 """A constraint whose slack at the solution is within this is active (and a candidate within it is allowed)."""
+
+EASE_MAX_MPS = 3.0
+"""The most the neighbours' constraints are eased by when no velocity keeps them all with the hard ones (m/s: twice
+the top speed, more than any two robots' closing)."""
+EASE_STEPS = 10
+"""Halvings of that range: the slack to 3 mm/s."""
 
 Constraint = tuple[float, float, float]
 """(nx, ny, limit): the command u must keep nx ux + ny uy <= limit."""
@@ -111,8 +117,11 @@ class SafeSurroundController(SurroundController):
             hard.append(row)
             hard_at.append(("obstacle", x, y))
         command = _nearest(nominal, [*soft, *hard])
-        if _excess(command, [*soft, *hard]) > TIGHT:  # no velocity keeps them all: the obstacles and he come first
-            command = _nearest(nominal, hard)
+        if soft and _excess(command, [*soft, *hard]) > TIGHT:
+            # no velocity keeps them all: the obstacles and he come first, and the neighbours' constraints are
+            # eased all by one slack, the least that leaves a velocity (each neighbour runs the same filter and
+            # gives way in turn)
+            command = _eased(nominal, soft, hard)
         command = _clip(command[0], command[1], c.max_speed_mps)
         self.active = [
             at
@@ -131,11 +140,13 @@ class SafeSurroundController(SurroundController):
         nx, ny = x / d, y / d
         h = d - touching - c.stop_margin_m
         lost = c.brake_mps2 * c.track_lag_s
+        away = ux * nx + uy * ny
         if walker:
-            lost *= _along_share(ux, uy, nx, ny)
-        away = ux * nx + uy * ny - lost
-        if walker and away > 0:
-            away = 0.0  # he may stop at any step (a person stops within a stride): none of his speed away counts
+            # he may stop at any step (a person stops within a stride): none of his speed away counts
+            away = min(away, 0.0)
+        elif away > 0:
+            # braking since its track saw it takes off its speed away, down to standing (not past: it brakes)
+            away = max(away - lost, 0.0)
         return nx, ny, away + self._stoppable(h)
 
     def _points(self, points: Sequence[Sequence[float]]) -> list[tuple[float, float, Constraint]]:
@@ -221,6 +232,24 @@ def _nearest(v: tuple[float, float], rows: list[Constraint]) -> tuple[float, flo
     if not everything:
         return v
     return min(everything, key=lambda cand: _excess(cand, rows))
+
+
+def _eased(v: tuple[float, float], soft: list[Constraint], hard: list[Constraint]) -> tuple[float, float]:
+    """The velocity nearest ``v`` keeping ``hard`` and every ``soft`` limit raised by the least common slack that
+    leaves one (to ``EASE_STEPS`` halvings of the slack's range; ``hard`` alone when even that fails)."""
+    low, high = 0.0, EASE_MAX_MPS
+    best = _nearest(v, hard)
+    if _excess(best, hard) > TIGHT:  # he and the obstacles alone leave no velocity: the one breaking them least
+        return best
+    for _ in range(EASE_STEPS):
+        mid = (low + high) / 2
+        eased = [(nx, ny, limit + mid) for nx, ny, limit in soft]
+        u = _nearest(v, [*eased, *hard])
+        if _excess(u, [*eased, *hard]) <= TIGHT:
+            best, high = u, mid
+        else:
+            low = mid
+    return best
 
 
 def _clip(x: float, y: float, limit: float) -> tuple[float, float]:
