@@ -45,14 +45,18 @@ def test_nothing_near_leaves_the_nominal_command_as_it_is() -> None:
 def test_a_still_neighbour_ahead_is_closed_on_no_faster_than_the_robot_can_stop() -> None:
     """Driving at 1 m/s toward a still neighbour 0.3 m ahead (centres), the command's speed toward it is the
     barrier's s(h), h the gap beyond touching and the margin: the robot stops short, and the neighbour's constraint
-    is the active one. Sideways motion is left alone."""
+    is the active one. Sideways motion is left alone. Moving away at 0.5 m/s, it may be closed on faster, by its
+    speed less what braking over the track's lag takes off it."""
     law = SafeSurroundController(CONFIG)
     # the human far ahead pulls the robot on; a neighbour 0.3 m ahead stands in its way
     u = law.step_plain([[0.3, 0.0]], [], [2.0, 0.5], (1.0, 0.3), 0.04, (1.0, 0.3), [(0.0, 0.0)], [])
     h = 0.3 - 2 * CONFIG.robot_radius_m - CONFIG.stop_margin_m
-    lost = CONFIG.brake_mps2 * CONFIG.track_lag_s
-    assert u[0] == pytest.approx(_stoppable(h) - lost, abs=1e-9)
+    assert u[0] == pytest.approx(_stoppable(h), abs=1e-9)
     assert u[1] > 0.2 and law.active == [("neighbour", 0.3, 0.0)]
+    law = SafeSurroundController(CONFIG)
+    u = law.step_plain([[0.3, 0.0]], [], [2.0, 0.5], (1.0, 0.3), 0.04, (1.0, 0.3), [(0.5, 0.0)], [])
+    lost = CONFIG.brake_mps2 * CONFIG.track_lag_s
+    assert u[0] == pytest.approx(0.5 - lost + _stoppable(h), abs=1e-9)
 
 
 def test_a_remembered_wall_point_in_a_blind_gap_stops_the_robot_short() -> None:
