@@ -103,14 +103,6 @@ class SurroundConfig:
     lead_s: float = 0.8
     """Improved law: the pull aims at where the human will be this much later (his position plus his velocity
     times it), not where he is."""
-    lead_fade_from_m: float = 0.6
-    """Improved law: a robot further than this ahead of the walking human (along his walk) gets less of the lead,
-    and none ``lead_fade_m`` further on: the robots far ahead of him wait for him rather than run on."""
-    lead_fade_m: float = 0.0
-    """Improved law: the distance over which the lead fades out ahead of the human; 0 (the default): it never
-    fades. An experiment (docs/SURROUND.md, item 9): 0.6 removed the corridor's robot-human contacts and tears
-    but not its contacts at the walls' ends (3 of 20 seeds meet all four bounds either way) and took the cylinder
-    from 20 to 18 of 20."""
     brake_mps2: float = 1.5
     """Improved law: the deceleration a robot counts on to stop; an obstacle point (a wall, the human's body) is
     repelled as if it were nearer by the distance braking from the robot's speed toward it takes."""
@@ -134,54 +126,6 @@ class SurroundConfig:
     track_lag_s: float = 0.1
     """Improved law: how far a tracked body's IR velocity lags its own (a 20 Hz sweep, the track's filter): in that
     time a neighbour ahead may have braked, so the robot counts on its being that much slower."""
-    free_space_brake_mps2: float = 0.0
-    """Improved law: the free-space rule (``surround_free``, an experiment; docs/SURROUND.md, item 10): a robot's
-    speed along its command is held to what stops, braking at this, within the space it has evidence is free. 0
-    (the default): off. 3.0 took the corridor's seeds 1-10 from 1 to 3 of 10 meeting all four bounds but its
-    seeds 11-20 did not follow (docs/RESULTS.md); 1.5 (the robot's real braking is 2) held the swarm back."""
-    free_space_memory_s: float = 0.5
-    """Improved law: how long a ring reading's free beams count as evidence for the free-space rule."""
-    free_space_near_m: float = 1.0
-    """Improved law: the free-space rule acts only on a robot that heard an echo no tracked body explains (a wall)
-    this near in the last ``free_space_memory_s`` (0: always)."""
-    free_space_gap_share: float = 0.0
-    """Improved law: for the free-space rule a point in a blind gap between two cones counts as free nearer than
-    the nearer of their echoes over this (0: any point in a gap counts as free; 1.5 held the swarm back)."""
-    free_space_band_m: float = 0.3
-    """Improved law: the free-space rule acts only on a robot further than this across the walking human's line
-    (his track's position and velocity): those in his lane follow where he and the robots ahead of them went
-    (0: on every robot; on every robot the swarm fell behind him, its centre 0.84-1.15 m off at the median)."""
-    commit_gain: float = 0.0
-    """Improved law: the flank commitment (``surround_commit``, an experiment; docs/SURROUND.md, item 11): the
-    lateral spring (/s^2) that takes a robot off the walking human's lane to the side of a wall point ahead it
-    committed to (OUT round the wall or IN behind him). 0 (the default): off."""
-    commit_reach_m: float = 1.2
-    """Improved law: a wall echo this near (from the robot's centre) can make a flank robot commit."""
-    commit_band_m: float = 0.3
-    """Improved law: only robots further than this across the walking human's line commit."""
-    commit_margin_m: float = 0.08
-    """Improved law: beyond its radius, how far outside (OUT) or inside (IN) the wall point's line a committed
-    robot keeps its centre."""
-    commit_from_m: float = 0.5
-    """Improved law: a flank robot commits only on a wall echo at least this far off (nearer ones refine it)."""
-    commit_follow_mps: float = 0.0
-    """Improved law: with > 0, a flank robot whose way ahead a neighbour hides commits to the side that neighbour
-    swerves to across the human's walk, faster than this (m/s) relative to him (0: off)."""
-    commit_lateral_mps: float = 0.0
-    """Improved law: with > 0, a committed robot not yet on its side moves across toward it at least this fast
-    (a rule with the neighbours' stop rules, which it gives way to; 0: the spring alone)."""
-    commit_room: float = 0.0
-    """Improved law: with > 0, a flank robot whose chosen side a neighbour blocks (level with it, across on that
-    side) takes the other side."""
-    commit_arc_share: float = 0.0
-    """Improved law: a committed robot clears its side by this share of the echo's arc besides (its range times
-    sin 15 degrees: the point may lie that far across its cone's axis); 0: the point on the axis alone."""
-    commit_hold_s: float = 1.5
-    """Improved law: a commitment lapses this long after the wall was last heard (or once the robot is past it)."""
-    commit_brake_mps2: float = 0.0
-    """Improved law: with > 0, a committed robot not yet on its side has its speed along the human's walk held
-    to what stops, braking at this, short of the wall point's line across his walk (0: the spring alone)."""
-
     lane_gain: float = 12.0
     """Improved law: the walking lane (docs/SURROUND.md, item 12): while the human walks, a lateral spring (/s^2) on
     the part of a robot's offset from his line (his tracked position along his tracked velocity) beyond

@@ -44,8 +44,6 @@ import math
 from collections.abc import Sequence
 
 from petswarm.controllers.surround import MIN_RANGE_M, SurroundConfig, SurroundController
-from petswarm.controllers.surround_commit import Commitment
-from petswarm.controllers.surround_free import FreeSpace
 
 WALL_MARGIN_M = 0.04
 """The wall rule's gap kept in hand beyond touching: a remembered point is an arc's, up to its chord off the
@@ -87,16 +85,12 @@ class ImprovedSurroundController(SurroundController):
         human_velocity: Sequence[float] | None = None,
         neighbour_velocities: Sequence[Sequence[float]] | None = None,
         walls: Sequence[Sequence[float]] = (),
-        free: FreeSpace | None = None,
-        commit: Commitment | None = None,
     ) -> tuple[float, float]:
         """The velocity command; as the paper's ``step_plain``, with the human's own velocity ``human_velocity``
         (his tracked beacon's, in this robot's frame; None when unknown), the neighbours' own velocities
         ``neighbour_velocities`` (their tracks', in the order of ``neighbours``; None: taken to be still) and the
         obstacle points the robot must pass or stop short of, ``walls`` (``surround_memory.EchoMemory``'s:
-        heard earlier, now in a blind gap or behind a neighbour); ``free``, what the robot knows is free
-        (``surround_free.FreeSpace``; None: the free-space rule is off); ``commit``, the robot's flank commitment
-        (``surround_commit.Commitment``, stepped; None: off)."""
+        heard earlier, now in a blind gap or behind a neighbour)."""
         distances, near, g, f_r = self._centring(neighbours, dt)
         c = self.config
         moving = neighbour_velocities if neighbour_velocities is not None else [(0.0, 0.0)] * len(neighbours)
@@ -110,13 +104,10 @@ class ImprovedSurroundController(SurroundController):
         if c.lane_gain > 0:
             f_l = self._lane(human, human_velocity, dt)
             f_p = (f_p[0] + f_l[0], f_p[1] + f_l[1])
-        if commit is not None:
-            f_c = commit.force()
-            f_p = (f_p[0] + f_c[0], f_p[1] + f_c[1])
         self._forces = (f_r, f_o, f_p)
         force = (f_r[0] + f_o[0] + f_p[0], f_r[1] + f_o[1] + f_p[1])
         command = self._matched_command(force, velocity, human if human is None else human_velocity, dt)
-        return self._stoppable(command, neighbours, moving, human, human_velocity, walls, free, commit)
+        return self._stoppable(command, neighbours, moving, human, human_velocity, walls)
 
     def _stoppable(
         self,
@@ -126,8 +117,6 @@ class ImprovedSurroundController(SurroundController):
         human: Sequence[float] | None,
         human_velocity: Sequence[float] | None,
         walls: Sequence[Sequence[float]] = (),
-        free: FreeSpace | None = None,
-        commit: Commitment | None = None,
     ) -> tuple[float, float]:
         """The command with its speed toward each tracked body and wall point cut to what still stops short of it.
 
@@ -142,9 +131,7 @@ class ImprovedSurroundController(SurroundController):
         c = self.config
         touching = 2 * c.robot_radius_m
         rules = [self._stop_rule(x, y, ux, uy, touching) for (x, y), (ux, uy) in zip(neighbours, moving, strict=True)]
-        if commit is not None:  # with the neighbours' rules: dropped with them when no velocity keeps all
-            rules.append(commit.lateral_rule())
-        if c.lane_gain > 0 and c.lane_rate > 0:  # likewise
+        if c.lane_gain > 0 and c.lane_rate > 0:  # with the neighbours' rules: dropped with them when none keeps all
             rules.append(self._lane_rule(human, human_velocity))
         if c.lane_gain > 0 and c.wake_rate > 0:  # likewise
             rules.append(self._wake_rule(neighbours, human, human_velocity))
@@ -155,14 +142,6 @@ class ImprovedSurroundController(SurroundController):
                 human[0], human[1], hvx, hvy, c.human_clearance_m + c.robot_radius_m, c.human_margin_m, walker=True
             )
         fixed = self._wall_rules(walls, command)
-        unknown = None
-        if free is not None and self._off_his_lane(human, human_velocity):
-            unknown = free.rule(command, c.robot_radius_m)
-        if unknown is not None:
-            fixed.append(unknown)
-        held = None if commit is None else commit.rule()
-        if held is not None:
-            fixed.append(held)
         kept = [rule for rule in (*rules, *fixed, his) if rule is not None]
         vx, vy = _nearest_allowed(command, kept)
         if his is not None and _excess((vx, vy), [his]) > 1e-9:
@@ -172,18 +151,6 @@ class ImprovedSurroundController(SurroundController):
             if _excess((vx, vy), [his]) > 1e-9:
                 vx, vy = _nearest_allowed(command, [his])
         return _clip(vx, vy, c.max_speed_mps)
-
-    def _off_his_lane(self, human: Sequence[float] | None, human_velocity: Sequence[float] | None) -> bool:
-        """Whether the free-space rule acts on this robot: further than ``free_space_band_m`` across the line of the
-        walking human (or always, with a band of 0, or when he is not seen walking)."""
-        band = self.config.free_space_band_m
-        if band <= 0 or human is None or human_velocity is None:
-            return True
-        speed = math.sqrt(human_velocity[0] ** 2 + human_velocity[1] ** 2)
-        if speed < 0.3:
-            return True
-        across = abs(human[0] * human_velocity[1] - human[1] * human_velocity[0]) / speed
-        return across > band
 
     def _wall_rules(
         self, walls: Sequence[Sequence[float]], command: tuple[float, float]
@@ -438,12 +405,11 @@ class ImprovedSurroundController(SurroundController):
         return sign * nx, sign * ny, his + c.wake_rate * (abs(theirs) - abs(across))
 
     def _aim(self, human: Sequence[float] | None, human_velocity: Sequence[float] | None) -> Sequence[float] | None:
-        """Where the pull aims: the human, led by ``lead_s`` of his velocity when it is known, less of it the
-        further the robot is ahead of him (``_lead_share``)."""
+        """Where the pull aims: the human, led by ``lead_s`` of his velocity when it is known (less of it for a
+        robot level with him while the walking lane holds)."""
         lead = self.config.lead_s
         if human is None or human_velocity is None or lead <= 0:
             return human
-        lead *= self._lead_share(human, human_velocity)
         c = self.config
         if (c.lane_level_lead < 1.0 or c.lane_outer_level_lead < 1.0) and self._lane_share > 0:
             speed = math.sqrt(human_velocity[0] ** 2 + human_velocity[1] ** 2)
@@ -465,18 +431,6 @@ class ImprovedSurroundController(SurroundController):
         (``lane_out_m``): pushed out to the outer lane, not drawn in."""
         out = self.config.lane_out_m
         return out > half and across > (half + out) / 2
-
-    def _lead_share(self, human: Sequence[float], human_velocity: Sequence[float]) -> float:
-        """How much of the lead a robot gets: all of it up to ``lead_fade_from_m`` ahead of the walking human (along
-        his walk), none ``lead_fade_m`` further on. Beyond the paper: with the full lead the robots far ahead of
-        him in the corridor were pulled on to where he would be while the walls held those behind him back, and
-        the swarm tore (seeds 3 and 5); those just ahead of him keep it, as he walks into them otherwise."""
-        c = self.config
-        speed = math.sqrt(human_velocity[0] ** 2 + human_velocity[1] ** 2)
-        if c.lead_fade_m <= 0 or not speed > 0:
-            return 1.0
-        ahead = -(human[0] * human_velocity[0] + human[1] * human_velocity[1]) / speed
-        return min(1.0, max(0.0, 1.0 - (ahead - c.lead_fade_from_m) / c.lead_fade_m))
 
     def _still(self, human_velocity: Sequence[float] | None, dt: float) -> float:
         """The extra centring once the human has stopped: ``still_centring`` times a share ramped toward 1 over

@@ -39,8 +39,6 @@ from petswarm.controllers.driving import EchoRanges
 from petswarm.controllers.motion import DriveLimits
 from petswarm.controllers.pet_controller import PetControllerConfig, SafetyStage
 from petswarm.controllers.surround import SurroundConfig, SurroundController
-from petswarm.controllers.surround_commit import Commitment
-from petswarm.controllers.surround_free import FreeSpace
 from petswarm.controllers.surround_improved import ImprovedSurroundController
 from petswarm.controllers.surround_memory import EchoMemory
 from petswarm.controllers.surround_safe import SafeSurroundController
@@ -121,27 +119,6 @@ class SurroundPilot:
         self.counters = {"steps": 0, "stale_steps": 0, "human_seen": 0, "echoes_dropped": 0, "beacons": 0}
         self._echoes = EchoRanges()
         self._memory = EchoMemory()
-        law = config.law
-        self._free = None
-        if improved and law.free_space_brake_mps2 > 0:  # off by default: no work on the hot path then
-            self._free = FreeSpace(
-                law.free_space_memory_s, law.free_space_brake_mps2, law.free_space_near_m, law.free_space_gap_share
-            )
-        self._commit = None
-        if improved and (law.commit_gain > 0 or law.commit_brake_mps2 > 0):  # off by default
-            self._commit = Commitment(
-                law.commit_gain,
-                law.commit_reach_m,
-                law.commit_band_m,
-                law.commit_margin_m,
-                law.commit_hold_s,
-                law.commit_brake_mps2,
-                law.commit_from_m,
-                law.commit_follow_mps,
-                law.commit_lateral_mps,
-                law.commit_room > 0,
-                law.commit_arc_share,
-            )
         self._safety = SafetyStage(SAFETY_IMPROVED if improved or safe else SAFETY)
         self._sensing = config.sensing
         self._last_us: int | None = None
@@ -252,20 +229,13 @@ class SurroundPilot:
             # the improved law keeps off the human's body itself (his centre and velocity): his surface point,
             # which sensing put last among the obstacles, is left out
             echoes = obstacles if human is None else obstacles[:-1]
-            walls, explained, points = self._remember(sensors, tracker.names, tracker.positions, velocity, dt)
-            free = None
-            if self._free is not None:
-                free = self._free_space(sensors, names, tracker.positions.tolist(), moving, velocity, dt, explained)
-            commit = self._commit
-            if commit is not None:
-                radius = config.law.robot_radius_m
-                commit.step(points, explained, human, own, velocity, dt, radius, neighbours, others)
-            vx, vy = controller.step_plain(neighbours, echoes, human, velocity, dt, own, others, walls, free, commit)
+            walls = self._remember(sensors, tracker.names, tracker.positions, velocity, dt)
+            vx, vy = controller.step_plain(neighbours, echoes, human, velocity, dt, own, others, walls)
         elif isinstance(controller, SafeSurroundController):
             names, moving = tracker.names, tracker.velocities.tolist()
             others = [v for name, v in zip(names, moving, strict=True) if name != config.human_id]
             own = tracker.velocity_of(config.human_id)
-            walls = self._remember(sensors, tracker.names, tracker.positions, velocity, dt)[0]
+            walls = self._remember(sensors, tracker.names, tracker.positions, velocity, dt)
             vx, vy = controller.step_plain(neighbours, obstacles, human, velocity, dt, own, others, walls)
         else:
             vx, vy = controller.step_plain(neighbours, obstacles, human, velocity, dt)
@@ -321,38 +291,14 @@ class SurroundPilot:
 
     def _remember(
         self, sensors: OwnSensors, names: list[str], positions: np.ndarray, velocity: tuple[float, float], dt: float
-    ) -> tuple[list[tuple[float, float]], list[bool], list[tuple[float, float]]]:
-        """The echo memory's step (``surround_memory``): the wall points the law must stop short of, per echo
-        whether a tracked body explains it, and the echo points (from the robot's centre; nan for none)."""
+    ) -> list[tuple[float, float]]:
+        """The echo memory's step (``surround_memory``): the wall points the law must stop short of or pass."""
         ranges = sensors.ranges_list()
         cos, sin = self._ring(sensors.angles_rad)
         radius = self.config.law.robot_radius_m
         points = [(c * (radius + r), s * (radius + r)) for r, c, s in zip(ranges, cos, sin, strict=True)]
         explained = explained_echoes(points, names, positions, self.config.human_id, self._sensing)
-        return self._memory.step(ranges, cos, sin, explained, velocity, dt, radius), explained, points
-
-    def _free_space(
-        self,
-        sensors: OwnSensors,
-        names: list[str],
-        positions: list[list[float]],
-        moving: list[list[float]],
-        velocity: tuple[float, float],
-        dt: float,
-        explained: list[bool],
-    ) -> FreeSpace:
-        """The free-space rule's step (``surround_free``), with the rule on."""
-        free = self._free
-        assert free is not None
-        radius = self.config.law.robot_radius_m
-        person = self.config.person_radius_m
-        human_id = self.config.human_id
-        bodies = [
-            (x, y, vx, vy, person if name == human_id else radius)
-            for name, (x, y), (vx, vy) in zip(names, positions, moving, strict=True)
-        ]
-        free.step(sensors.ranges_list(), *self._ring(sensors.angles_rad), velocity, dt, radius, bodies, explained)
-        return free
+        return self._memory.step(ranges, cos, sin, explained, velocity, dt, radius)
 
     def _ring(self, angles_rad: np.ndarray) -> tuple[list[float], list[float]]:
         """The cosines and sines of the ultrasonic sensors' angles, worked out again only when the ring changes."""

@@ -17,7 +17,6 @@ from petswarm.lab.surround_plots import is_surround_run, snapshot_instants
 from petswarm.scenario import _surround
 
 IMPROVED = SurroundConfig(law="improved")
-FADING = SurroundConfig(law="improved", lead_fade_m=0.6)
 DT = 0.04
 
 
@@ -59,23 +58,6 @@ def test_a_robot_the_human_left_behind_is_pulled_to_him_harder_than_one_beside_h
     v_near = near.step_plain([], [], (0.85, 0.0), (0.0, 0.0), DT, human_velocity=(0.0, 0.0))
     assert v_far[0] > v_near[0] > 0
     assert abs(v_far[1]) < 1e-12
-
-
-def test_a_robot_far_ahead_of_the_walking_human_waits_for_him_rather_than_being_pulled_on() -> None:
-    """The lead fades far ahead of him: with the full lead a robot 1.3 m ahead of him is pulled on toward where he
-    will be (the corridor's swarm tore between those far ahead of him and those the walls held back)."""
-    unfaded = IMPROVED  # the shipped default: the lead never fades
-    his_velocity = (1.0, 0.0)  # he walks toward the robot at 1 m/s
-
-    def command(config: SurroundConfig, he: tuple[float, float]) -> tuple[float, float]:
-        return ImprovedSurroundController(config).step_plain([], [], he, (1.0, 0.0), DT, human_velocity=his_velocity)
-
-    # 1.3 m ahead of him it slows for him to come up (the spring draws it back); unfaded it kept his pace further on
-    assert command(FADING, (-1.3, 0.0))[0] < command(unfaded, (-1.3, 0.0))[0] - 0.05
-    # just ahead of him, level with him or behind him the lead is whole: he would walk into the robots ahead of him,
-    # and the swarm ends round him, not behind
-    for he in ((-0.5, 0.0), (0.0, 0.7), (0.9, 0.0)):
-        assert command(FADING, he) == command(unfaded, he)
 
 
 def test_closing_on_an_obstacle_point_repels_harder_than_standing_off_it() -> None:
@@ -335,154 +317,6 @@ def test_a_wall_beside_a_robot_leaves_no_remembered_point_nearer_than_itself() -
     assert points and all(y <= -0.2 + 0.01 for _, y in points)  # none off the wall, toward the robot's path
     law = ImprovedSurroundController(IMPROVED)
     assert law.step_plain([], [], None, (1.0, 0.0), DT, walls=points)[0] > 0.95
-
-
-def test_the_free_space_rule_holds_a_robot_to_the_space_it_knows_is_free() -> None:
-    """Free-space reasoning (beyond the paper): in the open nothing holds a robot; a neighbour's echo 0.1 m ahead
-    hides what lies beyond it, so the robot may go only as fast as stops short of the first point past it that no
-    beam has heard free and no tracked body has swept; a beam that heard the way ahead empty a moment earlier
-    counts as evidence."""
-    from petswarm.controllers.surround_free import LATE_S, MARGIN_M, FreeSpace
-
-    cos, sin = _cones()
-    nothing = [math.nan] * 8
-    open_field = FreeSpace(memory_s=0.5, brake_mps2=1.5, gap_share=1.5)
-    open_field.step(nothing, cos, sin, (1.0, 0.0), DT, 0.1, [])
-    assert open_field.rule((1.0, 0.0), 0.1) is None
-    # a neighbour standing 0.3 m ahead (its surface 0.1 m off the skin), first heard now
-    neighbour = [(0.3, 0.0, 0.0, 0.0, 0.1)]
-    hidden = [0.1, *[math.nan] * 7]
-    masked = FreeSpace(memory_s=0.5, brake_mps2=1.5, gap_share=1.5)
-    masked.step(hidden, cos, sin, (1.0, 0.0), DT, 0.1, neighbour)
-    rule = masked.rule((1.0, 0.0), 0.1)
-    assert rule is not None and rule[:2] == (1.0, 0.0)
-    u = rule[2]
-    # it stops within the 0.1 m it knows of on its centre line (the first unknown point: 0.2 m, its radius on)
-    assert u > 0 and u * LATE_S + u * u / (2 * 1.5) <= 0.1 - MARGIN_M + 1e-9
-    # the same, but its ring heard the way ahead empty a step earlier (and the blind gaps count as free)
-    seen = FreeSpace(memory_s=0.5, brake_mps2=1.5, gap_share=0.0)
-    seen.step(nothing, cos, sin, (1.0, 0.0), DT, 0.1, [])
-    seen.step(hidden, cos, sin, (1.0, 0.0), DT, 0.1, neighbour)
-    assert seen.rule((1.0, 0.0), 0.1) is None
-    # without that earlier reading the same blind-gap setting still holds it
-    unseen = FreeSpace(memory_s=0.5, brake_mps2=1.5, gap_share=0.0)
-    unseen.step(hidden, cos, sin, (1.0, 0.0), DT, 0.1, neighbour)
-    assert unseen.rule((1.0, 0.0), 0.1) is not None
-
-
-def test_the_free_space_rule_acts_near_a_wall_heard_and_off_the_walking_humans_lane() -> None:
-    from petswarm.controllers.surround_free import FreeSpace
-
-    cos, sin = _cones()
-    hidden = [0.1, *[math.nan] * 7]
-    neighbour = [(0.3, 0.0, 0.0, 0.0, 0.1)]
-    # no echo but the neighbour's (explained) within near_m: the rule does not act
-    calm = FreeSpace(memory_s=0.5, brake_mps2=1.5, near_m=1.0)
-    calm.step(hidden, cos, sin, (1.0, 0.0), DT, 0.1, neighbour, [True, *[False] * 7])
-    assert calm.rule((1.0, 0.0), 0.1) is None
-    # a wall heard 0.5 m off to the side: it does
-    wall = [0.1, *[math.nan] * 5, 0.4, math.nan]
-    near = FreeSpace(memory_s=0.5, brake_mps2=1.5, near_m=1.0)
-    near.step(wall, cos, sin, (1.0, 0.0), DT, 0.1, neighbour, [True, *[False] * 7])
-    assert near.rule((1.0, 0.0), 0.1) is not None
-    law = ImprovedSurroundController(SurroundConfig(law="improved", free_space_band_m=0.3))
-    walking = (1.0, 0.0)
-    assert not law._off_his_lane((0.5, 0.2), walking)  # 0.2 m across his line: in his lane
-    assert law._off_his_lane((0.5, 0.45), walking)
-    assert law._off_his_lane((0.5, 0.2), (0.1, 0.0))  # he is not walking: every robot
-    assert ImprovedSurroundController(SurroundConfig(law="improved", free_space_band_m=0.0))._off_his_lane(
-        (0.5, 0.2), walking
-    )
-
-
-def test_a_flank_robot_that_hears_a_wall_ahead_commits_out_or_in_and_holds_it() -> None:
-    """Flank commitment (beyond the paper): the human walks along +x; a wall's end 1 m ahead, 0.6 m to his left.
-    A robot further left than the end commits OUT (pushed further left), one between him and the end IN (pushed
-    toward his line); the choice holds while the end goes unheard (masked, in a blind gap) and lapses past it."""
-    from petswarm.controllers.surround_commit import IN, OUT, Commitment
-
-    nothing = [(math.nan, math.nan)] * 8
-
-    def committed(robot_y: float) -> Commitment:
-        commitment = Commitment(gain=8.0, reach_m=1.2, band_m=0.3, margin_m=0.08, hold_s=1.5, brake_mps2=1.5)
-        human = (0.0, -robot_y)  # in the robot's frame: he walks along y = 0 of the world
-        end = [(1.0, 0.6 - robot_y), *nothing[1:]]
-        commitment.step(end, [False] * 8, human, (1.0, 0.0), (1.0, 0.0), DT, 0.1)
-        return commitment
-
-    out, inside = committed(0.7), committed(0.5)
-    assert (out.mode, inside.mode) == (OUT, IN)
-    assert out.force()[1] > 0 and inside.force()[1] < 0  # away from his line / toward it
-    assert out.force()[0] == pytest.approx(0.0) and inside.force()[0] == pytest.approx(0.0)
-    # not yet on its side: its speed along his walk stops short of the end's line; once there, free
-    rule = out.rule()
-    assert rule is not None and rule[:2] == (1.0, 0.0) and 0 < rule[2] < 1.5
-    law = ImprovedSurroundController(IMPROVED)
-    held = law.step_plain([], [], (0.0, -0.7), (1.0, 0.0), DT, human_velocity=(1.0, 0.0), commit=out)
-    assert held[0] <= rule[2] + 1e-9
-    # the end goes unheard: the choice stands, the robot still carried toward its side
-    for _ in range(10):
-        out.step(nothing, [False] * 8, (0.0, -0.7), (1.0, 0.0), (0.5, 0.0), DT, 0.1)
-    assert out.mode == OUT and out.force()[1] > 0
-    # a robot in his lane, or with no wall heard, does not commit
-    lane = Commitment(gain=8.0, reach_m=1.2, band_m=0.3, margin_m=0.08, hold_s=1.5, brake_mps2=0.0)
-    lane.step([(1.0, 0.4), *nothing[1:]], [False] * 8, (0.0, -0.2), (1.0, 0.0), (1.0, 0.0), DT, 0.1)
-    assert lane.mode == 0 and lane.force() == (0.0, 0.0) and lane.rule() is None
-    # past the end along his walk, the commitment lapses
-    for _ in range(40):
-        out.step(nothing, [False] * 8, (0.0, -0.8), (1.0, 0.0), (1.0, 0.0), DT, 0.1)
-    assert out.mode == 0 and out.force() == (0.0, 0.0)
-
-
-def test_a_flank_robot_whose_way_a_neighbour_hides_takes_the_side_that_neighbour_swerves_to() -> None:
-    """The end hidden from the robot's ring by the neighbour just ahead in its file: that neighbour swerving toward
-    the human's line (it heard the end and went IN) makes the robot commit IN too; swerving away, OUT; a neighbour
-    beside the file, or one keeping its line, makes it commit to nothing."""
-    from petswarm.controllers.surround_commit import IN, OUT, Commitment
-
-    nothing = [(math.nan, math.nan)] * 8
-
-    def following(neighbour: tuple[float, float], its_velocity: tuple[float, float]) -> Commitment:
-        commitment = Commitment(8.0, 1.2, 0.3, 0.08, 1.5, 0.0, from_m=0.5, follow_mps=0.1)
-        human = (0.0, -0.5)  # walking along +x, 0.5 m to the robot's right
-        commitment.step(nothing, [False] * 8, human, (1.0, 0.0), (1.0, 0.0), DT, 0.1, [neighbour], [its_velocity])
-        return commitment
-
-    assert following((0.3, 0.0), (1.0, -0.2)).mode == IN
-    assert following((0.3, 0.0), (1.0, 0.2)).mode == OUT
-    assert following((0.3, 0.0), (1.0, 0.05)).mode == 0
-    assert following((0.3, 0.35), (1.0, -0.2)).mode == 0
-    inside = following((0.3, 0.0), (1.0, -0.2))
-    assert inside.force()[1] < 0 and inside.shortfall() == pytest.approx(0.18)
-
-
-def test_a_flank_robot_takes_the_other_side_when_a_neighbour_blocks_the_one_it_would_choose() -> None:
-    """Between the human and the wall's end (IN by position), but a neighbour level with it on the inside: with
-    ``room`` it commits OUT instead; without, IN as ever."""
-    from petswarm.controllers.surround_commit import IN, OUT, Commitment
-
-    nothing = [(math.nan, math.nan)] * 8
-    end = [(1.0, 0.1), *nothing[1:]]  # 0.6 m left of his line; the robot 0.5 m left of it
-    for room, chosen in ((False, IN), (True, OUT)):
-        commitment = Commitment(20.0, 1.2, 0.3, 0.08, 1.5, 0.0, from_m=0.5, room=room)
-        commitment.step(end, [False] * 8, (0.0, -0.5), (1.0, 0.0), (1.0, 0.0), DT, 0.1, [(0.05, -0.25)], [(1.0, 0.0)])
-        assert commitment.mode == chosen
-
-
-def test_a_committed_robot_clears_the_echos_arc_with_arc_share() -> None:
-    """The end heard on the cone's axis may lie up to its range times sin 15 degrees across it: with
-    ``arc_share = 1`` the robot's shortfall grows by that much, and narrows as nearer echoes refine the point."""
-    from petswarm.controllers.surround_commit import Commitment
-
-    nothing = [(math.nan, math.nan)] * 8
-    shortfalls = []
-    for share in (0.0, 1.0):
-        commitment = Commitment(20.0, 1.2, 0.3, 0.08, 1.5, 0.0, from_m=0.5, arc_share=share)
-        commitment.step([(1.0, 0.0), *nothing[1:]], [False] * 8, (0.0, -0.6), (1.0, 0.0), (1.0, 0.0), DT, 0.1)
-        shortfalls.append(commitment.shortfall())
-    assert shortfalls[1] - shortfalls[0] == pytest.approx(math.sin(math.radians(15.0)))
-    commitment.step([(0.6, 0.0), *nothing[1:]], [False] * 8, (0.0, -0.6), (1.0, 0.0), (0.0, 0.0), DT, 0.1)
-    assert commitment.shortfall() - shortfalls[0] == pytest.approx(0.6 * math.sin(math.radians(15.0)))
 
 
 def test_the_walking_lane_draws_a_robot_to_his_line_while_he_walks_and_lets_go_once_he_stops() -> None:
