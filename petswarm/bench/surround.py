@@ -107,6 +107,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="model-time runs at once, each in its own worker process (default %(default)s; the machine's cores "
         "is the most that helps). Every run is a function of its seed: the same figures and digests whatever this is",
     )
+    parser.add_argument(
+        "--snapshots",
+        action="store_true",
+        help="also the safe law's snapshot plot of the first scenario's first seed, each robot's active safety "
+        "constraints drawn (bench_surround_safe_snapshots.png)",
+    )
     parser.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
 
 
@@ -150,6 +156,14 @@ def bench_surround(args: argparse.Namespace) -> int:
         results["pure_simulation"] = surround_figures(args.seed)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    if args.snapshots:
+        from petswarm.bench.surround_snapshots import plot_active, record_active
+
+        print(f"[bench surround] {scenarios[0].name} seed {args.seed}: safe law snapshots", file=sys.stderr)
+        world, active, digest = record_active(scenarios[0], args.seed)
+        title = f"{scenarios[0].name}, safe law, seed {args.seed}: active safety constraints"
+        snapshots = plot_active(world, active, out / "bench_surround_safe_snapshots.png", title)
+        results["snapshots"] = {"png": str(snapshots), "seed": args.seed, "digest": digest}
     save(results, out, "bench_surround", plot)
     emit(table(results) + summary_lines(results["summary"]), results, args.json)
     failed = [run for laws in results["runs"].values() for runs in laws.values() for run in runs if not run["ok"]]

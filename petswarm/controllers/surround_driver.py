@@ -13,6 +13,7 @@ from __future__ import annotations
 import asyncio
 import contextvars
 import weakref
+from collections.abc import Callable
 from typing import Any
 
 from petswarm import clock
@@ -122,6 +123,9 @@ class SurroundTask:
     _of_loop: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, SurroundTask] = weakref.WeakKeyDictionary()
     together = True
     """Step the robots of one instant together (``surround_batch``); False: one by one (tests hold both equal)."""
+    observer: Callable[[float, list[SurroundDriver]], None] | None = None
+    """Called with the instant and the drivers just stepped together (model time): a bench reads their pilots
+    (``surround_snapshots``); it must change nothing."""
 
     def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
         self._loop = loop
@@ -221,6 +225,8 @@ class SurroundTask:
                     driver._execute_now(action)
             except Exception as err:  # this robot's error ends this robot's surround task, not the others'
                 self._members[driver].set_exception(err)
+        if SurroundTask.observer is not None:
+            SurroundTask.observer(now, [driver for driver, _, _ in ready])
 
     def _step(self, driver: SurroundDriver, now: float) -> None:
         stepped = self._members.get(driver)
