@@ -186,11 +186,11 @@ def bench_courses(args: argparse.Namespace) -> int:
         return 2
     laws = _laws(args.law)
     jobs = courses.course_jobs(args.train, args.test, laws, args.first_course)
-    runs = courses.run_all(jobs, args.jobs)
-    results: dict[str, Any] = {"laws": laws, "first_course": args.first_course, "runs": runs}
-    results["summary"] = courses.summarise(runs)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    runs = courses.run_all(jobs, args.jobs, out / "bench_surround_courses_runs.jsonl")
+    results: dict[str, Any] = {"laws": laws, "first_course": args.first_course, "runs": runs}
+    results["summary"] = courses.summarise(runs)
     save(results, out, "bench_surround_courses", courses.plot)
     emit(courses.lines(results["summary"]), results, args.json)
     return 0

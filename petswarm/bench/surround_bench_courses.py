@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import json
 import math
 import shutil
 import sys
@@ -90,11 +91,15 @@ def bounds(figures: dict[str, Any]) -> dict[str, bool]:
     return bounds_met(figures)
 
 
-def run_all(jobs: list[tuple[str, int, str]], workers: int) -> list[dict[str, Any]]:
-    """Every job's run, in order, with a progress line per run on stderr; ``workers`` > 1: forked worker processes."""
+def run_all(jobs: list[tuple[str, int, str]], workers: int, log: Path | None = None) -> list[dict[str, Any]]:
+    """Every job's run, in order, with a progress line per run on stderr; ``workers`` > 1: forked worker processes.
+    ``log``: each run is also appended to this JSON-lines file as it ends (a long bench stopped early keeps them)."""
     total = len(jobs)
 
     def told(k: int, run: dict[str, Any]) -> dict[str, Any]:
+        if log is not None:
+            with log.open("a") as out:
+                out.write(json.dumps(run) + "\n")
         met = run["bounds"]
         missed = ",".join(b for b in BOUND_NAMES if not met[b]) or "-"
         print(
