@@ -184,17 +184,21 @@ def _load() -> tuple[float, float, float]:
     return (round(one, 2), round(five, 2), round(fifteen, 2))
 
 
+ROOT = Path(__file__).resolve().parents[2]
+"""The checkout's top folder: the benches run there, so the scenario files they name (``scenarios/...``) are found
+from wherever ``bench all`` was started."""
+
+
 def run_one(figure: Figure, out: Path, quick: bool, timeout_s: float) -> Outcome:
     """Run one bench in a fresh process with its own ``--out`` folder; its table is what it printed."""
     folder = out / figure.name
     folder.mkdir(parents=True, exist_ok=True)
     args = [*(figure.quick if quick else figure.args), "--out", str(folder)]
     command = "petswarm bench " + shlex.join(args)
+    argv = [sys.executable, "-m", "cli", "bench", *args[:-1], str(folder.resolve())]
     before, start = _load(), time.monotonic()
     try:
-        done = subprocess.run(
-            [sys.executable, "-m", "cli", "bench", *args], capture_output=True, text=True, timeout=timeout_s
-        )
+        done = subprocess.run(argv, capture_output=True, text=True, timeout=timeout_s, cwd=ROOT)
         status, table = done.returncode, done.stdout
         if done.returncode != 0:
             table += "\n" + "\n".join(done.stderr.strip().splitlines()[-20:])
@@ -252,11 +256,17 @@ def write_index(out: Path, command: str, quick: bool, started: datetime, outcome
 
 
 def plan_markdown() -> list[str]:
-    """The commands ``bench all`` runs, full and quick, as a Markdown table (for the guide's figures page)."""
-    rows = ["| name | command | `--quick` | quoted in |", "|---|---|---|---|"]
+    """What ``bench all`` runs, one section per figure (the anchors the guide links to), full and quick."""
+    lines: list[str] = []
     for f in FIGURES:
-        rows.append(f"| `{f.name}` | `petswarm bench {shlex.join(f.args)}` | `{shlex.join(f.quick)}` | {f.quoted_in} |")
-    return rows
+        lines += [
+            f"## {f.name}",
+            "",
+            f"`petswarm bench {shlex.join(f.args)}` (quick: `petswarm bench {shlex.join(f.quick)}`), quoted in"
+            f" {f.quoted_in}.",
+            "",
+        ]
+    return lines
 
 
 def bench_all(options: AllOptions, progress: Callable[[str], None] | None = None) -> int:
