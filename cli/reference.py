@@ -305,6 +305,12 @@ def wire_markdown() -> str:
         f"Envelope version `v = {wire.WIRE_VERSION}`; a message is at most {wire.MAX_MESSAGE_BYTES:,} bytes, "
         f"{wire.MAX_UP_BYTES:,} from a node to the hub.",
         "",
+        f"**Batches.** {_md(' '.join((wire.encode_batch.__doc__ or '').split()))} A batch carries at most "
+        f"{wire.BATCH_MAX_PARTS} messages; its first byte tells it from a message (an array, not a map).",
+        "",
+        "The decisions behind the protocol (liveliness tokens, exclusive attaches, the session key) are in",
+        '[Design](../DESIGN.md), "Node <-> hub protocol".',
+        "",
         "## Keys",
         "",
         _md(" ".join((keys.__doc__ or "").split())),
