@@ -201,7 +201,7 @@ def scenario_markdown() -> str:
     """Every key a scenario file may hold, from the loader's key lists and the dataclasses its tables build."""
     from petswarm import scenario
     from petswarm.controllers.surround import SurroundConfig
-    from radio_hub.interface import MediumConfig
+    from radio_hub.config import MediumConfig
     from radio_hub.physics.ble import BleConfig
     from radio_hub.physics.lf import LfConfig
     from radio_hub.physics.light import IrConfig
