@@ -176,7 +176,7 @@ TOP_DOCS = {
 
 ROBOTS_DOCS = {
     "count": "Number of robots, 0-64 (ids 1..count).",
-    "formation": 'The driving formation a swarm takes: `"column"` (default) or another shape.',
+    "formation": "A label for people; a run does not act on it (a swarm's shape is the organize request's `shape`).",
     "positions": "`[x, y, heading_deg]` per robot id 1, 2, ...; robots not listed start on a grid.",
     "ping_interval": "Each robot pings this often (s) and answers the others (0: never).",
 }
