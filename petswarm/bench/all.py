@@ -270,7 +270,8 @@ def plan_markdown() -> list[str]:
 
 
 def bench_all(options: AllOptions, progress: Callable[[str], None] | None = None) -> int:
-    """Run the figures' benches in order; 0 when every one exited 0, else 1 (each outcome is in the index)."""
+    """Run the figures' benches in order; 0 when every one exited 0, else 1 (each outcome is in the index); 130 when
+    interrupted (Ctrl-C), with the index of the benches that finished."""
     say = progress or (lambda text: print(text, file=sys.stderr, flush=True))
     figures = select(options.only)
     options.out.mkdir(parents=True, exist_ok=True)
@@ -278,10 +279,17 @@ def bench_all(options: AllOptions, progress: Callable[[str], None] | None = None
     command = "petswarm bench all --out " + shlex.quote(str(options.out))
     command += " --quick" * options.quick + (f" --only {','.join(options.only)}" if options.only else "")
     outcomes: list[Outcome] = []
+    write_index(options.out, command, options.quick, started, outcomes)
     for i, figure in enumerate(figures, 1):
         args = figure.quick if options.quick else figure.args
         say(f"[bench all] {i}/{len(figures)} {figure.name}: petswarm bench {shlex.join(args)}")
-        outcome = run_one(figure, options.out, options.quick, options.timeout_s)
+        try:
+            outcome = run_one(figure, options.out, options.quick, options.timeout_s)
+        except KeyboardInterrupt:  # subprocess.run has stopped the bench; the page keeps what finished
+            say(
+                f"[bench all] interrupted during {figure.name}; {len(outcomes)} finished, in {options.out / 'index.md'}"
+            )
+            return 130
         say(f"[bench all] {figure.name}: exit {outcome.status} in {outcome.wall_s:g} s")
         outcomes.append(outcome)
         write_index(options.out, command, options.quick, started, outcomes)  # a stopped run keeps what it did
