@@ -61,3 +61,30 @@ def test_every_bench_of_the_command_line_is_in_the_plan_and_every_plan_parses() 
         for args in (figure.args, figure.quick):
             parsed = parser.parse_args(["bench", *args, "--out", "x"])
             assert parsed.bench == args[0]
+
+
+@pytest.mark.timeout(120)
+def test_bench_all_interrupted_keeps_what_finished_and_exits_130_in_one_line(tmp_path: Path) -> None:
+    import os
+    import signal
+    import time
+
+    out = tmp_path / "figures"
+    argv = [sys.executable, "-m", "cli", "bench", "all", "--quick", "--only", "ir,reaction", "--out", str(out)]
+
+    def own_group_with_default_sigint() -> None:  # as a terminal's foreground job: Ctrl-C reaches the group
+        os.setpgid(0, 0)
+        signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+    proc = subprocess.Popen(argv, stderr=subprocess.PIPE, text=True, cwd=ROOT, preexec_fn=own_group_with_default_sigint)
+    index = out / "index.md"
+    deadline = time.monotonic() + 90
+    while not (index.exists() and "## ir" in index.read_text()):  # the first bench done
+        assert time.monotonic() < deadline and proc.poll() is None, "the first bench never finished"
+        time.sleep(0.2)
+    time.sleep(1.0)  # the second bench (reaction, about 15 s) is under way
+    os.killpg(proc.pid, signal.SIGINT)
+    stderr = proc.communicate(timeout=60)[1]
+    assert proc.returncode == 130, stderr
+    assert "interrupted during reaction; 1 finished" in stderr and "Traceback" not in stderr
+    assert "## ir" in index.read_text() and "## reaction" not in index.read_text()
