@@ -23,6 +23,10 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+ROOT = Path(__file__).resolve().parents[2]
+"""The checkout's top folder: the benches run there, so the scenario files they name (``scenarios/...``) are found
+from wherever ``bench all`` was started."""
+
 
 @dataclass(frozen=True)
 class Figure:
@@ -169,7 +173,7 @@ def _commit() -> str:
             capture_output=True,
             text=True,
             timeout=10,
-            cwd=Path(__file__).resolve().parents[2],
+            cwd=ROOT,
         )
     except (OSError, subprocess.SubprocessError):
         return "unknown"
@@ -180,13 +184,9 @@ def _load() -> tuple[float, float, float]:
     try:
         one, five, fifteen = os.getloadavg()
     except OSError:
-        return (float("nan"),) * 3  # type: ignore[return-value]
+        nan = float("nan")  # no load average on this system
+        return (nan, nan, nan)
     return (round(one, 2), round(five, 2), round(fifteen, 2))
-
-
-ROOT = Path(__file__).resolve().parents[2]
-"""The checkout's top folder: the benches run there, so the scenario files they name (``scenarios/...``) are found
-from wherever ``bench all`` was started."""
 
 
 def run_one(figure: Figure, out: Path, quick: bool, timeout_s: float) -> Outcome:
