@@ -539,10 +539,12 @@ def no_contact(record: Record) -> list[Violation]:
 
 TARGET_DISTANCE_M = 1.0
 """The distance a following or leading robot keeps from its user (pet-bot-wearable.md, Controller)."""
-RUNAWAY_M = 0.2
+RUNAWAY_M = 0.5
 """How much a robot may open its distance to a user who stands (beyond the target) in ``RUNAWAY_WINDOW_S``:
-ten times the LF's ranging error at 2 m, more than a controller's hunting around its target."""
-RUNAWAY_WINDOW_S = 1.0
+the most it drives before it can know his side, 0.41 m (side_check.UNSURE_SPEED_MPS: the check's probe, one
+LF period at the cautious speed, braking), rounded up. One that takes him for one on the other side and
+does not check drives on."""
+RUNAWAY_WINDOW_S = 2.0
 STANDING_S = 2.0
 """The user counts as standing once he stood this long: longer than a robot braking from its top speed
 (1.2 m/s at 1.5 m/s^2 takes 0.8 s), so a leading robot's stop after his is not counted."""
@@ -552,7 +554,7 @@ STANDING_MPS = 0.05
 @prop("no_runaway", "safety", ("drive", "follow", "mixed"))
 def no_runaway(record: Record) -> list[Violation]:
     """A robot following or leading its user does not drive away from him while he stands: beyond the target
-    distance, its distance to him grows by at most ``RUNAWAY_M`` a second. (The LF cannot tell a user ahead
+    distance, its distance to him grows by at most ``RUNAWAY_M`` in ``RUNAWAY_WINDOW_S``. (The LF cannot tell a user ahead
     from one behind; a robot that takes one for the other drives away from him.)"""
     out: list[Violation] = []
     samples = _user_and_distances(record)

@@ -276,7 +276,7 @@ def test_no_runaway_fails_a_robot_that_drives_away_from_its_standing_user() -> N
     ]
     record.world_lines = away
     [violation, *_] = P.no_runaway(record)
-    assert violation.who == ("robot-1",) and violation.when == pytest.approx(8.3)  # 1.30 m, 0.30 m in a second
+    assert violation.who == ("robot-1",) and violation.when == pytest.approx(8.6)  # 1.60 m, 0.60 m in two seconds
     # the same gap opened while the user walks away (he moves, not the robot): not judged
     walking = [
         json.dumps(
