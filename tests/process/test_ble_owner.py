@@ -39,7 +39,7 @@ def test_an_unpaired_wearable_cannot_claim_a_robot_or_command_it_over_ble(make_a
     air.robot(2, (0.0, 0.0), 0x1000, 11)
     air.robot(3, (1.0, 0.0), 0x1000, 11)
     asyncio.run(_rogue_wearable(air.endpoint, air.world, "robot-2"))
-    deadline = time.monotonic() + 10
+    deadline = time.monotonic() + 20  # a robot the machine's load starves takes its messages late
     while (driving := air.cmd(2, "status")["driving"])["unpaired"] < GUESSES + 1:
         assert time.monotonic() < deadline, driving
         time.sleep(0.2)
