@@ -20,7 +20,8 @@ dropped and counted in ``stats()["inbox"]``); an attach whose liveliness token d
 ``ATTACH_TOKEN_TIMEOUT_S`` is detached; at most ``MAX_UNPROVEN`` such attaches wait at once; any exception in
 a handler is counted in ``stats()["hub"]["faults"]`` and the loop goes on. A hub given its run's roster keeps room
 for those ids everywhere a flood of other ids could take it: their up keys, their first messages (a bucket per id,
-not the strangers'), their tokens' arrivals (a bucket per id) and the tokens remembered.
+not the strangers'), their tokens' arrivals (a bucket per id) and the tokens remembered; and the job thread takes
+their items ahead of the others at each pass.
 
 With ``pcap_path`` the hub also writes every transmission that leaves the air, data frames and ACKs,
 to a pcap file (``radio_hub.air.pcap``), stamped with the wall-clock time at which it started on the air.
@@ -105,6 +106,7 @@ ROSTER_ALIVE_WAITING = 64
 """A roster id's token arrivals and departures waiting in the inbox (a bucket per id, outside ``INBOX_OTHER``)."""
 _EXPIRY_EVERY_US = 500_000
 _S_FIELD = msgpack.packb("s")
+_WAKE_ITEM = ("wake",)
 MAX_CHAOS_REQUEST_BYTES = 32 << 10
 """A chaos request's bytes at most: a fault with a partition of ``MAX_GROUP`` ids of 64 characters fits."""
 
@@ -154,6 +156,10 @@ class RadioHub:
         """Set when the job thread made the world thread's next work due sooner than it sleeps (a BLE send...)."""
         self._world_due = _NEVER
         """When the world thread means to wake (``_NEVER`` while it is working out when)."""
+        self._first: deque[tuple[Any, ...]] = deque()
+        """Inbox items of roster ids (their messages, token events and departures), taken before the inbox's
+        other items at each pass (a ``("wake",)`` in the inbox wakes the job thread for them): a backlog of other
+        nodes' traffic delays a roster id's attach by one batch at most."""
         self._held: deque[tuple[Any, ...]] = deque()
         """Inbox items taken that wait for the world lock, in arrival order (nothing more is taken meanwhile)."""
         self._session: zenoh.Session | None = None
@@ -295,13 +301,24 @@ class RadioHub:
     def _take(self, item: tuple[Any, ...]) -> None:
         """``item`` and whatever arrived meanwhile, ``BATCH`` at most, before time advances (a flood never holds up
         the air); from an item that must wait for the world lock on, they are held (``_take_held``)."""
-        inbox = self._inbox
-        if not self._handle_safely(item):
+        inbox, first = self._inbox, self._first
+        self._take_first()
+        if self._held or not self._handle_safely(item):
             self._held.append(item)
         for _ in range(min(inbox.qsize(), BATCH - 1)):
+            if first:
+                self._take_first()
             item = inbox.get_nowait()
             if self._held or not self._handle_safely(item):
                 self._held.append(item)
+
+    def _take_first(self) -> None:
+        """The roster ids' items waiting (``_first``), in their order, held as the others are."""
+        first, held = self._first, self._held
+        while first:
+            item = first.popleft()
+            if held or not self._handle_safely(item):
+                held.append(item)
 
     def _take_held(self) -> None:
         """The held items, in order, as far as the world lock lets them in."""
@@ -312,12 +329,13 @@ class RadioHub:
     def _admit(self, item: tuple[Any, ...]) -> None:
         """Zenoh's threads: into the inbox if its bucket has room, else dropped and counted. A node's message
         goes in as ``("up", node id, bytes, bucket)``: its key is read here, once."""
-        size = 0
+        size, first = 0, False
         if item[0] == "up":
             node_id, size = self.keys.node_of(item[1]), len(item[2])
             # a roster id's first messages wait in its own bucket: no flood of strangers crowds out its attach
             own = self._own_marker(node_id) in item[2] if node_id in self.env.kinds else node_id in self.roster
             bucket, limit = (node_id, INBOX_PER_NODE) if own else ("", INBOX_STRANGERS)
+            first = own and node_id in self.roster
             if not bucket and not self._stranger_admitted():
                 return
             item = ("up", node_id, item[2])
@@ -325,9 +343,10 @@ class RadioHub:
             # a departure is never dropped, whatever the load: a dropped one left its body in the world for good
             # (at most one per attached node per token, so this is bounded by the attached nodes)
             bucket, limit = "!", 1 << 62
+            first = self._roster_id_of(item[1]) is not None
         elif item[0] == "alive" and (roster_id := self._roster_id_of(item[1])) is not None:
             # a roster id's token must reach the job thread however many other tokens come and go
-            bucket, limit = f"?{roster_id}", ROSTER_ALIVE_WAITING
+            bucket, limit, first = f"?{roster_id}", ROSTER_ALIVE_WAITING, True
         else:
             bucket, limit = "?", INBOX_OTHER
         with self._waiting_lock:
@@ -346,7 +365,11 @@ class RadioHub:
             if item[0] in ("stats", "air", "world", "chaos"):
                 item[1].drop()  # the query ends unanswered
             return
-        self._inbox.put((*item, bucket))
+        if first:
+            self._first.append((*item, bucket))
+            self._inbox.put(_WAKE_ITEM)
+        else:
+            self._inbox.put((*item, bucket))
 
     def _own_marker(self, node_id: str) -> bytes:
         """The bytes every message of ``node_id``'s own session carries (its session key ``s`` in the envelope).

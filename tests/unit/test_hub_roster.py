@@ -7,7 +7,14 @@ from __future__ import annotations
 import zenoh
 
 from radio_hub.link import wire
-from radio_hub.shell.hub import INBOX_OTHER, ROSTER_TOKENS_PER_ID, STRANGERS_PER_S, TOKENS_KEPT, RadioHub
+from radio_hub.shell.hub import (
+    BATCH,
+    INBOX_OTHER,
+    ROSTER_TOKENS_PER_ID,
+    STRANGERS_PER_S,
+    TOKENS_KEPT,
+    RadioHub,
+)
 
 PUT, DELETE = zenoh.SampleKind.PUT, zenoh.SampleKind.DELETE
 
@@ -58,3 +65,27 @@ def test_others_tokens_never_push_a_roster_ids_token_out_and_a_roster_id_keeps_a
     assert not hub._token_present("robot-1", "i2")
     hub._token_seen("robot-1", "late")  # a token that went frees its room
     assert hub._token_present("robot-1", "late")
+
+
+def test_a_roster_ids_attach_is_taken_ahead_of_a_backlog_of_other_nodes_traffic() -> None:
+    """A rogue's attached nodes flood until their buckets are full; a roster id's token and attach that come after
+    are handled in the job thread's next pass, not behind the whole backlog."""
+    hub = RadioHub("tcp/127.0.0.1:0", "roster-first", roster=("robot-1",))
+    keys = hub.keys
+    rogues = [f"rogue-{i}" for i in range(4)]
+    for i, node_id in enumerate(rogues):
+        hub._admit(("alive", keys.alive(node_id, "x"), PUT))
+        hub._admit(("up", keys.up(node_id), _attach(100 + i, "x")))
+    _drain(hub)
+    assert set(hub.env.kinds) == set(rogues)
+    for i, node_id in enumerate(rogues):  # each sends with its own session key: its own bucket, full
+        drive = wire.Drive(vx=0.1, n=2, s=100 + i).encode()
+        for _ in range(1000):
+            hub._admit(("up", keys.up(node_id), drive))
+    backlog = hub._inbox.qsize()
+    assert backlog == 4000, backlog
+    hub._admit(("alive", keys.alive("robot-1", "i1"), PUT))
+    hub._admit(("up", keys.up("robot-1"), _attach(1, "i1")))
+    hub._take(hub._inbox.get_nowait())  # one pass of the job thread
+    assert "robot-1" in hub.env.kinds
+    assert hub._inbox.qsize() >= backlog - BATCH, hub._inbox.qsize()  # the rogues' traffic mostly still waits
