@@ -421,6 +421,11 @@ def build_parser() -> argparse.ArgumentParser:
     add_bench_start_arguments(
         bench_sub.add_parser("start", help="CPU, time and memory of starting robot processes, forked vs exec'd")
     )
+    from cli.bench_all import add_arguments as add_bench_all_arguments
+
+    add_bench_all_arguments(
+        bench_sub.add_parser("all", help="rerun every bench the docs quote: one header with command, date, machine")
+    )
     return parser
 
 
@@ -855,6 +860,10 @@ def hub_line(hub: dict[str, Any]) -> str:
 
 
 def _bench(args: argparse.Namespace) -> int:
+    if args.bench == "all":
+        from cli.bench_all import run
+
+        return run(args)
     if args.bench == "ir":
         from petswarm.bench.ir import bench_ir
 

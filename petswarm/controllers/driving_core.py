@@ -1032,7 +1032,7 @@ class EchoRanges:
             old = _ranges_of(first) if span >= 0.1 else now
             angles.append(ring_angles)
             latest.append(now)
-            known.append(span >= 0.1 and len(old) == len(now))
+            known.append(span >= 0.1 and len(old) == len(now) and _steady(first[1], sensors))
             oldest.append(old if known[-1] else now)
             spans.append(span if known[-1] else 1.0)
             cos.append(ring_cos)
@@ -1072,7 +1072,7 @@ class EchoRanges:
         into 0.35 m/s) plus the robot's own speed along the beam."""
         first = self._history[0]
         dt = (sensors.t_us - first[0]) / 1e6
-        if dt < 0.1:
+        if dt < 0.1 or not _steady(first[1], sensors):
             return ()
         oldest = _ranges_of(first)
         if len(oldest) != len(ranges):
@@ -1083,6 +1083,17 @@ class EchoRanges:
             rate = (r - o) / dt
             receding.append(0.0 if math.isnan(rate) else rate + (vx * c + vy * s))
         return tuple(receding)
+
+
+RATE_TURN_RAD = math.radians(15.0)
+"""A ring that turned more than this (an ultrasonic cone's half-width) between two samples points each beam at
+another patch: the range's change then compares two echoes, not one echo's motion, and says nothing of how fast
+an obstacle moves away (a robot turning on the spot saw the user it left as a robot receding at its own speed)."""
+
+
+def _steady(before: OwnSensors, now: OwnSensors) -> bool:
+    """Whether the ring turned little enough between two samples for its range rates to mean motion."""
+    return abs(wrap(now.yaw_rad - before.yaw_rad)) <= RATE_TURN_RAD
 
 
 def _ranges_of(sample: list[Any]) -> list[float]:

@@ -136,3 +136,13 @@ def test_robots_the_user_left_pressed_together_are_one_contact_until_they_part(t
     pressed = [tick["t_us"] for tick in world if ["robot-2", "robot-5"] in tick.get("contacts", [])]
     assert pressed and any(["robot-2", "user"] in tick.get("contacts", []) for tick in world)
     assert result["ok"], result["failures"]
+
+
+@pytest.mark.timeout(120)
+def test_a_slave_turning_on_the_spot_does_not_drive_into_another(tmp_path: Path) -> None:
+    """Seed 1 case 581 (no_contact): two slaves closing on their slots, one turning as it drove: its beams swept
+    from one echo onto another as near, and the range rates it read took a robot for one moving away at its own
+    speed. Range rates over a turn wider than a cone's half-width are now unknown."""
+    result, world = _replay("seed-1-case-581-no_contact.toml", tmp_path / "run")
+    assert not {("robot-2", "robot-3")} & {tuple(p) for tick in world for p in tick.get("contacts", [])}
+    assert result["ok"], result["failures"]
