@@ -321,7 +321,7 @@ class DriverCore:
         self.drive_state_msg: m.DriveState | None = None
         self.drive_state_at = -math.inf
         self.tracker = RelativeTracker()
-        self._echoes = EchoRanges()
+        self._echoes = EchoRanges(strict=True)
         self.opening_rate: float | None = None
         """How fast the LF distance to the user grows (m/s, smoothed over fixes)."""
         self.turn_to: float | None = None
@@ -992,7 +992,12 @@ class EchoRanges:
     In plain floats: a ring is eight sensors, read on every control step, where numpy's per-call overhead
     is most of the cost (the same IEEE operations in the same order, so the same bits as the arrays gave)."""
 
-    def __init__(self) -> None:
+    def __init__(self, strict: bool = False) -> None:
+        self.strict = strict
+        """Range rates as the driving law reads them: unknown over a turn wider than a cone's half-width
+        (``RATE_TURN_RAD``), and inside the stop distance not counted below the noise (``RATE_NOISE_M``). The
+        surround laws keep the plain rates their figures were measured with (their robots stand closer than the
+        stop distance to their neighbours, where the noise rule tore the paper's swarm)."""
         self._history: deque[list[Any]] = deque(maxlen=6)
         """[t_us, sensors, ranges as floats (None until first read)] of the latest samples: a robot that only
         drives in formation keeps them without reading them (and so without importing numpy)."""
@@ -1032,7 +1037,7 @@ class EchoRanges:
             old = _ranges_of(first) if span >= 0.1 else now
             angles.append(ring_angles)
             latest.append(now)
-            known.append(span >= 0.1 and len(old) == len(now) and _steady(first[1], sensors))
+            known.append(span >= 0.1 and len(old) == len(now) and (not ring.strict or _steady(first[1], sensors)))
             oldest.append(old if known[-1] else now)
             spans.append(span if known[-1] else 1.0)
             cos.append(ring_cos)
@@ -1042,7 +1047,9 @@ class EchoRanges:
         rate = (now_m - old_m) / np.array(spans)[:, None]
         along = moving[:, 0:1] * np.array(cos) + moving[:, 1:2] * np.array(sin)
         away = np.where(np.isnan(rate), 0.0, rate + along)
-        receding = np.where((away > RATE_NOISE_M / np.array(spans)[:, None]) | (now_m > STOP_DISTANCE_M), away, 0.0)
+        strict = np.array([ring.strict for ring in rings])[:, None]
+        counted = ~strict | (away > RATE_NOISE_M / np.array(spans)[:, None]) | (now_m > STOP_DISTANCE_M)
+        receding = np.where(counted, away, 0.0)
         return angles, now_m, receding, np.array(known)
 
     def holds(self, t_us: int) -> bool:
@@ -1073,7 +1080,7 @@ class EchoRanges:
         into 0.35 m/s) plus the robot's own speed along the beam."""
         first = self._history[0]
         dt = (sensors.t_us - first[0]) / 1e6
-        if dt < 0.1 or not _steady(first[1], sensors):
+        if dt < 0.1 or (self.strict and not _steady(first[1], sensors)):
             return ()
         oldest = _ranges_of(first)
         if len(oldest) != len(ranges):
@@ -1083,7 +1090,7 @@ class EchoRanges:
         for r, o, c, s in zip(ranges, oldest, cos, sin, strict=True):
             rate = (r - o) / dt
             away = 0.0 if math.isnan(rate) else rate + (vx * c + vy * s)
-            receding.append(away if away > RATE_NOISE_M / dt or r > STOP_DISTANCE_M else 0.0)
+            receding.append(away if not self.strict or away > RATE_NOISE_M / dt or r > STOP_DISTANCE_M else 0.0)
         return tuple(receding)
 
 
