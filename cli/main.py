@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from cli.explore import add_explore, explore
+from cli.text import plain
 from petswarm.lab.arguments import CLOCKS, CommandParser, add_link_security, bounded, robot_id, seed, world_name
 from petswarm.lab.robot_command import add_hub as _add_hub
 from petswarm.lab.robot_command import add_node_clock as _add_node_clock
@@ -89,7 +90,10 @@ class _VersionAction(argparse.Action):
 def build_parser() -> argparse.ArgumentParser:
     """The whole command line."""
     parser = CommandParser(
-        prog="petswarm", description=__doc__, epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter
+        prog="petswarm",
+        description=plain(__doc__ or ""),
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action=_VersionAction, help="show the installed version and exit")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -265,9 +269,9 @@ def build_parser() -> argparse.ArgumentParser:
     from cli.chaos import add_arguments as add_chaos_arguments
 
     add_chaos_arguments(sub, _add_hub, robot_id, bounded)
-    from petswarm.lab.certs import add_arguments as add_certs_arguments
+    from cli.certs import add_certs
 
-    add_certs_arguments(sub, bounded)
+    add_certs(sub)
 
     watch = sub.add_parser("watch", help="a local web page drawing the world live from a hub, or replaying a run")
     _add_hub(watch)
@@ -509,43 +513,33 @@ def _add_dead_after(parser: argparse.ArgumentParser, default: float | None, what
 
 
 def _hub(args: argparse.Namespace) -> int:
+    from petswarm.lab.hub_tables import hub_environment
     from petswarm.scenario import ScenarioError, load
-    from radio_hub.shell.hub import environment_from_dict, load_config, ready_line
+    from radio_hub.shell.hub import ready_line
     from radio_hub.shell.stopping import end_closed, stop_on_signals
 
     if args.floor and args.clock != "wall":
         print("petswarm hub: --floor models nothing and keeps no lockstep time: use --clock wall", file=sys.stderr)
         return 2
     try:
-        environment = load_config(args.config) if args.config else None
-    except (OSError, ValueError) as err:
-        print(f"petswarm hub: bad --config: {err}", file=sys.stderr)
+        scenario = load(args.scenario) if args.scenario else None
+    except (ScenarioError, ValueError) as err:
+        print(f"petswarm hub: bad --scenario: {err}", file=sys.stderr)
         return 2
-    if args.scenario:
-        try:
-            scenario = load(args.scenario)
-            from_scenario = environment_from_dict(scenario.hub_tables())
-        except (ScenarioError, ValueError) as err:
-            print(f"petswarm hub: bad --scenario: {err}", file=sys.stderr)
-            return 2
-        if environment is not None:  # --config gives the radio and light; the scenario the world
-            from_scenario.medium, from_scenario.ir = environment.medium, environment.ir
-        environment = from_scenario
-    if args.profile != "ideal":  # the profile's MAC, BLE and IR values over the config's
-        from radio_hub.environment import EnvironmentConfig
-        from radio_hub.profiles import apply_profile
-
-        environment = apply_profile(environment or EnvironmentConfig(), args.profile)
+    try:
+        environment = hub_environment(args.config, scenario, args.profile)
+    except ValueError as err:
+        print(f"petswarm hub: {err}", file=sys.stderr)
+        return 2
     try:
         hub: Any
         if args.clock == "lockstep":
-            from radio_hub.environment import EnvironmentConfig
             from radio_hub.shell.lockstep import LockstepHub
 
             hub = LockstepHub(
                 args.listen,
                 args.world,
-                environment or EnvironmentConfig(),
+                environment,
                 args.seed,
                 expect=args.expect,
                 dead_after_s=args.dead_after,
@@ -590,7 +584,7 @@ def _hub(args: argparse.Namespace) -> int:
 
 
 def _user(args: argparse.Namespace) -> int:
-    from petswarm.managers.sequence import EventLog
+    from petswarm.managers.event_log import EventLog
     from petswarm.scenario import ScenarioError, load
     from petswarm.wearables.user import UserConfig, run_user
 

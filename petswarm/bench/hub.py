@@ -49,15 +49,8 @@ from petswarm.bench.nodes import (
 )
 from petswarm.bench.report import report, write_results
 from petswarm.lab.processes import Supervisor, free_tcp_port, run_supervised
-from radio_hub.interface import (
-    WORLD_THREAD,
-    HubUnavailable,
-    Keys,
-    RadioError,
-    airtime_us,
-    open_session,
-    query_hub,
-)
+from radio_hub.interface import WORLD_THREAD, Keys, open_session, query_hub
+from radio_hub.values import HubUnavailable, RadioError, airtime_us
 
 MODULE = "petswarm.bench.hub"
 WARMUP_ROUNDS = 20

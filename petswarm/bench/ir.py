@@ -25,10 +25,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from petswarm.bench import paper
-from petswarm.bench.output import emit, save
+from petswarm.lab.output import emit, save
 from petswarm.managers.ir_estimator import METHODS, IrEstimates, estimate_many
 from radio_hub.datasheet import IrConfig
-from radio_hub.interface import lazy_numpy, receiver_readings
+from radio_hub.values import lazy_numpy
 
 if TYPE_CHECKING:
     import numpy as np
@@ -87,7 +87,7 @@ def bench_ir(args: argparse.Namespace) -> int:
 def profiled_ir(profile: str) -> IrConfig:
     """The IR module as the hub emulates it under ``profile`` (its noise); the robots' calibration stays the
     datasheet's ``IrConfig()`` whatever the profile."""
-    from radio_hub.interface import profile_tables  # the hub's profiles: loaded when the bench runs, not to parse
+    from radio_hub.hosting import profile_tables  # the hub's profiles: loaded when the bench runs, not to parse
 
     return dataclasses.replace(IrConfig(), **profile_tables(profile).get("ir", {})).validate()
 
@@ -106,6 +106,8 @@ def paper_rows(results: dict[str, Any]) -> list[dict[str, Any]]:
 def run_experiment(runs: int, seed: int, heading: float | str, config: IrConfig) -> dict[str, Any]:
     """All points x ``runs`` sweeps through the light model (``config``: the module as emulated) and every
     estimator (calibrated with the datasheet's ``IrConfig()``); the summary as a dict."""
+    from radio_hub.hosting import receiver_readings  # the hub's light model: loaded to run, not to parse
+
     rng = np.random.default_rng(seed)
     dist_m, angle_rad = _placements(runs)
     heading_rad = _headings(heading, dist_m.size, rng)

@@ -35,7 +35,8 @@ from petswarm.lab.processes import Supervisor, run_supervised
 from petswarm.managers.exchange import StepTiming
 from petswarm.managers.formation import PROTOCOLS, FormationConfig
 from petswarm.profiles import robot_profile
-from radio_hub.interface import HubUnavailable, RadioError, query_hub
+from radio_hub.interface import query_hub
+from radio_hub.values import HubUnavailable, RadioError
 
 MAX_SLAVES = 14
 """Robots 2..15 stand within 6.7 m of the master on the default grid: inside the default -70 dBm region."""

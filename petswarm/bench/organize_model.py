@@ -30,7 +30,8 @@ from petswarm.lab.model_run import (
     unwind,
 )
 from petswarm.lab.processes import Interrupts
-from radio_hub.interface import EnvironmentConfig, HubUnavailable, apply_profile, load_config
+from radio_hub.hosting import EnvironmentConfig, apply_profile, load_config
+from radio_hub.values import HubUnavailable
 
 ATTACH_S = 0.1
 """Model time between starting the robots and the first organization (every robot attaches at once)."""

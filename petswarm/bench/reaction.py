@@ -19,9 +19,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from petswarm.bench import paper
-from petswarm.bench.output import emit, save
 from petswarm.lab.metrics import REACTION_OMEGA_RPS
-from radio_hub.interface import lazy_numpy
+from petswarm.lab.output import emit, save
+from radio_hub.values import lazy_numpy
 
 if TYPE_CHECKING:
     import numpy as np

@@ -19,7 +19,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from petswarm.bench.output import emit, save
+from petswarm.lab.output import emit, save
 
 
 def robot_counts(text: str) -> list[int]:

@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from petswarm.bench.output import emit, save
+from petswarm.lab.output import emit, save
 from petswarm.lab.processes import Supervisor, free_tcp_port
 
 WAYS = ("forked", "exec")

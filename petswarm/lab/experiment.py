@@ -44,14 +44,15 @@ from typing import Any
 
 import numpy as np
 
-from petswarm.bench.output import emit, save
 from petswarm.lab.arguments import CLOCKS
 from petswarm.lab.launch import run
+from petswarm.lab.output import emit, save
+from petswarm.lab.palette import OUTCOME_COLOURS
 from petswarm.lab.records import runs_dir
 from petswarm.lab.run import RunOptions
 from petswarm.scenario import parse_toml, read_bounded
 from radio_hub.datasheet import check_keys
-from radio_hub.interface import check_timed_fault
+from radio_hub.values import check_timed_fault
 
 RADIO_KEYS = ("sent", "delivered", "collided", "lost", "filtered", "mac_retries")
 """The hub's counters a run's row sums over its robots."""
@@ -91,7 +92,7 @@ def _check(data: dict[str, Any]) -> dict[str, Any]:
     _check_clock_and_profile(data.get("run", {}))
     config = data.get("run", {}).get("config")
     if config is not None:
-        from radio_hub.interface import config_problem
+        from radio_hub.hosting import config_problem
 
         problem = config_problem(config)
         if problem is not None:
@@ -113,7 +114,10 @@ def experiment_command(args: argparse.Namespace) -> int:
     """Run every repetition with a progress bar; 0 when every run was OK."""
     try:
         spec = load(Path(args.file))
-    except (OSError, ValueError, tomllib.TOMLDecodeError) as err:
+    except OSError as err:  # as a person reads it: the file and what is wrong, not Python's errno
+        print(f"petswarm experiment: {args.file}: {(err.strerror or str(err)).lower()}", file=sys.stderr)
+        return 2
+    except (ValueError, tomllib.TOMLDecodeError) as err:
         print(f"petswarm experiment: {err}", file=sys.stderr)  # every error names the file already
         return 2
     if getattr(args, "clock", None):
@@ -268,15 +272,21 @@ def _plot(results: dict[str, Any], path: Path) -> None:
     fig, (org, radio) = plt.subplots(1, 2, figsize=(12, 4.2))
     org.bar([str(r["seed"]) for r in runs], [r["organize_ms"] or 0 for r in runs], color="#4c72b0")
     org.set(xlabel="seed", ylabel="organizing time (ms)", title="organizing time per run")
-    for i, key in enumerate(("delivered", "collided", "lost")):
-        radio.bar([j + i * 0.27 for j in range(len(runs))], [r[key] for r in runs], 0.27, label=key)
-    radio.set_xticks([j + 0.27 for j in range(len(runs))], [str(r["seed"]) for r in runs])
-    radio.set(xlabel="seed", ylabel="receptions", title="radio per run")
-    radio.legend(fontsize=8)
+    draw_radio_per_run(radio, runs)
     fig.suptitle(results["name"] or results["file"])
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def draw_radio_per_run(ax: Any, runs: list[dict[str, Any]]) -> None:
+    """Delivered, collided and lost receptions per run, in the colours every view of a run gives them."""
+    for i, key in enumerate(("delivered", "collided", "lost")):
+        values = [r[key] for r in runs]
+        ax.bar([j + i * 0.27 for j in range(len(runs))], values, 0.27, label=key, color=OUTCOME_COLOURS[key])
+    ax.set_xticks([j + 0.27 for j in range(len(runs))], [str(r["seed"]) for r in runs])
+    ax.set(xlabel="seed", ylabel="receptions", title="radio per run")
+    ax.legend(fontsize=8)
 
 
 def progress_line(done: int, total: int, row: dict[str, Any]) -> str:

@@ -20,10 +20,11 @@ from petswarm.lab.foxglove_live import StreamUnavailable, start_stream
 from petswarm.lab.metrics import describe_driving
 from petswarm.lab.processes import Interrupts, Supervisor, free_tcp_port
 from petswarm.lab.records import RunRecord
-from petswarm.lab.supervision import RunAborted, Supervision
+from petswarm.lab.supervision import RunAborted, Supervision, verdict
 from petswarm.lab.swarm import describe
 from petswarm.managers.decisions import WAITING_PAN as DEFAULT_PAN
-from radio_hub.interface import HubUnavailable, Keys, describe_fault, open_session, query_hub
+from radio_hub.interface import Keys, open_session, query_hub
+from radio_hub.values import HubUnavailable, describe_fault
 
 
 @dataclass(frozen=True)
@@ -561,4 +562,4 @@ def _print(summary: dict[str, Any], as_json: bool) -> None:
     for death in summary.get("deaths", []):
         when = f"{death['cause']}, {death['elapsed_s']:g} s in"
         print(f"died during the run: {death['process']} ({when}); the run went on without it")
-    print("OK" if summary["ok"] else "PROBLEMS: " + "; ".join(summary["problems"]))
+    print(verdict(summary))
