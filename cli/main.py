@@ -13,6 +13,7 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from cli.bench import add_bench, bench
 from cli.explore import add_explore, explore
 from cli.text import plain
 from petswarm.lab.arguments import CLOCKS, CommandParser, add_link_security, bounded, robot_id, seed, world_name
@@ -324,89 +325,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_hub(stats)
     stats.add_argument("--json", action="store_true", help="print the raw counters as JSON")
 
-    bench = sub.add_parser("bench", help="benchmarks: figures on stdout, JSON and plots to --out")
-    bench_sub = bench.add_subparsers(dest="bench", required=True, metavar="BENCH")
-    bhub = bench_sub.add_parser("hub", help="hub round trip vs plain zenoh, frames/s with 50 nodes, delivery lag")
-    bhub.add_argument("--rounds", type=bounded(int, 10, 100000), default=500, help="round trips per path (default 500)")
-    bhub.add_argument(
-        "--nodes", type=bounded(int, 2, 200), default=50, help="attached nodes in the load test (default 50)"
-    )
-    bhub.add_argument(
-        "--load-seconds", type=bounded(float, 1, 600), default=5.0, help="length of the load test (default 5)"
-    )
-    bhub.add_argument("--seed", type=seed, default=1, help="seed of the hubs and the load (default %(default)s)")
-    bhub.add_argument("--out", default="bench-results", help="directory for JSON and plots (default %(default)s)")
-    bhub.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
-    bhub.add_argument(
-        "--floor",
-        action="store_true",
-        help="also run both phases on a hub that carries frames without modelling the air (petswarm hub "
-        "--floor): the floor under any hub's figures on this machine, printed beside the real hub's",
-    )
-    bhub.add_argument(
-        "--check",
-        action="store_true",
-        help="exit 1 (naming each on stderr) when a target is missed: round trip ratio p50 <= 1.5, "
-        "throughput >= min(10000, the air's capacity) frames/s, hub lag p99 <= 2 ms",
-    )
-    borg = bench_sub.add_parser("organize", help="swarm organizing time vs number of slaves, per protocol")
-    borg.add_argument(
-        "--slaves", type=_slave_counts, default=[1, 2, 3, 4, 5], help="slave counts: N, A-B or N,M,... (default 1-5)"
-    )
-    borg.add_argument(
-        "--runs", type=bounded(int, 1, 10000), default=50, help="organizations per count and protocol (default 50)"
-    )
-    borg.add_argument(
-        "--protocol", choices=("paper", "slotted", "both"), default="both", help="protocols to measure (default both)"
-    )
-    borg.add_argument("--mac-ack", choices=("on", "off"), default="on", help="MAC acknowledgements (default on)")
-    borg.add_argument(
-        "--clock",
-        choices=("model", "wall"),
-        default="model",
-        help="model (default): every slave count in this one process on model time, the same figures for the "
-        "same seed on any machine; wall: a hub process and robot processes over zenoh, in real time",
-    )
-    borg.add_argument(
-        "--step-deadline",
-        type=bounded(float, 0.005, 10),
-        help="seconds each organizing step waits before retrying (default: the robot's, 0.1)",
-    )
-    borg.add_argument(
-        "--step-retries",
-        type=bounded(int, 0, 50),
-        help="retries of an organizing step (default: the robot's, 5)",
-    )
-    add_profile(borg, "hub and robots; the paper's figure printed beside the bench's, with the ratio")
-    borg.add_argument("--seed", type=seed, default=1, help="seed of the hub and the robots (default %(default)s)")
-    add_link_security(borg)
-    borg.add_argument("--out", default="bench-results", help="directory for JSON and plots (default %(default)s)")
-    borg.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
-    from petswarm.bench.ir import add_arguments as add_bench_ir_arguments
-
-    add_bench_ir_arguments(bench_sub.add_parser("ir", help="IR relative-location accuracy per estimator"))
-    from petswarm.bench.reaction import add_arguments as add_bench_reaction_arguments
-
-    add_bench_reaction_arguments(
-        bench_sub.add_parser("reaction", help="reaction time of master and slaves to the user's rotation (CDFs)")
-    )
-    from petswarm.bench.surround import add_arguments as add_bench_surround_arguments
-
-    add_bench_surround_arguments(
-        bench_sub.add_parser(
-            "surround", help="surround scenarios in model time through each robot's own pipeline (seeds, plot)"
-        )
-    )
-    from petswarm.bench.scale import add_arguments as add_bench_scale_arguments
-
-    add_bench_scale_arguments(
-        bench_sub.add_parser("scale", help="wall time per model second, memory and digests vs robots, per clock")
-    )
-    from petswarm.bench.start import add_arguments as add_bench_start_arguments
-
-    add_bench_start_arguments(
-        bench_sub.add_parser("start", help="CPU, time and memory of starting robot processes, forked vs exec'd")
-    )
+    add_bench(sub)
     return parser
 
 
@@ -440,7 +359,7 @@ def main(argv: list[str] | None = None, parser: argparse.ArgumentParser | None =
     """Entry point of the ``petswarm`` console script; ``parser``: ``build_parser()``'s, made already (the fork
     server makes it once for all its robots)."""
     args = (parser or build_parser()).parse_args(argv)
-    commands = {"hub": _hub, "user": _user, "robot": _robot, "run": _run, "stats": _stats, "bench": _bench}
+    commands = {"hub": _hub, "user": _user, "robot": _robot, "run": _run, "stats": _stats, "bench": bench}
     commands.update(swarm=_swarm, watch=_watch)
     commands.update(report=_report, chaos=_chaos, experiment=_experiment, certs=_certs, explore=explore)
     commands.update(export=_export)
@@ -826,46 +745,6 @@ def hub_line(hub: dict[str, Any]) -> str:
         number = f"{value:.0f}" if isinstance(value, float) else str(value)
         parts.append(f"{name} {number}" + (" us" if key.endswith("_us") else ""))
     return "hub: " + ", ".join(parts)
-
-
-def _bench(args: argparse.Namespace) -> int:
-    if args.bench == "ir":
-        from petswarm.bench.ir import bench_ir
-
-        return bench_ir(args)
-    if args.bench == "reaction":
-        from petswarm.bench.reaction import bench_reaction
-
-        return bench_reaction(args)
-    if args.bench == "surround":
-        from petswarm.bench.surround import bench_surround
-
-        return bench_surround(args)
-    if args.bench == "scale":
-        from petswarm.bench.scale import bench_scale
-
-        return bench_scale(args)
-    if args.bench == "start":
-        from petswarm.bench.start import bench_start
-
-        return bench_start(args)
-    if args.bench == "organize" and args.clock == "model":
-        from petswarm.bench.organize_model import bench_organize as bench_organize_model
-
-        return bench_organize_model(args)
-    if args.bench == "organize":
-        from petswarm.bench.organize import bench_organize
-
-        return bench_organize(args)
-    from petswarm.bench.hub import bench_hub
-
-    return bench_hub(args)
-
-
-def _slave_counts(text: str) -> list[int]:
-    from petswarm.bench.organize import slave_counts  # imported here: it brings zenoh, which --help does not need
-
-    return slave_counts(text)
 
 
 if __name__ == "__main__":
