@@ -99,6 +99,29 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action=_VersionAction, help="show the installed version and exit")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
+    _add_hub_command(sub)
+    _add_user_command(sub)
+    _add_robot_command(sub)
+    _add_swarm_command(sub)
+    _add_run_command(sub)
+    from cli.chaos import add_arguments as add_chaos_arguments
+
+    add_chaos_arguments(sub, _add_hub, robot_id, bounded)
+    from cli.certs import add_certs
+
+    add_certs(sub)
+    _add_watch_command(sub)
+    _add_experiment_command(sub)
+    _add_export_command(sub)
+    _add_report_command(sub)
+    add_explore(sub)
+    _add_stats_command(sub)
+    add_bench(sub)
+    return parser
+
+
+def _add_hub_command(sub: Any) -> None:
+    """``petswarm hub``."""
     hub = sub.add_parser("hub", help="run the radio hub (zenoh router + emulated air)")
     hub.add_argument("--listen", default="tcp/127.0.0.1:7447", help="zenoh endpoint to listen on (default %(default)s)")
     _add_world(hub)
@@ -153,6 +176,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_tls(hub, "hub")
 
+
+def _add_user_command(sub: Any) -> None:
+    """``petswarm user``."""
     user = sub.add_parser(
         "user",
         help="run the user process: a person walking a scenario's path with belt and watch",
@@ -169,9 +195,15 @@ def build_parser() -> argparse.ArgumentParser:
     _add_node_clock(user)
     add_profile(user, "the belt's recognition delay")
 
+
+def _add_robot_command(sub: Any) -> None:
+    """``petswarm robot``."""
     robot = sub.add_parser("robot", help="run one robot process attached to a hub")
     add_robot_arguments(robot)
 
+
+def _add_swarm_command(sub: Any) -> None:
+    """``petswarm swarm organize|disperse|status``."""
     swarm = sub.add_parser("swarm", help="ask a running robot to organize or disperse a swarm (the watch's requests)")
     swarm_sub = swarm.add_subparsers(dest="action", required=True, metavar="ACTION")
     org = swarm_sub.add_parser("organize", help="the user asks the robot connected to them for a swarm of N")
@@ -197,6 +229,9 @@ def build_parser() -> argparse.ArgumentParser:
     for p in (org, dis, sts):
         p.add_argument("--json", action="store_true", help="print the robot's answer as JSON (default: in words)")
 
+
+def _add_run_command(sub: Any) -> None:
+    """``petswarm run``."""
     run = sub.add_parser(
         "run",
         help="run a hub and N robots on this machine and summarise the radio traffic",
@@ -267,13 +302,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="end the run when a robot dies unexpectedly (default: record the death and go on without it)",
     )
 
-    from cli.chaos import add_arguments as add_chaos_arguments
 
-    add_chaos_arguments(sub, _add_hub, robot_id, bounded)
-    from cli.certs import add_certs
-
-    add_certs(sub)
-
+def _add_watch_command(sub: Any) -> None:
+    """``petswarm watch``."""
     watch = sub.add_parser("watch", help="a local web page drawing the world live from a hub, or replaying a run")
     _add_hub(watch)
     watch.add_argument("--replay", metavar="RUN", help="replay a run record (its directory, or its world.jsonl)")
@@ -288,6 +319,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="with --foxglove: also stream this run record's events and radio frames as its processes write them",
     )
 
+
+def _add_experiment_command(sub: Any) -> None:
+    """``petswarm experiment``."""
     exp = sub.add_parser("experiment", help="run an experiment file: a run, a fault timeline, repetitions, seeds")
     exp.add_argument("file", help="a TOML experiment file (see examples/experiment-loss.toml)")
     exp.add_argument(
@@ -302,6 +336,9 @@ def build_parser() -> argparse.ArgumentParser:
         "exactly from its seed (each run's digest is in the results), wall runs real processes over zenoh",
     )
 
+
+def _add_export_command(sub: Any) -> None:
+    """``petswarm export``."""
     export = sub.add_parser(
         "export",
         help="write a run record as an MCAP file for Foxglove (docs/FOXGLOVE.md)",
@@ -314,19 +351,20 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("--force", action="store_true", help="replace FILE when it exists")
     export.add_argument("--json", action="store_true", help="print the messages per topic, size and time as JSON")
 
+
+def _add_report_command(sub: Any) -> None:
+    """``petswarm report``."""
     rep = sub.add_parser("report", help="print a run record's summary and render its plots to PNG")
     rep.add_argument("run", help="a run record directory (runs/<time>-<seed>)")
     rep.add_argument("--out", help="directory for report.png (default: the run directory)")
     rep.add_argument("--json", action="store_true", help="print the record's figures and the plots' paths as JSON")
 
-    add_explore(sub)
 
+def _add_stats_command(sub: Any) -> None:
+    """``petswarm stats``."""
     stats = sub.add_parser("stats", help="print a running hub's counters")
     _add_hub(stats)
     stats.add_argument("--json", action="store_true", help="print the raw counters as JSON")
-
-    add_bench(sub)
-    return parser
 
 
 def _use_security(args: argparse.Namespace) -> str | None:
