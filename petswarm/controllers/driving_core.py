@@ -59,6 +59,7 @@ from petswarm.controllers.pet_controller import (
     obstacle_ahead,
     safety,
 )
+from petswarm.controllers.side_check import ACTIVITY_LAG_S, UNSURE_SPEED_MPS, SideCheck
 from petswarm.controllers.slave_controller import RelativeFix, RelativeTracker, SlaveControllerConfig, slave_decision
 from petswarm.managers import messages as m
 from petswarm.managers.actions import Log
@@ -281,6 +282,10 @@ class DriverCore:
         self.reliable_at = -math.inf
         """When the robot last had a reliable LF fix (inside the valid range), or ended a turn-about."""
         self.activity = Activity(Movement.STOP, False, 0.0, 0.0)
+        self.side = SideCheck()
+        self._side_assumed = False
+        self._side_refuted_at: float | None = None
+        """Whether the user is on the side the mode assumes, checked by moving after the side was assumed."""
         self.sensors: OwnSensors | None = None
         """The latest own-body sample (AHRS yaw, odometry, ultrasonic ring)."""
         self.command = MotorCommand()
@@ -481,10 +486,43 @@ class DriverCore:
         else:
             self.opening_rate = None
         self.fix, self.fix_at = fix, now
+        self._check_side(fix, now)
         if self._announce_on_fix:  # a new master's first fix: the belt has re-paired with us by now
             self._announce_on_fix = False
             self._record("owner_tracked", distance=round(fix.distance_m, 3), lf_fixes=self.counters["lf_fixes"])
             self._tell_owner()
+
+    def _check_side(self, fix: UserFix, now: float) -> None:
+        """A fix while the side is assumed: judged only while the user stands (then only the robot's motion
+        changes the distance). A user found on the other side is put where the mode wants him by a turn-about,
+        once the belt has had time to report a walk the verdict may have mistaken for the robot's own motion."""
+        if not self.side.armed or self.sequence.state not in STEERED or self.turn_to is not None:
+            return
+        if self.activity.movement != Movement.STOP:  # (turning on the spot moves no belt)
+            self.side.restart()
+            return
+        verdict = self.side.judge(fix)
+        if verdict is not None:
+            self._record("side_checked", confirmed=verdict, distance=round(fix.distance_m, 3))
+        if verdict is False:
+            self._side_refuted_at = now
+
+    def _side_refuted(self, now: float) -> bool:
+        """Whether a refuted side holds the robot still: until the belt could have reported a walk (then the
+        verdict is dropped and the check starts over), then it turns round and checks again."""
+        if self._side_refuted_at is None:
+            return False
+        if self.activity.movement != Movement.STOP:
+            self._side_refuted_at = None
+            self._record("side_check_dropped", reason="the user walks")
+            self.side.arm(self.fix)
+            return False
+        if now - self._side_refuted_at < ACTIVITY_LAG_S:
+            return True
+        self._side_refuted_at = None
+        self._side_assumed = True  # checked again once turned
+        self._start_turn_about()
+        return True
 
     def _user_behind(self) -> bool:
         # leading: the user walks behind the robot (front/back is ambiguous for LF)
@@ -534,6 +572,10 @@ class DriverCore:
             self.sequence.transition(target, cause="watch")  # refused: nothing else changes
         if target in STEERED:  # (remote control keeps the side the robot faces)
             self._change_side(Mode.LEADING if target == RobotState.LEADING else Mode.FOLLOWING)
+            # chosen while the robot stood: the user may have walked round it meanwhile
+            self._side_assumed = True
+            if self.turn_to is None:
+                self.side.arm(self.fix)
 
     def _change_side(self, mode: Mode) -> None:
         """Following or leading chosen outside a driving state (waiting for a command, remote control, an
@@ -672,6 +714,8 @@ class DriverCore:
         error = wrap(self.turn_to - sensors.yaw_rad)
         if abs(error) < TURN_DONE_RAD:
             self.turn_to, self.fix, self.fix_at, self.opening_rate = None, None, now, None
+            if self._side_assumed:
+                self.side.arm(self.fix)
             self.reliable_at = now  # the lost-user time runs from here for the first fix facing the new way
             self._record("turn_about_done")
             return None
@@ -735,6 +779,10 @@ class DriverCore:
         if turn is not None:
             self.intent = turn
             return turn
+        if state in STEERED and self._side_refuted(now):
+            return MotorCommand()
+        if self.sensors is not None and state in STEERED:
+            self.side.moved(float(self.sensors.odometry[0]), float(self.sensors.odometry[1]), self.fix, dt)
         observation = self._observation(now)
         if self._lost(now, state):
             return MotorCommand()
@@ -750,6 +798,8 @@ class DriverCore:
             return MotorCommand()
         control = lead if leading else follow
         self.intent = control(observation, Ranges(), self.config.pet, target)
+        if self.side.armed and state in STEERED and self.activity.movement == Movement.STOP:
+            self.intent = _capped(self.intent, UNSURE_SPEED_MPS)  # not sure of the user's side: slowly
         return safety(self.intent, ranges, self.config.pet)
 
     def _observation(self, now: float) -> UserObservation | None:
@@ -1038,3 +1088,11 @@ def _ranges_of(sample: list[Any]) -> list[float]:
 def _floats(values: Any) -> list[float]:
     """A sequence of numbers as Python floats (one conversion for the whole array, not one per value)."""
     return np.asarray(values, dtype=float).tolist()
+
+
+def _capped(command: MotorCommand, speed: float) -> MotorCommand:
+    """``command`` with its translation scaled down to at most ``speed`` (m/s); the turn kept."""
+    now = math.hypot(command.vx, command.vy)
+    if now <= speed:
+        return command
+    return MotorCommand(command.vx * speed / now, command.vy * speed / now, command.omega)

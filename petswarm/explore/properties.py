@@ -8,6 +8,7 @@ opinion of itself. Pure functions of a ``Record``: the unit tests feed each one 
 
 from __future__ import annotations
 
+import bisect
 import json
 import math
 from collections.abc import Callable, Iterable
@@ -247,9 +248,9 @@ def no_exception(record: Record) -> list[Violation]:
 def checker_invariants(record: Record) -> list[Violation]:
     """The checker's invariants (counters add up, records complete and ordered, transitions chain, every robot
     ends waiting or with its user, no two IR modules at once) and the run's own checks. A robot that ends in
-    emergency because its user asked it to follow or lead from beyond the LF's range, having walked away while it
-    stood (waiting for a command, in remote control), did what the spec says (``_lost_when_asked_from_afar``)."""
-    texts = [t for t in record.invariants if not _lost_when_asked_from_afar(record, t)]
+    emergency did what the spec says when it lost a user who was truly beyond the LF's reach and never came back
+    within it (``_justified_emergency``); a false alarm, or a user in reach for long and not found, fails."""
+    texts = [t for t in record.invariants if not _justified_emergency(record, t)]
     out = [Violation(f"invariant violated: {text}") for text in texts]
     problems = [p for p in record.summary.get("problems", []) if not p.startswith("invariant violated")]
     return out + [Violation(f"run check: {p}") for p in problems]
@@ -257,41 +258,67 @@ def checker_invariants(record: Record) -> list[Violation]:
 
 LF_VALID_RANGE_M = 2.0
 """The LF fix's valid range (pet-bot-wearable.md): a user farther than this from his robot is lost to it."""
-REQUEST_TO_LOSS_S = 0.1
-"""A robot judges its user on its next control step (20 Hz) after a request."""
+LF_RANGE_ERROR_M = 0.1
+"""How far inside the valid range a burst may still measure the user beyond it: 4 sigma of the LF's ranging
+error at 2 m (``LfConfig.noise_db`` 0.3 dB through 60 dB a decade: 1.2 % a burst, 2.4 cm)."""
+LOST_AFTER_S = 2.0
+"""A robot declares its user lost after this long without a reliable fix (driving_core.LOST_AFTER_S)."""
+FOUND_WITHIN_S = 1.0
+"""A robot in emergency hears a tracking burst every 0.35 s: a user back within reach this long is found."""
+EMERGENCY_END = "ends in emergency, not waiting or driving with its user"
 
 
-def _lost_when_asked_from_afar(record: Record, invariant: str) -> bool:
-    """Whether ``invariant`` is a robot's end in emergency that the spec asks for: the robot stood (waiting for a
-    command, in remote control after an obstacle, or already lost) while its user walked on, and he then asked
-    it to follow or lead from beyond the LF's valid range (its true distance from the world log). Following
-    or leading, a robot too far from its user goes to emergency (pet-bot-wearable.md, Robot states); one that
-    lost him while driving with him is still a failure, and so is one he asked from within the range."""
+def _justified_emergency(record: Record, invariant: str) -> bool:
+    """Whether ``invariant`` is a robot's end in emergency that the spec asks for: following or leading (or
+    driving a swarm and then dispersed), a robot too far from its user goes to emergency (pet-bot-wearable.md,
+    Robot states). Justified when, at its last loss, the user was truly beyond the LF's valid range (the world
+    log, less the ranging error) or out of its hearing (the wearable link lost by a fault), and never came back
+    within reach long enough to be found. Whether the robot let him get away is ``no_runaway``'s to judge."""
     node = invariant.split(":", 1)[0]
-    if not invariant.endswith("ends in emergency, not waiting or driving with its user"):
+    if not invariant.endswith(EMERGENCY_END):
         return False
     events = record.events.get(node, [])
-    losses = [
-        e for e in events if e["kind"] == "state" and e.get("to") == "emergency" and e.get("cause") == "user lost"
-    ]
-    if not losses:
+    entered = [e["mono"] for e in events if e["kind"] == "state" and e.get("to") == "emergency"]
+    losses = [e["mono"] for e in events if e["kind"] == "state" and e.get("cause") == "user lost"]
+    if not losses or any(
+        e["kind"] == "state" and e.get("cause") == "user found" and e["mono"] > losses[-1] for e in events
+    ):
         return False
-    lost = losses[-1]["mono"]
-    if any(e["kind"] == "state" and e.get("cause") == "user found" and e["mono"] > lost for e in events):
+    lost = losses[-1]
+    window = [lost - LOST_AFTER_S + k * 0.1 for k in range(int(LOST_AFTER_S / 0.1) + 1)]
+    unheard = [t for t in window if any(f["kind"] == "wearable_lost" for f in record.active_faults(t))]
+    beyond = _true_distance(record, node, lost) > LF_VALID_RANGE_M - LF_RANGE_ERROR_M
+    if not (beyond or unheard):
         return False
-    asked = [
-        e["mono"]
-        for e in events
-        if e["kind"] == "watch_request"
-        and e.get("request") in ("follow", "lead", "mode")
-        and 0 <= lost - e["mono"] <= REQUEST_TO_LOSS_S
-    ]
-    if not asked:
-        return False
-    before = record.state_at(node, asked[-1] - 1e-6).get("to")
-    return before in ("command-waiting", "remote-control", "emergency") and (
-        _true_distance(record, node, asked[-1]) > LF_VALID_RANGE_M
-    )
+    # found only in emergency (a dispersal may restore it after a swarm): reach counts from the last entry
+    since = max([lost, entered[-1], *(_wearable_back(record, t) for t in unheard)])
+    return not _in_reach_for(record, node, since, FOUND_WITHIN_S)
+
+
+def _wearable_back(record: Record, t: float) -> float:
+    """When the wearable link lost at ``t`` came back (the end of the run when it never did)."""
+    backs = [float(f["at"]) for f in record.scenario.faults if f.get("kind") == "wearable_back" and f["at"] > t]
+    return min(backs, default=float(record.summary.get("model_time_s") or 1e9))
+
+
+def _in_reach_for(record: Record, node: str, since: float, seconds: float) -> bool:
+    """Whether the user stood truly within the LF's valid range of ``node`` (less the ranging error) for
+    ``seconds`` on end at some time after ``since``."""
+    start = None
+    for tick in record.world:
+        t = tick["t_us"] / 1e6
+        if t < since or not tick.get("bodies"):
+            continue
+        bodies = {b["id"]: b for b in tick["bodies"]}
+        if node not in bodies or "user" not in bodies:
+            start = None
+            continue
+        robot, user = bodies[node], bodies["user"]
+        near = math.hypot(robot["x"] - user["x"], robot["y"] - user["y"]) < LF_VALID_RANGE_M - LF_RANGE_ERROR_M
+        start = (start if start is not None else t) if near else None
+        if start is not None and t - start >= seconds:
+            return True
+    return False
 
 
 def _true_distance(record: Record, node: str, t: float) -> float:
@@ -507,6 +534,66 @@ def no_contact(record: Record) -> list[Violation]:
         if count > seen and "contacts" not in tick:  # a world log that does not name who touched (an older hub's)
             out.append(Violation("a contact the world log names no pair of", round(t, 3)))
         seen = max(seen, count)
+    return out
+
+
+TARGET_DISTANCE_M = 1.0
+"""The distance a following or leading robot keeps from its user (pet-bot-wearable.md, Controller)."""
+RUNAWAY_M = 0.5
+"""How much a robot may open its distance to a user who stands (beyond the target) in ``RUNAWAY_WINDOW_S``:
+the most it drives before it can know his side, 0.41 m (side_check.UNSURE_SPEED_MPS: the check's probe, one
+LF period at the cautious speed, braking), rounded up. One that takes him for one on the other side and
+does not check drives on."""
+RUNAWAY_WINDOW_S = 2.0
+STANDING_S = 2.0
+"""The user counts as standing once he stood this long: longer than a robot braking from its top speed
+(1.2 m/s at 1.5 m/s^2 takes 0.8 s), so a leading robot's stop after his is not counted."""
+STANDING_MPS = 0.05
+
+
+@prop("no_runaway", "safety", ("drive", "follow", "mixed"))
+def no_runaway(record: Record) -> list[Violation]:
+    """A robot following or leading its user does not drive away from him while he stands: beyond the target
+    distance, its distance to him grows by at most ``RUNAWAY_M`` in ``RUNAWAY_WINDOW_S``. (The LF cannot tell a user ahead
+    from one behind; a robot that takes one for the other drives away from him.)"""
+    out: list[Violation] = []
+    samples = _user_and_distances(record)
+    times = [sample[0] for sample in samples]
+    for node in record.robots:
+        flagged = -math.inf
+        for t, standing_since, distances in samples:
+            k = bisect.bisect_right(times, t - RUNAWAY_WINDOW_S + 1e-9)
+            if not k or node not in distances or t - flagged < RUNAWAY_WINDOW_S:
+                continue
+            t0, _, before = samples[k - 1]
+            d0, d1 = before.get(node, math.inf), distances[node]
+            if d1 <= TARGET_DISTANCE_M + RUNAWAY_M or d1 - d0 <= RUNAWAY_M or t0 - standing_since < STANDING_S:
+                continue
+            if {record.state_at(node, x).get("to") for x in (t0, t)} <= {"following", "leading"}:
+                out.append(Violation(f"{node} drove away from its standing user: {d0:.2f} -> {d1:.2f} m", t, (node,)))
+                flagged = t
+    return out
+
+
+def _user_and_distances(record: Record) -> list[tuple[float, float, dict[str, float]]]:
+    """The world log every 0.1 s: (t, since when the user stands, each robot's distance to him)."""
+    out: list[tuple[float, float, dict[str, float]]] = []
+    last = None
+    standing_since = math.inf
+    for tick in record.world:
+        t = tick["t_us"] / 1e6
+        bodies = {b["id"]: b for b in tick.get("bodies") or []}
+        if "user" not in bodies or (out and t - out[-1][0] < 0.1 - 1e-9):
+            continue
+        user = bodies["user"]
+        if last is not None:
+            speed = math.hypot(user["x"] - last[1], user["y"] - last[2]) / max(t - last[0], 1e-9)
+            standing_since = min(standing_since, last[0]) if speed < STANDING_MPS else math.inf
+        last = (t, user["x"], user["y"])
+        distances = {
+            k: math.hypot(b["x"] - user["x"], b["y"] - user["y"]) for k, b in bodies.items() if k.startswith("robot")
+        }
+        out.append((t, standing_since, distances))
     return out
 
 

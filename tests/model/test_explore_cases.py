@@ -112,3 +112,16 @@ def test_robots_the_user_presses_through_another_are_not_robots_touching(tmp_pat
     ]
     assert chained  # the user, robot-5, robot-6 and robot-2 touching in a row
     assert result["ok"], result["failures"]
+
+
+@pytest.mark.timeout(120)
+def test_a_robot_told_to_follow_a_user_who_walked_round_it_finds_his_side(tmp_path: Path) -> None:
+    """Seed 1 case 585 (no_runaway): the user walked round his robot while it waited for a command, then asked it to
+    follow; the robot, last leading, turned round to face away from him (LF cannot tell front from back) and drove
+    away from him at 1 m/s until he was lost. It now checks the side it assumed by moving slowly while he stands,
+    finds the distance opening, and turns round."""
+    result, _ = _replay("seed-1-case-585-no_runaway.toml", tmp_path / "run")
+    events = [json.loads(line) for line in (tmp_path / "run" / "events" / "robot-1.jsonl").read_text().splitlines()]
+    checks = [e for e in events if e["kind"] == "side_checked"]
+    assert checks and checks[0]["confirmed"] is False, checks
+    assert result["ok"], result["failures"]

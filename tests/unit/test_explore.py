@@ -204,15 +204,23 @@ def test_roster_agreement_gives_a_master_its_rounds_to_drop_a_member_that_left_u
     assert P.roster_agreement(killed_member(6.5 + P.MEMBER_DROP_S + 3.5))
 
 
-def test_checker_invariants_pass_a_robot_lost_when_asked_to_follow_from_beyond_the_lf_range() -> None:
+def _ticks(*at: tuple[float, float, float]) -> list[str]:
+    """World ticks every 0.1 s: (from s, to s, the user's distance north of robot-1 at the origin)."""
+    lines = []
+    for start, end, user_m in at:
+        for k in range(round((end - start) / 0.1)):
+            t = start + k * 0.1
+            bodies = [{"id": "robot-1", "x": 0.0, "y": 0.0}, {"id": "user", "x": 0.0, "y": user_m}]
+            lines.append(json.dumps({"t_us": round(t * 1e6), "bodies": bodies}))
+    return lines
+
+
+def test_checker_invariants_pass_an_emergency_only_for_a_user_truly_out_of_reach() -> None:
     ends = "robot-1: ends in emergency, not waiting or driving with its user"
 
-    def asked(before: str, user_m: float) -> P.Record:
+    def lost(user_m: float, then_m: float | None = None, faults: list[dict[str, Any]] | None = None) -> P.Record:
         robot = [
             _state(1.0, "command-waiting", "following", cause="watch"),
-            _state(2.0, "following", before, cause="cancel" if before == "command-waiting" else "obstacle ahead"),
-            _ev("watch_request", 5.8, request="follow"),
-            _state(5.8, before, "following", cause="watch"),
             _state(5.85, "following", "emergency", cause="user lost"),
             _ev("watch_request", 11.4, request="organize"),
             _state(11.4, "emergency", "organizing", session=3),
@@ -220,24 +228,75 @@ def test_checker_invariants_pass_a_robot_lost_when_asked_to_follow_from_beyond_t
             _state(14.4, "master-driving", "emergency", session=3),  # the dispersal restores it
         ]
         record = _record(**{"robot-1": robot})
+        if faults:
+            record = P.Record(
+                parse({"duration_s": 30, "robots": {"count": 3}, "user": {"owner": 1}, "faults": faults}),
+                "follow",
+                events=record.events,
+                summary=record.summary,
+            )
         record.__dict__["invariants"] = [ends]
-        tick = {
-            "t_us": 5_800_000,
-            "bodies": [{"id": "robot-1", "x": 0.0, "y": 0.0}, {"id": "user", "x": 0.0, "y": user_m}],
-        }
-        record.world_lines = [json.dumps(tick)]
+        record.world_lines = _ticks((0.0, 16.0, user_m), (16.0, 30.0, then_m if then_m is not None else user_m))
         return record
 
-    # the user walked away from a robot waiting for a command (or in remote control), then asked from 2.6 m
-    assert P.checker_invariants(asked("command-waiting", 2.6)) == []
-    assert P.checker_invariants(asked("remote-control", 2.6)) == []
-    # asked from 1.5 m: the robot should have found him
-    [violation] = P.checker_invariants(asked("command-waiting", 1.5))
+    # lost at 2.6 m (beyond the LF's valid range) and never back within it: what the spec asks for
+    assert P.checker_invariants(lost(2.6)) == []
+    # a false alarm: lost at 1.5 m
+    [violation] = P.checker_invariants(lost(1.5))
     assert "ends in emergency" in violation.what
-    # lost while following him (no request): a failure whatever the distance
-    driving = asked("command-waiting", 2.6)
-    driving.events["robot-1"] = [e for e in driving.events["robot-1"] if e["kind"] != "watch_request"]
-    assert P.checker_invariants(driving)
+    # back within reach after the swarm ended (1.2 m for 14 s) and never found
+    assert P.checker_invariants(lost(2.6, then_m=1.2))
+    # within reach only while it drove the swarm, not in emergency since: not a failure
+    record = lost(2.6, then_m=2.6)
+    record.world_lines = _ticks((0.0, 12.0, 2.6), (12.0, 14.0, 1.2), (14.0, 30.0, 2.6))
+    assert P.checker_invariants(record) == []
+    # at 1.5 m, but the wearable link was down (a fault): lost by the spec, found never needed
+    wearable = [{"at": 3.0, "kind": "wearable_lost"}]
+    assert P.checker_invariants(lost(1.5, faults=wearable)) == []
+    # the link back at 16 s with the user at 1.2 m: he should be found
+    back = [*wearable, {"at": 16.0, "kind": "wearable_back"}]
+    assert P.checker_invariants(lost(1.5, then_m=1.2, faults=back))
+
+
+def test_no_runaway_fails_a_robot_that_drives_away_from_its_standing_user() -> None:
+    robot = [_state(1.0, "command-waiting", "following", cause="watch")]
+    record = _record("follow", **{"robot-1": robot})
+    # the user stands at 1.0 m until 8 s, then the robot opens the gap at 1 m/s (its user taken for one ahead)
+    away = [
+        json.dumps(
+            {
+                "t_us": round(t * 1e5),
+                "bodies": [
+                    {"id": "robot-1", "x": 0.0, "y": -max(0.0, t / 10 - 8.0)},
+                    {"id": "user", "x": 0.0, "y": 1.0},
+                ],
+            }
+        )
+        for t in range(0, 120)
+    ]
+    record.world_lines = away
+    [violation, *_] = P.no_runaway(record)
+    assert violation.who == ("robot-1",) and violation.when == pytest.approx(8.6)  # 1.60 m, 0.60 m in two seconds
+    # the same gap opened while the user walks away (he moves, not the robot): not judged
+    walking = [
+        json.dumps(
+            {
+                "t_us": round(t * 1e5),
+                "bodies": [
+                    {"id": "robot-1", "x": 0.0, "y": 0.0},
+                    {"id": "user", "x": 0.0, "y": 1.0 + max(0.0, t / 10 - 8.0)},
+                ],
+            }
+        )
+        for t in range(0, 120)
+    ]
+    record = _record("follow", **{"robot-1": robot})
+    record.world_lines = walking
+    assert P.no_runaway(record) == []
+    # waiting for a command, the robot may be carried off (not following or leading): not judged
+    record = _record("follow", **{"robot-1": [_state(0.5, "waiting", "command-waiting")]})
+    record.world_lines = away
+    assert P.no_runaway(record) == []
 
 
 def test_a_master_killed_and_restarted_claims_the_members_of_its_new_swarm() -> None:
