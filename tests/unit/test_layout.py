@@ -39,6 +39,7 @@ PURE_MODELS = (
     "petswarm.managers.sequence",
     "petswarm.managers.serial_link",
     "petswarm.controllers.formation_shapes",
+    "petswarm.controllers.side_check",
     "petswarm.controllers.motion",
     "petswarm.controllers.pet_controller",
     "petswarm.controllers.slave_controller",
