@@ -91,40 +91,21 @@ def add_bench(sub: Any) -> None:
 
 def bench(args: argparse.Namespace) -> int:
     """Run the bench ``args`` names, with its options typed."""
-    if args.bench == "ir":
-        from petswarm.bench.ir import IrOptions, bench_ir
-
-        return bench_ir(options_of(IrOptions, args))
-    if args.bench == "reaction":
-        from petswarm.bench.reaction import ReactionOptions, bench_reaction
-
-        return bench_reaction(options_of(ReactionOptions, args))
-    if args.bench == "surround":
+    if args.bench == "surround":  # its options are not typed yet: the bench takes the parsed command line
         from petswarm.bench.surround import bench_surround
 
         return bench_surround(args)
-    if args.bench == "scale":
-        from petswarm.bench.scale import ScaleOptions, bench_scale
+    from petswarm.bench import hub, ir, organize, reaction, run_bench, scale, start
 
-        return bench_scale(options_of(ScaleOptions, args))
-    if args.bench == "start":
-        from petswarm.bench.start import StartOptions, bench_start
-
-        return bench_start(options_of(StartOptions, args))
-    if args.bench == "organize":
-        from petswarm.bench.organize import OrganizeOptions
-
-        options = options_of(OrganizeOptions, args)
-        if options.clock == "model":
-            from petswarm.bench.organize_model import bench_organize as bench_organize_model
-
-            return bench_organize_model(options)
-        from petswarm.bench.organize import bench_organize
-
-        return bench_organize(options)
-    from petswarm.bench.hub import HubBenchOptions, bench_hub
-
-    return bench_hub(options_of(HubBenchOptions, args))
+    typed = {
+        "hub": hub.HubBenchOptions,
+        "organize": organize.OrganizeOptions,
+        "ir": ir.IrOptions,
+        "reaction": reaction.ReactionOptions,
+        "scale": scale.ScaleOptions,
+        "start": start.StartOptions,
+    }
+    return run_bench(options_of(typed[args.bench], args))
 
 
 def _add_ir(parser: argparse.ArgumentParser) -> None:

@@ -67,3 +67,31 @@ def test_hub_tables_merge_config_scenario_and_profile_in_one_place(tmp_path: Pat
     assert hub_environment(None, None, "kim2017") != EnvironmentConfig()
     with pytest.raises(ValueError, match=r"^bad --config: "):
         hub_environment(str(tmp_path / "missing.json"), None, "ideal")
+
+
+def test_a_notebook_runs_a_swarm_from_the_package_alone(tmp_path: Path) -> None:
+    """``import petswarm`` and a RunOptions with the command line's defaults: the run's digest is the seed's, as
+    the command line gives it (``petswarm run --seed 7 --clock model``)."""
+    import subprocess
+    import sys
+
+    import petswarm
+    from petswarm.lab.run import RunOptions
+
+    code = petswarm.run(RunOptions(seed=7, clock="model", record_dir=str(tmp_path / "nb"), as_json=True))
+    assert code == 0
+    argv = ["run", "--seed", "7", "--clock", "model", "--json", "--record", str(tmp_path / "cli")]
+    done = subprocess.run([sys.executable, "-m", "cli", *argv], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    digest = json.loads((tmp_path / "nb" / "summary.json").read_text())["digest"]
+    assert digest == json.loads(done.stdout)["digest"]
+
+
+def test_run_bench_dispatches_on_the_options_it_is_given(tmp_path: Path, capsys: Any) -> None:
+    import petswarm
+    from petswarm.bench.ir import IrOptions
+
+    assert petswarm.run_bench(IrOptions(runs=2, wire=False, out=str(tmp_path), json=True)) == 0
+    assert (tmp_path / "bench_ir.json").exists()
+    with pytest.raises(TypeError, match="no bench takes"):
+        petswarm.run_bench(object())
