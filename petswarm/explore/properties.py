@@ -554,8 +554,8 @@ STANDING_MPS = 0.05
 @prop("no_runaway", "safety", ("drive", "follow", "mixed"))
 def no_runaway(record: Record) -> list[Violation]:
     """A robot following or leading its user does not drive away from him while he stands: beyond the target
-    distance, its distance to him grows by at most ``RUNAWAY_M`` in ``RUNAWAY_WINDOW_S``. (The LF cannot tell a user ahead
-    from one behind; a robot that takes one for the other drives away from him.)"""
+    distance, its distance to him grows by at most ``RUNAWAY_M`` in ``RUNAWAY_WINDOW_S``. (The LF cannot tell a
+    user ahead from one behind; a robot that takes one for the other drives away from him.)"""
     out: list[Violation] = []
     samples = _user_and_distances(record)
     times = [sample[0] for sample in samples]

@@ -1,4 +1,5 @@
-"""Message-processing manager: requests, the responses they expect, deadlines and retries.
+"""Message processing, sans-IO: a request, the responses it expects, its deadline and retries, as a ``Step``
+(``petswarm.managers.message_processing`` runs steps on the event loop).
 
 A step of the swarm process sends a request, then waits until every expected robot has answered or the
 deadline passes; it then repeats the request to the robots still missing, a bounded number of times. An open
