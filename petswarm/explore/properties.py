@@ -518,15 +518,19 @@ def no_contact(record: Record) -> list[Violation]:
     begins to touch."""
     out = []
     touched: dict[tuple[str, str], float] = {}  # each pair's last tick in contact
+    apart: set[tuple[str, str]] = set()  # pairs of bodies that parted since they last touched
     pushed: dict[str, float] = {}
     seen = 0
     for tick in record.world:
         t = tick["t_us"] / 1e6
         now = {(str(a), str(b)) for a, b in tick.get("contacts", [])}
         pushed.update({who: t for who in _pressed_by_the_user(now)})
+        apart |= _parted(tick, set(touched) - now)
         for a, b in sorted(now):
-            begins = t - touched.get((a, b), -math.inf) > PUSHED_S + 1e-9
+            parted = (a, b) in apart or (a, b) not in touched or not _bodies(tick, a, b)
+            begins = parted and t - touched.get((a, b), -math.inf) > PUSHED_S + 1e-9
             touched[(a, b)] = t
+            apart.discard((a, b))
             if not begins or "user" in (a, b) or any(t - pushed.get(who, -1.0) <= PUSHED_S for who in (a, b)):
                 continue
             out.append(Violation(f"contact {a} / {_name(tick, b)}", round(t, 3), (a, b)))
@@ -549,6 +553,9 @@ STANDING_S = 2.0
 """The user counts as standing once he stood this long: longer than a robot braking from its top speed
 (1.2 m/s at 1.5 m/s^2 takes 0.8 s), so a leading robot's stop after his is not counted."""
 STANDING_MPS = 0.05
+STILL_YAW_RPS = 0.15
+"""Nor turning: the belt's recogniser calls a turn over below this (``ActivityConfig.rotation_stop_rps``). A leading
+robot answers a turning user with an arc (pet-bot-wearable.md, Controller), which may open the distance."""
 
 
 @prop("no_runaway", "safety", ("drive", "follow", "mixed"))
@@ -576,7 +583,8 @@ def no_runaway(record: Record) -> list[Violation]:
 
 
 def _user_and_distances(record: Record) -> list[tuple[float, float, dict[str, float]]]:
-    """The world log every 0.1 s: (t, since when the user stands, each robot's distance to him)."""
+    """The world log every 0.1 s: (t, since when the user stands still, neither walking nor turning, each robot's
+    distance to him)."""
     out: list[tuple[float, float, dict[str, float]]] = []
     last = None
     standing_since = math.inf
@@ -587,13 +595,44 @@ def _user_and_distances(record: Record) -> list[tuple[float, float, dict[str, fl
             continue
         user = bodies["user"]
         if last is not None:
-            speed = math.hypot(user["x"] - last[1], user["y"] - last[2]) / max(t - last[0], 1e-9)
-            standing_since = min(standing_since, last[0]) if speed < STANDING_MPS else math.inf
-        last = (t, user["x"], user["y"])
+            dt = max(t - last[0], 1e-9)
+            speed = math.hypot(user["x"] - last[1], user["y"] - last[2]) / dt
+            turning = abs(math.remainder(float(user.get("yaw", 0.0)) - last[3], math.tau)) / dt
+            still = speed < STANDING_MPS and turning < STILL_YAW_RPS
+            standing_since = min(standing_since, last[0]) if still else math.inf
+        last = (t, user["x"], user["y"], float(user.get("yaw", 0.0)))
         distances = {
             k: math.hypot(b["x"] - user["x"], b["y"] - user["y"]) for k, b in bodies.items() if k.startswith("robot")
         }
         out.append((t, standing_since, distances))
+    return out
+
+
+PARTED_M = 0.005
+"""Two bodies count as parted once this far beyond touching: the world log keeps positions to the millimetre, and
+the world pushes overlapping bodies apart to touching exactly, so bodies left pressed together by a push read
+within a millimetre or two of touching, in and out of the contact list, until one drives off."""
+
+
+def _bodies(tick: dict[str, Any], a: str, b: str) -> tuple[dict[str, Any], dict[str, Any]] | None:
+    """The two bodies of a pair in this tick (None when either is an obstacle or absent)."""
+    found = {body["id"]: body for body in tick.get("bodies") or [] if body["id"] in (a, b)}
+    return (found[a], found[b]) if len(found) == 2 else None
+
+
+def _parted(tick: dict[str, Any], pairs: set[tuple[str, str]]) -> set[tuple[str, str]]:
+    """Those of ``pairs`` (bodies not touching now) that are more than ``PARTED_M`` apart in this tick; a pair
+    with an obstacle parts as soon as it stops touching (the time rule of ``PUSHED_S`` then applies)."""
+    out = set()
+    for a, b in pairs:
+        bodies = _bodies(tick, a, b)
+        if bodies is None:
+            out.add((a, b))
+            continue
+        first, second = bodies
+        gap = math.hypot(first["x"] - second["x"], first["y"] - second["y"])
+        if gap > float(first.get("radius", 0.0)) + float(second.get("radius", 0.0)) + PARTED_M:
+            out.add((a, b))
     return out
 
 

@@ -125,3 +125,14 @@ def test_a_robot_told_to_follow_a_user_who_walked_round_it_finds_his_side(tmp_pa
     checks = [e for e in events if e["kind"] == "side_checked"]
     assert checks and checks[0]["confirmed"] is False, checks
     assert result["ok"], result["failures"]
+
+
+@pytest.mark.timeout(120)
+def test_robots_the_user_left_pressed_together_are_one_contact_until_they_part(tmp_path: Path) -> None:
+    """Seed 1 case 193 (no_contact): the user pressed robot-2 against robot-5 and robot-4; after the push robot-2 stayed
+    exactly touching them (the world pushes bodies apart to touching), out of the contact list and back in as it
+    turned, and the judge counted a new contact 1 s after the push. A pair counts again only once it parted."""
+    result, world = _replay("seed-1-case-193-no_contact.toml", tmp_path / "run")
+    pressed = [tick["t_us"] for tick in world if ["robot-2", "robot-5"] in tick.get("contacts", [])]
+    assert pressed and any(["robot-2", "user"] in tick.get("contacts", []) for tick in world)
+    assert result["ok"], result["failures"]

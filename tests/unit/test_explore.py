@@ -293,6 +293,18 @@ def test_no_runaway_fails_a_robot_that_drives_away_from_its_standing_user() -> N
     record = _record("follow", **{"robot-1": robot})
     record.world_lines = walking
     assert P.no_runaway(record) == []
+    # the user turns on the spot as the robot opens the gap (a leading robot's arc): not judged
+    record = _record("follow", **{"robot-1": robot})
+    record.world_lines = [
+        json.dumps(
+            {
+                **json.loads(line),
+                "bodies": [{**b, "yaw": 0.5 * k / 10} if b["id"] == "user" else b for b in json.loads(line)["bodies"]],
+            }
+        )
+        for k, line in enumerate(away)
+    ]
+    assert P.no_runaway(record) == []
     # waiting for a command, the robot may be carried off (not following or leading): not judged
     record = _record("follow", **{"robot-1": [_state(0.5, "waiting", "command-waiting")]})
     record.world_lines = away
@@ -434,11 +446,21 @@ def test_no_contact_takes_a_pair_that_parts_for_a_tick_as_one_contact_going_on()
         *(_tick(20_000 * k, 2, pair) for k in range(2, 20)),
         _tick(400_000, 2, []),
         _tick(420_000, 3, pair),
-        _tick(440_000, 3, []),
-        _tick(700_000, 4, pair),  # parted for a quarter second: a new contact
+        _tick(440_000, 3, [], robot_1=(-0.02, 0.0)),
+        _tick(700_000, 4, pair),  # parted (2 cm) for a quarter second: a new contact
     ]
     [violation] = P.no_contact(record)
     assert violation.who == ("robot-1", "robot-2") and violation.when == 0.7
+
+
+def test_no_contact_takes_a_pair_left_pressed_together_as_one_contact_however_long_it_flickers() -> None:
+    """Seed 1 case 193: after the push the two robots stay side by side, exactly touching (the world pushed them
+    apart to that), and drop out of the contact list and back as one slides along the other: never parted."""
+    pair, pushed = [["robot-1", "robot-2"]], [["robot-1", "robot-2"], ["robot-1", "user"]]
+    flicker = [_tick(20_000 * k, 2, [] if 15 <= k < 30 else pair, robot_1=(0.001 * (k % 2), 0.0)) for k in range(2, 60)]
+    record = _record()
+    record.world_lines = [_tick(0, 0, []), _tick(20_000, 2, pushed), *flicker]
+    assert P.no_contact(record) == []
 
 
 def test_no_contact_fails_a_contact_a_world_log_does_not_name() -> None:
