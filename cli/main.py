@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 from cli.bench import add_bench, bench
 from cli.explore import add_explore, explore
+from cli.options import options_of
 from cli.text import plain
 from petswarm.lab.arguments import CLOCKS, CommandParser, add_link_security, bounded, robot_id, seed, world_name
 from petswarm.lab.robot_command import add_hub as _add_hub
@@ -683,9 +684,9 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _experiment(args: argparse.Namespace) -> int:
-    from petswarm.lab.experiment import experiment_command
+    from petswarm.lab.experiment import ExperimentOptions, experiment_command
 
-    return experiment_command(args)
+    return experiment_command(options_of(ExperimentOptions, args))
 
 
 def _watch(args: argparse.Namespace) -> int:
@@ -734,10 +735,9 @@ def _export(args: argparse.Namespace) -> int:
 
 
 def _report(args: argparse.Namespace) -> int:
+    from petswarm.lab.report import ReportOptions, report_command
 
-    from petswarm.lab.report import report_command
-
-    return report_command(args)
+    return report_command(options_of(ReportOptions, args))
 
 
 def _swarm(args: argparse.Namespace) -> int:

@@ -31,14 +31,13 @@ swarm asked for and the run had joined it). Both are required unless the file sa
 
 from __future__ import annotations
 
-import argparse
 import io
 import json
 import sys
 import time
 import tomllib
 from contextlib import redirect_stderr, redirect_stdout
-from dataclasses import fields
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
@@ -110,7 +109,20 @@ def _check_clock_and_profile(run_table: dict[str, Any]) -> None:
         check_profile(run_table["profile"])
 
 
-def experiment_command(args: argparse.Namespace) -> int:
+@dataclass
+class ExperimentOptions:
+    """What ``petswarm experiment`` is asked to do (its options, as a notebook gives them)."""
+
+    file: str
+    """The TOML experiment file."""
+    out: str | None = None
+    """Directory for the records and results (None: runs/experiment-<time>, or under $PETSWARM_RUNS)."""
+    json: bool = False
+    clock: str | None = None
+    """Every run's clock, over the file's ``[run] clock`` (None: the file's, else wall)."""
+
+
+def experiment_command(args: ExperimentOptions) -> int:
     """Run every repetition with a progress bar; 0 when every run was OK."""
     try:
         spec = load(Path(args.file))
@@ -146,7 +158,7 @@ def experiment_command(args: argparse.Namespace) -> int:
 
 
 def _results(
-    spec: dict[str, Any], args: argparse.Namespace, rows: list[dict[str, Any]], **extra: Any
+    spec: dict[str, Any], args: ExperimentOptions, rows: list[dict[str, Any]], **extra: Any
 ) -> dict[str, Any]:
     """results.json: the file's spec, a row per run and their aggregate (``interrupted``: a Ctrl-C or SIGTERM
     stopped the last run, whose row is in as it ended)."""

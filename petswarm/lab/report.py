@@ -10,10 +10,10 @@ surround run (robots in IR beacon mode round a user) also gets the swarm and its
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -24,7 +24,18 @@ from petswarm.lab.supervision import verdict
 from petswarm.lab.surround_plots import is_surround_run, plot_snapshots
 
 
-def report_command(args: argparse.Namespace) -> int:
+@dataclass
+class ReportOptions:
+    """What ``petswarm report`` is asked to do."""
+
+    run: str
+    """A run record directory."""
+    out: str | None = None
+    """Directory for the plots (None: the run directory)."""
+    json: bool = False
+
+
+def report_command(args: ReportOptions) -> int:
     """Print and plot one run record (``--json``: its figures and the plots' paths as JSON); 2 when the
     directory is not a run record."""
     run = Path(args.run)

@@ -22,6 +22,8 @@ def _options() -> dict[tuple[str, ...], Any]:
     from petswarm.bench.scale import ScaleOptions
     from petswarm.bench.start import StartOptions
     from petswarm.explore.main import ExploreOptions
+    from petswarm.lab.experiment import ExperimentOptions
+    from petswarm.lab.report import ReportOptions
 
     return {
         ("bench", "hub"): HubBenchOptions,
@@ -31,6 +33,8 @@ def _options() -> dict[tuple[str, ...], Any]:
         ("bench", "scale"): ScaleOptions,
         ("bench", "start"): StartOptions,
         ("explore",): ExploreOptions,
+        ("experiment", "x.toml"): ExperimentOptions,
+        ("report", "runs/x"): ReportOptions,
     }
 
 
@@ -38,7 +42,8 @@ def _options() -> dict[tuple[str, ...], Any]:
 def test_typed_options_default_to_what_the_command_line_does(argv: tuple[str, ...]) -> None:
     cls = _options()[argv]
     args = build_parser().parse_args(list(argv))
-    assert options_of(cls, args) == cls()
+    positional = {"experiment": {"file": "x.toml"}, "report": {"run": "runs/x"}}.get(argv[0], {})
+    assert options_of(cls, args) == cls(**positional)
     # every option of the command is a field: nothing the command line takes is lost on the way
     taken = set(vars(args)) - {"command", "bench"}
     assert taken == {f.name for f in fields(cls)}, taken ^ {f.name for f in fields(cls)}
