@@ -157,9 +157,7 @@ def experiment_command(args: ExperimentOptions) -> int:
     return 0 if all(r["ok"] for r in rows) else 1
 
 
-def _results(
-    spec: dict[str, Any], args: ExperimentOptions, rows: list[dict[str, Any]], **extra: Any
-) -> dict[str, Any]:
+def _results(spec: dict[str, Any], args: ExperimentOptions, rows: list[dict[str, Any]], **extra: Any) -> dict[str, Any]:
     """results.json: the file's spec, a row per run and their aggregate (``interrupted``: a Ctrl-C or SIGTERM
     stopped the last run, whose row is in as it ended)."""
     return {
