@@ -21,7 +21,9 @@ def hub_environment(config: str | None, scenario: Scenario | None, profile: str)
 
     try:
         environment = load_config(config) if config else EnvironmentConfig()
-    except (OSError, ValueError) as err:
+    except OSError as err:  # as a person reads it: the file and what is wrong, not Python's errno
+        raise ValueError(f"bad --config: {config}: {(err.strerror or str(err)).lower()}") from None
+    except ValueError as err:
         raise ValueError(f"bad --config: {err}") from None
     if scenario is not None:
         try:

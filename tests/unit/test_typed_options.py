@@ -70,8 +70,10 @@ def test_hub_tables_merge_config_scenario_and_profile_in_one_place(tmp_path: Pat
     assert merged.medium.mac.min_be == 5 and merged.ir.emitter_noise == 0.05
     assert merged.obstacles == hub_environment(None, scenario, "ideal").obstacles != EnvironmentConfig().obstacles
     assert hub_environment(None, None, "kim2017") != EnvironmentConfig()
-    with pytest.raises(ValueError, match=r"^bad --config: "):
-        hub_environment(str(tmp_path / "missing.json"), None, "ideal")
+    missing = tmp_path / "missing.json"
+    with pytest.raises(ValueError) as refused:
+        hub_environment(str(missing), None, "ideal")
+    assert str(refused.value) == f"bad --config: {missing}: no such file or directory"
 
 
 def test_a_notebook_runs_a_swarm_from_the_package_alone(tmp_path: Path) -> None:
