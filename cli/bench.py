@@ -91,6 +91,10 @@ def add_bench(sub: Any) -> None:
 
 def bench(args: argparse.Namespace) -> int:
     """Run the bench ``args`` names, with its options typed."""
+    if args.bench == "all":
+        from cli.bench_all import run
+
+        return run(args)
     if args.bench == "surround":  # its options are not typed yet: the bench takes the parsed command line
         from petswarm.bench.surround import bench_surround
 

@@ -17,7 +17,16 @@ from cli.bench import add_bench, bench
 from cli.explore import add_explore, explore
 from cli.options import options_of
 from cli.text import plain
-from petswarm.lab.arguments import CLOCKS, CommandParser, add_link_security, bounded, robot_id, seed, world_name
+from petswarm.lab.arguments import (
+    CLOCKS,
+    CommandParser,
+    add_link_security,
+    bounded,
+    node_ids,
+    robot_id,
+    seed,
+    world_name,
+)
 from petswarm.lab.robot_command import add_hub as _add_hub
 from petswarm.lab.robot_command import add_node_clock as _add_node_clock
 from petswarm.lab.robot_command import add_profile, add_robot_arguments, robot_config
@@ -174,6 +183,15 @@ def _add_hub_command(sub: Any) -> None:
         default=None,
         help="lockstep: wall seconds to wait for the --expect nodes; then model time starts without the missing "
         "ones, recorded as gone (default 60 + 1 per expected node)",
+    )
+    hub.add_argument(
+        "--roster",
+        type=node_ids,
+        default=(),
+        metavar="IDS",
+        help="comma-separated node ids the run starts (robot-1,robot-2,user-1): their up keys open outside the cap of "
+        "1,024 node ids and room is kept for their first messages and tokens, so no other session's nodes can keep "
+        "them from attaching (petswarm run gives its own; docs/SECURITY.md)",
     )
     _add_tls(hub, "hub")
 
@@ -502,6 +520,7 @@ def _hub(args: argparse.Namespace) -> int:
                 expect=args.expect,
                 dead_after_s=args.dead_after,
                 start_within_s=args.start_within,
+                roster=args.roster,
                 pcap_path=args.pcap,
                 world_log=args.world_log,
             )
@@ -513,6 +532,7 @@ def _hub(args: argparse.Namespace) -> int:
                 pcap_path=args.pcap,
                 environment=environment,
                 world_log=args.world_log,
+                roster=args.roster,
             )
     except OSError as err:
         print(f"petswarm hub: cannot open --pcap file or --world-log file: {err}", file=sys.stderr)

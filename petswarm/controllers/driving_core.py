@@ -1025,7 +1025,7 @@ class EchoRanges:
             old = _ranges_of(first) if span >= 0.1 else now
             angles.append(ring_angles)
             latest.append(now)
-            known.append(span >= 0.1 and len(old) == len(now))
+            known.append(span >= 0.1 and len(old) == len(now) and _steady(first[1], sensors))
             oldest.append(old if known[-1] else now)
             spans.append(span if known[-1] else 1.0)
             cos.append(ring_cos)
@@ -1034,7 +1034,7 @@ class EchoRanges:
         now_m, old_m, moving = np.array(latest), np.array(oldest), np.array(velocity, dtype=float)
         rate = (now_m - old_m) / np.array(spans)[:, None]
         along = moving[:, 0:1] * np.array(cos) + moving[:, 1:2] * np.array(sin)
-        receding = np.where(np.isnan(rate), 0.0, rate + along)
+        receding = np.where(np.isnan(rate), 0.0, rate + along - RATE_NOISE_M / np.array(spans)[:, None])
         return angles, now_m, receding, np.array(known)
 
     def holds(self, t_us: int) -> bool:
@@ -1065,7 +1065,7 @@ class EchoRanges:
         into 0.35 m/s) plus the robot's own speed along the beam."""
         first = self._history[0]
         dt = (sensors.t_us - first[0]) / 1e6
-        if dt < 0.1:
+        if dt < 0.1 or not _steady(first[1], sensors):
             return ()
         oldest = _ranges_of(first)
         if len(oldest) != len(ranges):
@@ -1074,8 +1074,24 @@ class EchoRanges:
         receding = []
         for r, o, c, s in zip(ranges, oldest, cos, sin, strict=True):
             rate = (r - o) / dt
-            receding.append(0.0 if math.isnan(rate) else rate + (vx * c + vy * s))
+            receding.append(0.0 if math.isnan(rate) else rate + (vx * c + vy * s) - RATE_NOISE_M / dt)
         return tuple(receding)
+
+
+RATE_NOISE_M = 0.04
+"""What two ranges of one still echo may differ by through noise alone: three sigma of the difference of two
+readings of an HC-SR04-like sensor (1 cm each, ``WorldConfig.ultrasonic_noise_m``: 1.4 cm). A range rate is taken
+as that much slower (over its span) before the safety stage lets a robot follow an echo it reads as receding: a
+robot 1 cm from a standing one read it receding at 0.1 m/s from noise, and drove into it (seed 1 case 193)."""
+RATE_TURN_RAD = math.radians(15.0)
+"""A ring that turned more than this (an ultrasonic cone's half-width) between two samples points each beam at
+another patch: the range's change then compares two echoes, not one echo's motion, and says nothing of how fast
+an obstacle moves away (a robot turning on the spot saw the user it left as a robot receding at its own speed)."""
+
+
+def _steady(before: OwnSensors, now: OwnSensors) -> bool:
+    """Whether the ring turned little enough between two samples for its range rates to mean motion."""
+    return abs(wrap(now.yaw_rad - before.yaw_rad)) <= RATE_TURN_RAD
 
 
 def _ranges_of(sample: list[Any]) -> list[float]:

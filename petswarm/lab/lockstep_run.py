@@ -17,7 +17,7 @@ from petswarm.lab.digest import record_digest
 from petswarm.lab.metrics import driving_metrics, read_world
 from petswarm.lab.model_run import CONTROL_IDENTITY, orchestrate, robot_argvs
 from petswarm.lab.records import RunRecord
-from petswarm.lab.run import RunContext, RunOptions, progress, supervise
+from petswarm.lab.run import RunContext, RunOptions, progress, roster_argv, supervise
 from petswarm.scenario import Scenario
 from radio_hub.interface import LockstepLink, RadioClient, query_hub
 
@@ -33,6 +33,8 @@ def run_lockstep(opts: RunOptions, scenario: Scenario | None) -> int:
 
     def hub_extra(record: RunRecord) -> list[str]:
         extra = ["--clock", "lockstep", "--expect", str(nodes)]
+        users = [scenario.user.node_id] if scenario is not None and scenario.user is not None else []
+        extra += roster_argv(opts.robots, *users, CONTROL_IDENTITY.node_id)
         extra += [] if opts.dead_after_s is None else ["--dead-after", str(opts.dead_after_s)]
         if scenario is not None:
             extra += ["--scenario", str(scenario.path), "--world-log", str(record.path / "world.jsonl")]

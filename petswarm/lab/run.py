@@ -121,6 +121,12 @@ class RunContext:
     watch: Supervision
 
 
+def roster_argv(robots: int, *others: str) -> list[str]:
+    """The hub's ``--roster`` for a run of ``robots`` robots and the other nodes it starts (a user, its orchestrator):
+    the hub keeps room for these ids whatever other sessions attach (docs/SECURITY.md)."""
+    return ["--roster", ",".join([*(f"robot-{rid}" for rid in range(1, robots + 1)), *others])]
+
+
 def supervise(
     opts: RunOptions,
     prefix: str,

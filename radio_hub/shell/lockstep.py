@@ -25,6 +25,7 @@ import queue
 import sys
 import threading
 import time
+from collections.abc import Collection
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -88,8 +89,10 @@ class LockstepHub:
         start_within_s: float | None = None,
         pcap_path: str | Path | None = None,
         world_log: str | Path | None = None,
+        roster: Collection[str] = (),
     ) -> None:
-        """``expect``: model time starts once this many nodes have reported idle (a run's robots, its user and
+        """``roster``: the node ids the run starts, whose up keys open outside the cap (``UpKeys``). ``expect``: model
+        time starts once this many nodes have reported idle (a run's robots, its user and
         its orchestrator), so every node attaches in the first instant whatever order processes start in; if some
         have not come within ``start_within_s`` of wall time (default: 60 s + 1 s per expected node), it starts
         without them and records how many were missing, rather than wait forever."""
@@ -99,6 +102,7 @@ class LockstepHub:
         self.endpoint = endpoint
         self.keys = Keys(world)
         self.seed = seed
+        self.roster = tuple(roster)
         self.expect = expect
         self.dead_after_s = dead_after_s
         self.start_within_s = (
@@ -135,7 +139,9 @@ class LockstepHub:
         session = zenoh.open(session_config("router", self.endpoint))
         self._session = session
         self._opened_at = time.monotonic()
-        _, self._decls = declare_hub_keys(session, self.keys, self._inbox.put, chaos=False, faults=self.env.faults)
+        _, self._decls = declare_hub_keys(
+            session, self.keys, self._inbox.put, chaos=False, faults=self.env.faults, roster=self.roster
+        )
         self._downlink.world_pub = session.declare_publisher(self.keys.world_state)
         self._decls.append(self._downlink.world_pub)
         self._downlink.session = session

@@ -573,3 +573,29 @@ def test_telemetry_every_ten_control_steps_names_the_slave_slot() -> None:
     [telemetry] = of(actions, Telemetry)
     assert telemetry.role == "slave" and telemetry.master == "robot-1" and telemetry.state == "slave-driving"
     assert telemetry.slot == pytest.approx((-0.6, 0.0))
+
+
+def _ring_sample(t: float, yaw_deg: float, ahead_m: float, vx: float) -> OwnSensors:
+    ranges = np.full(8, math.nan)
+    ranges[0] = ahead_m
+    return OwnSensors(int(t * 1e6), ranges, ANGLES, math.radians(yaw_deg), (vx, 0.0, 0.0))
+
+
+def test_an_echo_seen_while_the_ring_turns_is_not_taken_for_one_moving_away() -> None:
+    """Seed 1 case 581, seed 5 case 52: a robot turning on the spot at 1.5 rad/s while driving at 0.7 m/s had its
+    front beam swing from the user (0.4 m) onto a robot as far: the range did not change, so the robot counted that
+    robot as receding at its own speed and drove into it. Over a turn wider than a cone's half-width (15 degrees)
+    the range rates are unknown (no allowance for a receding echo); a steady ring keeps them."""
+    from petswarm.controllers.driving_core import EchoRanges
+
+    steady = EchoRanges()
+    for k in range(6):
+        steady.observe(_ring_sample(0.04 * k, 90.0 + k, 0.4, 0.7))
+    _, _, receding = steady.floats(_ring_sample(0.24, 96.0, 0.4, 0.7))
+    # the echo keeps its range as the robot drives at it: it moves away at 0.7 m/s, less what noise could fake
+    assert receding[0] == pytest.approx(0.7 - driving_core.RATE_NOISE_M / 0.2)
+    turning = EchoRanges()
+    for k in range(6):
+        turning.observe(_ring_sample(0.04 * k, 90.0 + 3.5 * k, 0.4, 0.7))
+    _, _, receding = turning.floats(_ring_sample(0.24, 111.0, 0.4, 0.7))
+    assert receding == ()
