@@ -87,6 +87,11 @@ def add_bench(sub: Any) -> None:
         bench_sub.add_parser("scale", help="wall time per model second, memory and digests vs robots, per clock")
     )
     _add_start(bench_sub.add_parser("start", help="CPU, time and memory of starting robot processes, forked vs exec'd"))
+    from cli.bench_all import add_arguments as add_bench_all_arguments
+
+    add_bench_all_arguments(
+        bench_sub.add_parser("all", help="rerun every bench the docs quote: one header with command, date, machine")
+    )
 
 
 def bench(args: argparse.Namespace) -> int:

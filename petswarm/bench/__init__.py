@@ -1,7 +1,8 @@
 """The benchmarks behind ``petswarm bench``: the hub's throughput and latency (``hub``, ``nodes``),
 network formation (``organize``), IR relative location (``ir``, ``ir_token``), reaction to the user
-(``reaction``), scale (``scale``) and the surround formation (``surround``, ``surround_sim``). Each writes its
-figures and results the same way (``output``).
+(``reaction``), scale (``scale``) and the surround formation (``surround``, ``surround_sim``); ``all`` reruns
+every bench the docs quote. Each writes its figures and results the same way (``petswarm.lab.output``), and
+each is a plain function of typed options: ``run_bench(IrOptions(...))`` runs one without a command line.
 """
 
 from __future__ import annotations
@@ -11,7 +12,8 @@ from typing import Any
 
 def run_bench(options: Any) -> int:
     """Run the bench whose typed options ``options`` are (``hub.HubBenchOptions``, ``organize.OrganizeOptions``,
-    ``ir.IrOptions``, ``reaction.ReactionOptions``, ``scale.ScaleOptions``, ``start.StartOptions``); its exit
+    ``ir.IrOptions``, ``reaction.ReactionOptions``, ``scale.ScaleOptions``, ``start.StartOptions``,
+    ``all.AllOptions``); its exit
     status. Each bench is imported when run: they bring zenoh, numpy and matplotlib, which parsing does not need."""
     name = type(options).__name__
     if name == "IrOptions":
@@ -38,6 +40,10 @@ def run_bench(options: Any) -> int:
         from petswarm.bench.organize import bench_organize
 
         return bench_organize(options)
+    if name == "AllOptions":
+        from petswarm.bench.all import bench_all
+
+        return bench_all(options)
     if name == "HubBenchOptions":
         from petswarm.bench.hub import bench_hub
 
