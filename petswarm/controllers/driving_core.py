@@ -1034,7 +1034,8 @@ class EchoRanges:
         now_m, old_m, moving = np.array(latest), np.array(oldest), np.array(velocity, dtype=float)
         rate = (now_m - old_m) / np.array(spans)[:, None]
         along = moving[:, 0:1] * np.array(cos) + moving[:, 1:2] * np.array(sin)
-        receding = np.where(np.isnan(rate), 0.0, rate + along - RATE_NOISE_M / np.array(spans)[:, None])
+        away = np.where(np.isnan(rate), 0.0, rate + along)
+        receding = np.where((away > RATE_NOISE_M / np.array(spans)[:, None]) | (now_m > STOP_DISTANCE_M), away, 0.0)
         return angles, now_m, receding, np.array(known)
 
     def holds(self, t_us: int) -> bool:
@@ -1074,15 +1075,20 @@ class EchoRanges:
         receding = []
         for r, o, c, s in zip(ranges, oldest, cos, sin, strict=True):
             rate = (r - o) / dt
-            receding.append(0.0 if math.isnan(rate) else rate + (vx * c + vy * s) - RATE_NOISE_M / dt)
+            away = 0.0 if math.isnan(rate) else rate + (vx * c + vy * s)
+            receding.append(away if away > RATE_NOISE_M / dt or r > STOP_DISTANCE_M else 0.0)
         return tuple(receding)
 
 
 RATE_NOISE_M = 0.04
 """What two ranges of one still echo may differ by through noise alone: three sigma of the difference of two
-readings of an HC-SR04-like sensor (1 cm each, ``WorldConfig.ultrasonic_noise_m``: 1.4 cm). A range rate is taken
-as that much slower (over its span) before the safety stage lets a robot follow an echo it reads as receding: a
-robot 1 cm from a standing one read it receding at 0.1 m/s from noise, and drove into it (seed 1 case 193)."""
+readings of an HC-SR04-like sensor (1 cm each, ``WorldConfig.ultrasonic_noise_m``: 1.4 cm). An echo counts as
+receding (the safety stage then lets a robot follow it) only faster than that over the rate's span (0.2 m/s over
+0.2 s): a robot 1 cm from a standing one read it receding at 0.1 m/s from noise and drove into it (seed 1 case
+193); a leader driving on is followed as before."""
+STOP_DISTANCE_M = PetControllerConfig().stop_distance_m
+"""Inside it only an echo's receding speed lets the safety stage move a robot toward it: there, and only there,
+a receding speed noise could fake is not counted."""
 RATE_TURN_RAD = math.radians(15.0)
 """A ring that turned more than this (an ultrasonic cone's half-width) between two samples points each beam at
 another patch: the range's change then compares two echoes, not one echo's motion, and says nothing of how fast

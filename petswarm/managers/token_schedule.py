@@ -511,6 +511,13 @@ class TokenSchedule:
             self.last_activity = now
             self._end_round(held)
             return [*actions, Log("ir_unheard", {"round": held.round})]
+        if not self.is_master and self.chain and self.chain[0] not in held.alive:
+            # our master did not hear us (a partition, or it died): it regenerates the token on its side once the
+            # air is silent for regen_timeout_s, and two modules would shine at once; end the round unshone and
+            # unpassed, so the members cut off with us fall silent too
+            self.last_activity = now
+            self._end_round(held)
+            return [*actions, Log("ir_master_unheard", {"round": held.round, "master": self.chain[0]})]
         held.phase = "switch_on"
         held.ref = self._await(lambda at: self._shining(held, at))
         return [*actions, SetIrMode("transmit", held.ref)]

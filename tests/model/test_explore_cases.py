@@ -147,3 +147,15 @@ def test_a_slave_turning_on_the_spot_does_not_drive_into_another(tmp_path: Path)
     result, world = _replay("seed-1-case-581-no_contact.toml", tmp_path / "run")
     assert not {("robot-2", "robot-3")} & {tuple(p) for tick in world for p in tick.get("contacts", [])}
     assert result["ok"], result["failures"]
+
+
+@pytest.mark.timeout(120)
+def test_members_cut_off_from_their_master_do_not_shine_beside_its_regenerated_token(tmp_path: Path) -> None:
+    """Seed 3 case 27 of drive,mixed,follow (checker_invariants): robots 2 and 4, cut off from their master by a
+    partition, passed the token between themselves while the master regenerated its own after 1.5 s of silence: two
+    modules shone at once for 23 ms. A member holder now shines only when its master answered its start sign."""
+    result, _ = _replay("seed-3-case-27-checker_invariants.toml", tmp_path / "run")
+    events = [json.loads(line) for line in (tmp_path / "run" / "events" / "robot-2.jsonl").read_text().splitlines()]
+    events += [json.loads(line) for line in (tmp_path / "run" / "events" / "robot-4.jsonl").read_text().splitlines()]
+    assert any(e["kind"] == "ir_master_unheard" for e in events)
+    assert result["ok"], result["failures"]

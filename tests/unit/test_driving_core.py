@@ -592,8 +592,16 @@ def test_an_echo_seen_while_the_ring_turns_is_not_taken_for_one_moving_away() ->
     for k in range(6):
         steady.observe(_ring_sample(0.04 * k, 90.0 + k, 0.4, 0.7))
     _, _, receding = steady.floats(_ring_sample(0.24, 96.0, 0.4, 0.7))
-    # the echo keeps its range as the robot drives at it: it moves away at 0.7 m/s, less what noise could fake
-    assert receding[0] == pytest.approx(0.7 - driving_core.RATE_NOISE_M / 0.2)
+    # the echo keeps its range as the robot drives at it: it moves away at 0.7 m/s, faster than noise could fake
+    assert receding[0] == pytest.approx(0.7)
+    for ahead_m, counted in ((0.1, 0.0), (0.4, 0.1)):
+        slow = EchoRanges()
+        for k in range(6):
+            slow.observe(_ring_sample(0.04 * k, 90.0 + k, ahead_m, 0.1))
+        _, _, receding = slow.floats(_ring_sample(0.24, 96.0, ahead_m, 0.1))
+        # 0.1 m/s over 0.2 s is within what noise fakes: not counted inside the stop distance, where it alone would
+        # let the robot close in; beyond it, counted as before
+        assert receding[0] == pytest.approx(counted)
     turning = EchoRanges()
     for k in range(6):
         turning.observe(_ring_sample(0.04 * k, 90.0 + 3.5 * k, 0.4, 0.7))
