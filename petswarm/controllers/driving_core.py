@@ -62,13 +62,14 @@ from petswarm.controllers.pet_controller import (
 from petswarm.controllers.side_check import ACTIVITY_LAG_S, UNSURE_SPEED_MPS, SideCheck
 from petswarm.controllers.slave_controller import RelativeFix, RelativeTracker, SlaveControllerConfig, slave_decision
 from petswarm.managers import messages as m
+from petswarm.managers.actions import Log
 from petswarm.managers.sequence import RobotState, SequenceManager, TransitionError
 from petswarm.wearables import user_link
 from petswarm.wearables.activity import Activity, Movement
 from petswarm.wearables.gestures import Gesture, combine
 from petswarm.wearables.lf_location import UserFix, locate
 from radio_hub.datasheet import LfConfig, wake_pattern
-from radio_hub.interface import BROADCAST, OwnSensors, lazy_numpy
+from radio_hub.values import BROADCAST, OwnSensors, lazy_numpy
 
 if TYPE_CHECKING:
     import numpy as np
@@ -222,14 +223,6 @@ class SetUser:
     """The formation's user id changes (the robot's owner, as it appears in scans)."""
 
     user: int
-
-
-@dataclass(frozen=True)
-class Log:
-    """One event for the robot's record."""
-
-    kind: str
-    detail: dict[str, Any]
 
 
 @dataclass(frozen=True)

@@ -28,7 +28,7 @@ def run(opts: RunOptions) -> int:
             )
             return 2
     if opts.config is not None:  # checked on every clock before anything starts: unchecked, a traceback in model
-        from radio_hub.interface import config_problem  # time, a hub dead at start on the wall clock
+        from radio_hub.hosting import config_problem  # time, a hub dead at start on the wall clock
 
         problem = config_problem(opts.config)
         if problem is not None:

@@ -25,9 +25,9 @@ import zenoh
 from radio_hub.guard import Faults
 from radio_hub.link import wire
 from radio_hub.link.keys import Keys
-from radio_hub.link.port import HubUnavailable
 from radio_hub.link.trust import TransportSecurity, access_control, tls_settings
 from radio_hub.link.up_keys import UpKeys, wait_for_up_key
+from radio_hub.link.values import HubUnavailable
 
 DOWN_PENDING_LIMIT = 2000
 """Messages from the hub a node's event loop may have waiting; more are dropped and counted (``dropped``):

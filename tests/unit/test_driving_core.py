@@ -39,9 +39,10 @@ from petswarm.controllers.driving_core import (
 from petswarm.controllers.formation_shapes import Mode
 from petswarm.controllers.motion import MotorCommand
 from petswarm.managers import messages as m
-from petswarm.managers.sequence import EventLog, RobotState, SequenceManager, TransitionError
+from petswarm.managers.event_log import EventLog
+from petswarm.managers.sequence import RobotState, SequenceManager, TransitionError
 from petswarm.wearables import user_link
-from radio_hub.interface import BROADCAST, OwnSensors
+from radio_hub.values import BROADCAST, OwnSensors
 
 BELT = "user-1"
 ANGLES = np.linspace(0.0, 2 * math.pi, 8, endpoint=False)

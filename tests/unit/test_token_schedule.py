@@ -17,11 +17,11 @@ import pytest
 
 from petswarm.managers import messages as m
 from petswarm.managers import token_schedule as ts
-from petswarm.managers.rf import Incoming
+from petswarm.managers.actions import Incoming
 from petswarm.managers.token_schedule import ANSWER_SLOT_MS, WATCH_PERIOD_S, TokenConfig, TokenSchedule
 from radio_hub.air.mac import Frame, FrameType
-from radio_hub.interface import BROADCAST, RxFrame
 from radio_hub.physics.light import IrConfig, receiver_readings
+from radio_hub.values import BROADCAST, RxFrame
 
 SESSION = 9
 CONFIG = TokenConfig()
