@@ -52,6 +52,8 @@ def add_explore(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-a
 
 def explore(args: argparse.Namespace) -> int:
     """Run ``petswarm explore``."""
-    from petswarm.explore.main import explore as run
+    import petswarm
+    from cli.options import options_of
+    from petswarm.explore.main import ExploreOptions
 
-    return run(args)
+    return petswarm.run_explore(options_of(ExploreOptions, args))

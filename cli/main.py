@@ -13,8 +13,20 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from cli.bench import add_bench, bench
 from cli.explore import add_explore, explore
-from petswarm.lab.arguments import CLOCKS, CommandParser, add_link_security, bounded, robot_id, seed, world_name
+from cli.options import options_of
+from cli.text import plain
+from petswarm.lab.arguments import (
+    CLOCKS,
+    CommandParser,
+    add_link_security,
+    bounded,
+    node_ids,
+    robot_id,
+    seed,
+    world_name,
+)
 from petswarm.lab.robot_command import add_hub as _add_hub
 from petswarm.lab.robot_command import add_node_clock as _add_node_clock
 from petswarm.lab.robot_command import add_profile, add_robot_arguments, robot_config
@@ -89,11 +101,37 @@ class _VersionAction(argparse.Action):
 def build_parser() -> argparse.ArgumentParser:
     """The whole command line."""
     parser = CommandParser(
-        prog="petswarm", description=__doc__, epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter
+        prog="petswarm",
+        description=plain(__doc__ or ""),
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action=_VersionAction, help="show the installed version and exit")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
+    _add_hub_command(sub)
+    _add_user_command(sub)
+    _add_robot_command(sub)
+    _add_swarm_command(sub)
+    _add_run_command(sub)
+    from cli.chaos import add_arguments as add_chaos_arguments
+
+    add_chaos_arguments(sub, _add_hub, robot_id, bounded)
+    from cli.certs import add_certs
+
+    add_certs(sub)
+    _add_watch_command(sub)
+    _add_experiment_command(sub)
+    _add_export_command(sub)
+    _add_report_command(sub)
+    add_explore(sub)
+    _add_stats_command(sub)
+    add_bench(sub)
+    return parser
+
+
+def _add_hub_command(sub: Any) -> None:
+    """``petswarm hub``."""
     hub = sub.add_parser("hub", help="run the radio hub (zenoh router + emulated air)")
     hub.add_argument("--listen", default="tcp/127.0.0.1:7447", help="zenoh endpoint to listen on (default %(default)s)")
     _add_world(hub)
@@ -146,8 +184,20 @@ def build_parser() -> argparse.ArgumentParser:
         help="lockstep: wall seconds to wait for the --expect nodes; then model time starts without the missing "
         "ones, recorded as gone (default 60 + 1 per expected node)",
     )
+    hub.add_argument(
+        "--roster",
+        type=node_ids,
+        default=(),
+        metavar="IDS",
+        help="comma-separated node ids the run starts (robot-1,robot-2,user-1): their up keys open outside the cap of "
+        "1,024 node ids and room is kept for their first messages and tokens, so no other session's nodes can keep "
+        "them from attaching (petswarm run gives its own; docs/SECURITY.md)",
+    )
     _add_tls(hub, "hub")
 
+
+def _add_user_command(sub: Any) -> None:
+    """``petswarm user``."""
     user = sub.add_parser(
         "user",
         help="run the user process: a person walking a scenario's path with belt and watch",
@@ -164,9 +214,15 @@ def build_parser() -> argparse.ArgumentParser:
     _add_node_clock(user)
     add_profile(user, "the belt's recognition delay")
 
+
+def _add_robot_command(sub: Any) -> None:
+    """``petswarm robot``."""
     robot = sub.add_parser("robot", help="run one robot process attached to a hub")
     add_robot_arguments(robot)
 
+
+def _add_swarm_command(sub: Any) -> None:
+    """``petswarm swarm organize|disperse|status``."""
     swarm = sub.add_parser("swarm", help="ask a running robot to organize or disperse a swarm (the watch's requests)")
     swarm_sub = swarm.add_subparsers(dest="action", required=True, metavar="ACTION")
     org = swarm_sub.add_parser("organize", help="the user asks the robot connected to them for a swarm of N")
@@ -192,6 +248,9 @@ def build_parser() -> argparse.ArgumentParser:
     for p in (org, dis, sts):
         p.add_argument("--json", action="store_true", help="print the robot's answer as JSON (default: in words)")
 
+
+def _add_run_command(sub: Any) -> None:
+    """``petswarm run``."""
     run = sub.add_parser(
         "run",
         help="run a hub and N robots on this machine and summarise the radio traffic",
@@ -262,13 +321,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="end the run when a robot dies unexpectedly (default: record the death and go on without it)",
     )
 
-    from cli.chaos import add_arguments as add_chaos_arguments
 
-    add_chaos_arguments(sub, _add_hub, robot_id, bounded)
-    from petswarm.lab.certs import add_arguments as add_certs_arguments
-
-    add_certs_arguments(sub, bounded)
-
+def _add_watch_command(sub: Any) -> None:
+    """``petswarm watch``."""
     watch = sub.add_parser("watch", help="a local web page drawing the world live from a hub, or replaying a run")
     _add_hub(watch)
     watch.add_argument("--replay", metavar="RUN", help="replay a run record (its directory, or its world.jsonl)")
@@ -283,6 +338,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="with --foxglove: also stream this run record's events and radio frames as its processes write them",
     )
 
+
+def _add_experiment_command(sub: Any) -> None:
+    """``petswarm experiment``."""
     exp = sub.add_parser("experiment", help="run an experiment file: a run, a fault timeline, repetitions, seeds")
     exp.add_argument("file", help="a TOML experiment file (see examples/experiment-loss.toml)")
     exp.add_argument(
@@ -297,6 +355,9 @@ def build_parser() -> argparse.ArgumentParser:
         "exactly from its seed (each run's digest is in the results), wall runs real processes over zenoh",
     )
 
+
+def _add_export_command(sub: Any) -> None:
+    """``petswarm export``."""
     export = sub.add_parser(
         "export",
         help="write a run record as an MCAP file for Foxglove (docs/FOXGLOVE.md)",
@@ -309,101 +370,20 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("--force", action="store_true", help="replace FILE when it exists")
     export.add_argument("--json", action="store_true", help="print the messages per topic, size and time as JSON")
 
+
+def _add_report_command(sub: Any) -> None:
+    """``petswarm report``."""
     rep = sub.add_parser("report", help="print a run record's summary and render its plots to PNG")
     rep.add_argument("run", help="a run record directory (runs/<time>-<seed>)")
     rep.add_argument("--out", help="directory for report.png (default: the run directory)")
     rep.add_argument("--json", action="store_true", help="print the record's figures and the plots' paths as JSON")
 
-    add_explore(sub)
 
+def _add_stats_command(sub: Any) -> None:
+    """``petswarm stats``."""
     stats = sub.add_parser("stats", help="print a running hub's counters")
     _add_hub(stats)
     stats.add_argument("--json", action="store_true", help="print the raw counters as JSON")
-
-    bench = sub.add_parser("bench", help="benchmarks: figures on stdout, JSON and plots to --out")
-    bench_sub = bench.add_subparsers(dest="bench", required=True, metavar="BENCH")
-    bhub = bench_sub.add_parser("hub", help="hub round trip vs plain zenoh, frames/s with 50 nodes, delivery lag")
-    bhub.add_argument("--rounds", type=bounded(int, 10, 100000), default=500, help="round trips per path (default 500)")
-    bhub.add_argument(
-        "--nodes", type=bounded(int, 2, 200), default=50, help="attached nodes in the load test (default 50)"
-    )
-    bhub.add_argument(
-        "--load-seconds", type=bounded(float, 1, 600), default=5.0, help="length of the load test (default 5)"
-    )
-    bhub.add_argument("--seed", type=seed, default=1, help="seed of the hubs and the load (default %(default)s)")
-    bhub.add_argument("--out", default="bench-results", help="directory for JSON and plots (default %(default)s)")
-    bhub.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
-    bhub.add_argument(
-        "--floor",
-        action="store_true",
-        help="also run both phases on a hub that carries frames without modelling the air (petswarm hub "
-        "--floor): the floor under any hub's figures on this machine, printed beside the real hub's",
-    )
-    bhub.add_argument(
-        "--check",
-        action="store_true",
-        help="exit 1 (naming each on stderr) when a target is missed: round trip ratio p50 <= 1.5, "
-        "throughput >= min(10000, the air's capacity) frames/s, hub lag p99 <= 2 ms",
-    )
-    borg = bench_sub.add_parser("organize", help="swarm organizing time vs number of slaves, per protocol")
-    borg.add_argument(
-        "--slaves", type=_slave_counts, default=[1, 2, 3, 4, 5], help="slave counts: N, A-B or N,M,... (default 1-5)"
-    )
-    borg.add_argument(
-        "--runs", type=bounded(int, 1, 10000), default=50, help="organizations per count and protocol (default 50)"
-    )
-    borg.add_argument(
-        "--protocol", choices=("paper", "slotted", "both"), default="both", help="protocols to measure (default both)"
-    )
-    borg.add_argument("--mac-ack", choices=("on", "off"), default="on", help="MAC acknowledgements (default on)")
-    borg.add_argument(
-        "--clock",
-        choices=("model", "wall"),
-        default="model",
-        help="model (default): every slave count in this one process on model time, the same figures for the "
-        "same seed on any machine; wall: a hub process and robot processes over zenoh, in real time",
-    )
-    borg.add_argument(
-        "--step-deadline",
-        type=bounded(float, 0.005, 10),
-        help="seconds each organizing step waits before retrying (default: the robot's, 0.1)",
-    )
-    borg.add_argument(
-        "--step-retries",
-        type=bounded(int, 0, 50),
-        help="retries of an organizing step (default: the robot's, 5)",
-    )
-    add_profile(borg, "hub and robots; the paper's figure printed beside the bench's, with the ratio")
-    borg.add_argument("--seed", type=seed, default=1, help="seed of the hub and the robots (default %(default)s)")
-    add_link_security(borg)
-    borg.add_argument("--out", default="bench-results", help="directory for JSON and plots (default %(default)s)")
-    borg.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
-    from petswarm.bench.ir import add_arguments as add_bench_ir_arguments
-
-    add_bench_ir_arguments(bench_sub.add_parser("ir", help="IR relative-location accuracy per estimator"))
-    from petswarm.bench.reaction import add_arguments as add_bench_reaction_arguments
-
-    add_bench_reaction_arguments(
-        bench_sub.add_parser("reaction", help="reaction time of master and slaves to the user's rotation (CDFs)")
-    )
-    from petswarm.bench.surround import add_arguments as add_bench_surround_arguments
-
-    add_bench_surround_arguments(
-        bench_sub.add_parser(
-            "surround", help="surround scenarios in model time through each robot's own pipeline (seeds, plot)"
-        )
-    )
-    from petswarm.bench.scale import add_arguments as add_bench_scale_arguments
-
-    add_bench_scale_arguments(
-        bench_sub.add_parser("scale", help="wall time per model second, memory and digests vs robots, per clock")
-    )
-    from petswarm.bench.start import add_arguments as add_bench_start_arguments
-
-    add_bench_start_arguments(
-        bench_sub.add_parser("start", help="CPU, time and memory of starting robot processes, forked vs exec'd")
-    )
-    return parser
 
 
 def _use_security(args: argparse.Namespace) -> str | None:
@@ -436,7 +416,7 @@ def main(argv: list[str] | None = None, parser: argparse.ArgumentParser | None =
     """Entry point of the ``petswarm`` console script; ``parser``: ``build_parser()``'s, made already (the fork
     server makes it once for all its robots)."""
     args = (parser or build_parser()).parse_args(argv)
-    commands = {"hub": _hub, "user": _user, "robot": _robot, "run": _run, "stats": _stats, "bench": _bench}
+    commands = {"hub": _hub, "user": _user, "robot": _robot, "run": _run, "stats": _stats, "bench": bench}
     commands.update(swarm=_swarm, watch=_watch)
     commands.update(report=_report, chaos=_chaos, experiment=_experiment, certs=_certs, explore=explore)
     commands.update(export=_export)
@@ -509,47 +489,38 @@ def _add_dead_after(parser: argparse.ArgumentParser, default: float | None, what
 
 
 def _hub(args: argparse.Namespace) -> int:
+    from petswarm.lab.hub_tables import hub_environment
     from petswarm.scenario import ScenarioError, load
-    from radio_hub.shell.hub import environment_from_dict, load_config, ready_line
+    from radio_hub.shell.hub import ready_line
     from radio_hub.shell.stopping import end_closed, stop_on_signals
 
     if args.floor and args.clock != "wall":
         print("petswarm hub: --floor models nothing and keeps no lockstep time: use --clock wall", file=sys.stderr)
         return 2
     try:
-        environment = load_config(args.config) if args.config else None
-    except (OSError, ValueError) as err:
-        print(f"petswarm hub: bad --config: {err}", file=sys.stderr)
+        scenario = load(args.scenario) if args.scenario else None
+    except (ScenarioError, ValueError) as err:
+        print(f"petswarm hub: bad --scenario: {err}", file=sys.stderr)
         return 2
-    if args.scenario:
-        try:
-            scenario = load(args.scenario)
-            from_scenario = environment_from_dict(scenario.hub_tables())
-        except (ScenarioError, ValueError) as err:
-            print(f"petswarm hub: bad --scenario: {err}", file=sys.stderr)
-            return 2
-        if environment is not None:  # --config gives the radio and light; the scenario the world
-            from_scenario.medium, from_scenario.ir = environment.medium, environment.ir
-        environment = from_scenario
-    if args.profile != "ideal":  # the profile's MAC, BLE and IR values over the config's
-        from radio_hub.environment import EnvironmentConfig
-        from radio_hub.profiles import apply_profile
-
-        environment = apply_profile(environment or EnvironmentConfig(), args.profile)
+    try:
+        environment = hub_environment(args.config, scenario, args.profile)
+    except ValueError as err:
+        print(f"petswarm hub: {err}", file=sys.stderr)
+        return 2
     try:
         hub: Any
         if args.clock == "lockstep":
-            from radio_hub.environment import EnvironmentConfig
             from radio_hub.shell.lockstep import LockstepHub
 
             hub = LockstepHub(
                 args.listen,
                 args.world,
-                environment or EnvironmentConfig(),
+                environment,
                 args.seed,
                 expect=args.expect,
                 dead_after_s=args.dead_after,
                 start_within_s=args.start_within,
+                roster=args.roster,
                 pcap_path=args.pcap,
                 world_log=args.world_log,
             )
@@ -561,6 +532,7 @@ def _hub(args: argparse.Namespace) -> int:
                 pcap_path=args.pcap,
                 environment=environment,
                 world_log=args.world_log,
+                roster=args.roster,
             )
     except OSError as err:
         print(f"petswarm hub: cannot open --pcap file or --world-log file: {err}", file=sys.stderr)
@@ -590,7 +562,7 @@ def _hub(args: argparse.Namespace) -> int:
 
 
 def _user(args: argparse.Namespace) -> int:
-    from petswarm.managers.sequence import EventLog
+    from petswarm.managers.event_log import EventLog
     from petswarm.scenario import ScenarioError, load
     from petswarm.wearables.user import UserConfig, run_user
 
@@ -732,9 +704,9 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _experiment(args: argparse.Namespace) -> int:
-    from petswarm.lab.experiment import experiment_command
+    from petswarm.lab.experiment import ExperimentOptions, experiment_command
 
-    return experiment_command(args)
+    return experiment_command(options_of(ExperimentOptions, args))
 
 
 def _watch(args: argparse.Namespace) -> int:
@@ -783,10 +755,9 @@ def _export(args: argparse.Namespace) -> int:
 
 
 def _report(args: argparse.Namespace) -> int:
+    from petswarm.lab.report import ReportOptions, report_command
 
-    from petswarm.lab.report import report_command
-
-    return report_command(args)
+    return report_command(options_of(ReportOptions, args))
 
 
 def _swarm(args: argparse.Namespace) -> int:
@@ -832,46 +803,6 @@ def hub_line(hub: dict[str, Any]) -> str:
         number = f"{value:.0f}" if isinstance(value, float) else str(value)
         parts.append(f"{name} {number}" + (" us" if key.endswith("_us") else ""))
     return "hub: " + ", ".join(parts)
-
-
-def _bench(args: argparse.Namespace) -> int:
-    if args.bench == "ir":
-        from petswarm.bench.ir import bench_ir
-
-        return bench_ir(args)
-    if args.bench == "reaction":
-        from petswarm.bench.reaction import bench_reaction
-
-        return bench_reaction(args)
-    if args.bench == "surround":
-        from petswarm.bench.surround import bench_surround
-
-        return bench_surround(args)
-    if args.bench == "scale":
-        from petswarm.bench.scale import bench_scale
-
-        return bench_scale(args)
-    if args.bench == "start":
-        from petswarm.bench.start import bench_start
-
-        return bench_start(args)
-    if args.bench == "organize" and args.clock == "model":
-        from petswarm.bench.organize_model import bench_organize as bench_organize_model
-
-        return bench_organize_model(args)
-    if args.bench == "organize":
-        from petswarm.bench.organize import bench_organize
-
-        return bench_organize(args)
-    from petswarm.bench.hub import bench_hub
-
-    return bench_hub(args)
-
-
-def _slave_counts(text: str) -> list[int]:
-    from petswarm.bench.organize import slave_counts  # imported here: it brings zenoh, which --help does not need
-
-    return slave_counts(text)
 
 
 if __name__ == "__main__":

@@ -23,7 +23,7 @@ import time
 from collections.abc import Callable
 from typing import Any, Protocol
 
-from radio_hub.interface import MODEL_EPOCH_S
+from radio_hub.values import MODEL_EPOCH_S
 
 
 class ModelTimeStalled(RuntimeError):
@@ -144,7 +144,7 @@ class ModelClockLoop(asyncio.SelectorEventLoop):
 
 
 class LockstepSync(Protocol):
-    """What a lockstep loop tells the hub when every task waits (``radio_hub.shell.lockstep.LockstepLink``)."""
+    """What a lockstep loop tells the hub when every task waits (``radio_hub.link.lockstep_link.LockstepLink``)."""
 
     def idle(self, next_timer: float | None) -> None:
         """Report: all handled, nothing ready, the next timer due at ``next_timer`` (model seconds)."""
@@ -273,16 +273,6 @@ async def sleep_until(when: float) -> None:
 def _wake(future: asyncio.Future[None]) -> None:
     if not future.done():
         future.set_result(None)
-
-
-def next_on_grid(last: float, period: float, after: float) -> float:
-    """The first instant later than ``after`` on the grid ``last``, ``last + period``, ...: summed a period at a
-    time, as a periodic timer that had gone on would have set each of its instants (a product could round
-    differently, and model time compares instants exactly). A pure function: sans-IO cores use it too."""
-    at = last + period
-    while at <= after:
-        at = at + period
-    return at
 
 
 def now() -> float:

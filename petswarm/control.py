@@ -16,12 +16,14 @@ from typing import TYPE_CHECKING, Any
 import msgpack
 
 from petswarm.wearables.user_link import robot_node
-from radio_hub.interface import HubUnavailable, Keys
+from radio_hub.interface import Keys
+from radio_hub.values import HubUnavailable
 
 if TYPE_CHECKING:
     import zenoh
 
-    from radio_hub.interface import Faults, RadioClient, Relayed
+    from radio_hub.interface import RadioClient
+    from radio_hub.values import Faults, Relayed
 
 HUB_NODE = "hub"
 """The name the hub's relay gives the hub itself."""

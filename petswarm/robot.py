@@ -27,30 +27,20 @@ from petswarm.controllers.driving import Driver
 from petswarm.controllers.surround_driver import SurroundDriver
 from petswarm.controllers.surround_pilot import SurroundDriverConfig
 from petswarm.draws import Draws
+from petswarm.managers.actions import Incoming
 from petswarm.managers.decisions import WAITING_PAN
-from petswarm.managers.exchange import MessageProcessingManager
+from petswarm.managers.event_log import EventLog
 from petswarm.managers.formation import RESPONSES, FormationConfig, FormationError, NetworkFormation, Swarm
+from petswarm.managers.message_processing import MessageProcessingManager
 from petswarm.managers.messages import Blob, Ping, Pong, SwarmMessage
 from petswarm.managers.relative_location import IrModuleManager, IrTokenSchedule, RelativeLocationManager, TokenConfig
-from petswarm.managers.rf import Incoming, RfCommunicationManager
-from petswarm.managers.sequence import EventLog, RobotState, SequenceManager, TransitionError
+from petswarm.managers.rf import RfCommunicationManager
+from petswarm.managers.sequence import RobotState, SequenceManager, TransitionError
 from petswarm.managers.serial_link import SerialLink
 from petswarm.profiles import DEFAULT_PROFILE, check_profile, robot_profile
 from petswarm.wearables.user_link import robot_node
-from radio_hub.interface import (
-    BROADCAST,
-    DEFAULT_ENDPOINT,
-    DEFAULT_WORLD,
-    FrameError,
-    HubLink,
-    HubUnavailable,
-    Keys,
-    LinkSecurity,
-    RadioClient,
-    RadioError,
-    RadioIdentity,
-    open_session,
-)
+from radio_hub.interface import DEFAULT_ENDPOINT, DEFAULT_WORLD, HubLink, Keys, LinkSecurity, RadioClient, open_session
+from radio_hub.values import BROADCAST, FrameError, HubUnavailable, RadioError, RadioIdentity
 
 DEFAULT_PAN = WAITING_PAN
 """The PAN every waiting robot starts on."""

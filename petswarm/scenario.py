@@ -14,7 +14,8 @@ A scenario is one TOML file (``scenarios/*.toml`` ship with the project)::
     watch = [ {at = 1, request = "follow"}, {at = 3, request = "organize", robots = 3} ]
     [robots]
     count = 4
-    positions = [[0, -1, 90], [0, -1.6, 90]]   # x, y, heading (deg) per robot id 1, 2, ...
+    positions = [[0, -1, 90], [0, -1.6, 90]]   # x, y, heading (deg) per robot id 1, 2, ... (at most count;
+                                               # robots without one stand on a default grid)
     ping_interval = 0.5      # optional: each robot pings this often (s) and answers the others (default 0)
     [[faults]]               # as in experiment files: at = s, then a fault or an action
     [[faults]]               # model time only: at = s, kind = "kill" | "restart" (robot = id), or
@@ -33,11 +34,11 @@ from pathlib import Path
 from typing import Any
 
 from petswarm.controllers.formation_shapes import Mode, Shape
-from petswarm.controllers.motion import wrap
 from petswarm.controllers.surround import SurroundConfig
 from petswarm.wearables.gestures import Gesture
+from petswarm.wearables.plan import Leg, UserPlan, WatchRequest
 from radio_hub.datasheet import check_keys
-from radio_hub.interface import check_timed_fault
+from radio_hub.values import check_timed_fault
 
 REQUESTS = ("follow", "lead", "remote", "cancel", "organize", "disperse", "mode", "return", "gesture")
 """Watch requests: select a main operation, cancel it, organize/disperse a swarm, change driving mode,
@@ -81,74 +82,6 @@ process of the same id, in waiting), and the user's wearables' BLE link lost or 
 
 class ScenarioError(ValueError):
     """A scenario file that cannot be run, and why."""
-
-
-@dataclass(frozen=True)
-class Leg:
-    """One piece of the user's path: walk ``distance`` at ``speed``, turn ``angle`` at ``rate``, or stop."""
-
-    kind: str
-    duration_s: float
-    speed: float = 0.0
-    """m/s while walking."""
-    rate: float = 0.0
-    """rad/s while turning (signed: positive counter-clockwise)."""
-
-
-@dataclass(frozen=True)
-class WatchRequest:
-    """A request the user makes on the watch at ``at`` seconds."""
-
-    at: float
-    request: str
-    args: dict[str, Any] = field(default_factory=dict)
-
-
-@dataclass
-class UserPlan:
-    """The user's start, path and watch requests."""
-
-    node_id: str = "user"
-    owner: int = 1
-    start: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    """x, y (m), heading (rad)."""
-    walk_at: float = 0.0
-    legs: list[Leg] = field(default_factory=list)
-    watch: list[WatchRequest] = field(default_factory=list)
-
-    def pose_at(self, t: float) -> tuple[float, float, float, float, float, float]:
-        """x, y, yaw and world velocity (vx, vy, omega) at ``t`` seconds after the user process started."""
-        x, y, yaw = self.start
-        elapsed = t - self.walk_at
-        for leg in self.legs:
-            if elapsed <= 0:
-                break
-            dt = min(elapsed, leg.duration_s)
-            moving = dt < leg.duration_s
-            if leg.kind == "walk":
-                x, y = x + math.cos(yaw) * leg.speed * dt, y + math.sin(yaw) * leg.speed * dt
-                if moving:
-                    return x, y, yaw, math.cos(yaw) * leg.speed, math.sin(yaw) * leg.speed, 0.0
-            elif leg.kind == "turn":
-                yaw += leg.rate * dt
-                if moving:
-                    return x, y, wrap(yaw), 0.0, 0.0, leg.rate
-            elapsed -= leg.duration_s
-        return x, y, wrap(yaw), 0.0, 0.0, 0.0
-
-    @property
-    def path_end_s(self) -> float:
-        """When the last leg ends."""
-        return self.walk_at + sum(leg.duration_s for leg in self.legs)
-
-    def turn_starts(self) -> list[float]:
-        """When each turn leg begins (s after the user process started): reaction times count from them."""
-        starts, t = [], self.walk_at
-        for leg in self.legs:
-            if leg.kind == "turn":
-                starts.append(t)
-            t += leg.duration_s
-        return starts
 
 
 @dataclass
@@ -245,6 +178,11 @@ def parse(data: dict[str, Any], path: Path | None = None) -> Scenario:
     if not 0 <= count <= 64:
         raise ValueError(f"robots.count must be 0-64, got {count}")
     poses = [_pose(p, f"robots.positions[{i}]") for i, p in enumerate(robots.get("positions", []))]
+    if len(poses) > count:  # silently dropped, a robot meant to be in the run would not be
+        raise ValueError(
+            f"[robots] gives {len(poses)} positions for count = {count}: at most one position per robot "
+            "(raise count or drop positions)"
+        )
     if len(poses) < count:
         poses += [(1.5 * (i % 5), -1.5 * (i // 5) - 2.0, 90.0) for i in range(len(poses), count)]
     user = _user(data["user"]) if "user" in data else None
@@ -291,14 +229,12 @@ def _check_action(spec: dict[str, Any], where: str, robots: int) -> None:
 
 def _hub_tables(table: Any, obstacles: list[Any]) -> dict[str, Any]:
     """``[hub]`` and ``[[obstacles]]``, checked here as the hub will read them, so a typo fails before a run starts."""
-    from radio_hub.interface import parse_obstacle
+    from radio_hub.hosting import parse_obstacle
 
     for i, obstacle in enumerate(obstacles):
         parse_obstacle(obstacle, f"[[obstacles]][{i}]")
-    from radio_hub.interface import (
-        MediumConfig,
-        environment_from_dict,  # imported here: it brings zenoh, which parsing rarely needs
-    )
+    from radio_hub.hosting import environment_from_dict  # here: the environment brings numpy, parsing rarely needs it
+    from radio_hub.values import MediumConfig
 
     # no [hub.obstacles]: a scenario's obstacles are its own [[obstacles]]
     check_keys(table, ("world", "ble", "lf", "ir", "medium", *MediumConfig().to_dict()), "[hub]")

@@ -22,7 +22,7 @@ from typing import Any
 
 from radio_hub.environment import Environment, EnvironmentConfig
 from radio_hub.link import wire
-from radio_hub.link.port import MODEL_EPOCH_S
+from radio_hub.link.values import MODEL_EPOCH_S
 
 MODEL_EPOCH_US = round(MODEL_EPOCH_S * 1e6)
 

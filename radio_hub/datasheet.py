@@ -7,7 +7,8 @@ through ``radio_hub.interface``), never from the hub's models or their private n
 IR module (``radio_hub.physics.light``)
     ``RECEIVERS`` receivers, evenly spaced around the body; ``IrConfig`` the module's
     settings (emitter power, receivers' gain and noise, range, sweep timing) with their defaults;
-    ``PERSON_BEACON_POWER`` the emitter power of the beacon a person wears.
+    ``PERSON_BEACON_POWER`` the emitter power of the beacon a person wears; ``receiver_axes_rad()`` each
+    receiver's axis from the heading.
 LF antennas (``radio_hub.physics.lf``)
     ``LfConfig`` the robots' two LF antennas (baseline, field strength, RSSI curve, burst timing);
     ``wake_pattern(robot_id)`` the wake-up pattern a robot's bursts carry and ``wakes(register, pattern)``
@@ -22,7 +23,7 @@ from __future__ import annotations
 
 from radio_hub.config import build_config, check_keys
 from radio_hub.physics.lf import LfConfig, wake_pattern, wakes
-from radio_hub.physics.light import PERSON_BEACON_POWER, RECEIVERS, IrConfig
+from radio_hub.physics.light import PERSON_BEACON_POWER, RECEIVERS, IrConfig, receiver_axes_rad
 
 __all__ = [
     "PERSON_BEACON_POWER",
@@ -31,6 +32,7 @@ __all__ = [
     "LfConfig",
     "build_config",
     "check_keys",
+    "receiver_axes_rad",
     "wake_pattern",
     "wakes",
 ]

@@ -49,15 +49,8 @@ from petswarm.bench.nodes import (
 )
 from petswarm.bench.report import report, write_results
 from petswarm.lab.processes import Supervisor, free_tcp_port, run_supervised
-from radio_hub.interface import (
-    WORLD_THREAD,
-    HubUnavailable,
-    Keys,
-    RadioError,
-    airtime_us,
-    open_session,
-    query_hub,
-)
+from radio_hub.interface import WORLD_THREAD, Keys, open_session, query_hub
+from radio_hub.values import HubUnavailable, RadioError, airtime_us
 
 MODULE = "petswarm.bench.hub"
 WARMUP_ROUNDS = 20
@@ -210,7 +203,7 @@ def stopping(sup: Supervisor, names: list[str]) -> Iterator[list[str]]:
 # == phase 1: round trips ============================================================================
 
 
-def rtt_phase(sup: Supervisor, world: str, args: argparse.Namespace, floor: bool = False) -> dict[str, Any]:
+def rtt_phase(sup: Supervisor, world: str, args: HubBenchOptions, floor: bool = False) -> dict[str, Any]:
     """Hub (``floor``: the floor's), echo child, then interleaved round trips from this process."""
     tag = "floor-" if floor else ""
     progress(f"round trips{' [floor]' if floor else ''}: starting a hub and the echo node")
@@ -321,7 +314,7 @@ def world_thread(pid: int) -> int | None:
 def load_phase(
     sup: Supervisor,
     world: str,
-    args: argparse.Namespace,
+    args: HubBenchOptions,
     label: str,
     config: Path | None,
     floor: bool = False,
@@ -443,7 +436,25 @@ def write_min_be0(out: Path) -> Path:
 # == the whole run ===================================================================================
 
 
-def bench_hub(args: argparse.Namespace) -> int:
+@dataclass
+class HubBenchOptions:
+    """What ``petswarm bench hub`` is asked to do."""
+
+    rounds: int = 500
+    """Round trips per path."""
+    nodes: int = 50
+    """Attached nodes in the load test."""
+    load_seconds: float = 5.0
+    seed: int = 1
+    out: str = "bench-results"
+    json: bool = False
+    floor: bool = False
+    """Also run both phases on a hub that carries frames without modelling the air."""
+    check: bool = False
+    """Exit 1 when a target is missed."""
+
+
+def bench_hub(args: HubBenchOptions) -> int:
     """``petswarm bench hub``: run both phases, print the figures, write JSON and a plot."""
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -505,7 +516,7 @@ def check_targets(results: dict[str, Any]) -> int:
     return 1 if missed else 0
 
 
-def run_phases(sup: Supervisor, args: argparse.Namespace, out: Path) -> dict[str, Any]:
+def run_phases(sup: Supervisor, args: HubBenchOptions, out: Path) -> dict[str, Any]:
     """Round trips, then throughput with the defaults and, if the air was the limit, with min_be = 0; with
     ``--floor`` both again on the hub that models nothing (``petswarm hub --floor``)."""
     base = f"bench-{os.getpid()}-{args.seed}"
@@ -531,7 +542,7 @@ def run_phases(sup: Supervisor, args: argparse.Namespace, out: Path) -> dict[str
     return results
 
 
-def settings(args: argparse.Namespace, config: dict[str, Any], load_average: float) -> dict[str, Any]:
+def settings(args: HubBenchOptions, config: dict[str, Any], load_average: float) -> dict[str, Any]:
     """What the run was asked for, and the medium it ran on (the defaults unless a load entry says else)."""
     mac, rng = config["mac"], config["range"]
     return {

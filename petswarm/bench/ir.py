@@ -21,14 +21,15 @@ import dataclasses
 import math
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from petswarm.bench import paper
-from petswarm.bench.output import emit, save
+from petswarm.lab.output import emit, save
 from petswarm.managers.ir_estimator import METHODS, IrEstimates, estimate_many
 from radio_hub.datasheet import IrConfig
-from radio_hub.interface import lazy_numpy, receiver_readings
+from radio_hub.values import lazy_numpy
 
 if TYPE_CHECKING:
     import numpy as np
@@ -55,7 +56,26 @@ def heading_arg(text: str) -> float | str:
         raise argparse.ArgumentTypeError(f"{text!r} is neither degrees nor 'random'") from None
 
 
-def bench_ir(args: argparse.Namespace) -> int:
+@dataclass
+class IrOptions:
+    """What ``petswarm bench ir`` is asked to do (its options, as a notebook gives them)."""
+
+    runs: int = 300
+    """Sweeps per point."""
+    seed: int = 1
+    heading: float | str = 0.0
+    """Receiver heading in degrees, or ``random`` per sweep."""
+    out: str = "bench-results"
+    json: bool = False
+    profile: str = "ideal"
+    wire: bool = True
+    """Also run the token cycle through real hub and robot processes."""
+    wire_seconds: float = 6.0
+    members: tuple[int, int] = (2, 10)
+    """Swarm sizes of the token-cycle run, LOW-HIGH."""
+
+
+def bench_ir(args: IrOptions) -> int:
     """Run the experiment, print the table, write JSON and plot; 0 on success."""
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -87,7 +107,7 @@ def bench_ir(args: argparse.Namespace) -> int:
 def profiled_ir(profile: str) -> IrConfig:
     """The IR module as the hub emulates it under ``profile`` (its noise); the robots' calibration stays the
     datasheet's ``IrConfig()`` whatever the profile."""
-    from radio_hub.interface import profile_tables  # the hub's profiles: loaded when the bench runs, not to parse
+    from radio_hub.hosting import profile_tables  # the hub's profiles: loaded when the bench runs, not to parse
 
     return dataclasses.replace(IrConfig(), **profile_tables(profile).get("ir", {})).validate()
 
@@ -106,6 +126,8 @@ def paper_rows(results: dict[str, Any]) -> list[dict[str, Any]]:
 def run_experiment(runs: int, seed: int, heading: float | str, config: IrConfig) -> dict[str, Any]:
     """All points x ``runs`` sweeps through the light model (``config``: the module as emulated) and every
     estimator (calibrated with the datasheet's ``IrConfig()``); the summary as a dict."""
+    from radio_hub.hosting import receiver_readings  # the hub's light model: loaded to run, not to parse
+
     rng = np.random.default_rng(seed)
     dist_m, angle_rad = _placements(runs)
     heading_rad = _headings(heading, dist_m.size, rng)
@@ -290,48 +312,7 @@ def _cells(row: dict[str, Any]) -> str:
     return f"{row['distance_rmse_cm']:>15.2f}{row['direction_rmse_deg']:>15.2f}"
 
 
-def _main() -> int:
-    """``python -m petswarm.bench.ir``: the bench without the ``petswarm`` parser (for use before it is wired in)."""
-    parser = argparse.ArgumentParser(prog="python -m petswarm.bench.ir", description=__doc__.splitlines()[0])
-    add_arguments(parser)
-    return bench_ir(parser.parse_args())
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """The bench's options, for ``petswarm bench ir`` and ``python -m petswarm.bench.ir``."""
-    from petswarm.lab.arguments import bounded, seed
-
-    parser.add_argument("--runs", type=bounded(int, 1, 100000), default=300, help="sweeps per point (default 300)")
-    parser.add_argument("--seed", type=seed, default=1, help="seed of the light model's noise (default %(default)s)")
-    parser.add_argument(
-        "--heading",
-        type=heading_arg,
-        default=0.0,
-        help="receiver heading in degrees, or 'random' per sweep (default 0, as in the paper)",
-    )
-    parser.add_argument("--out", default="bench-results", help="directory for JSON and plots (default %(default)s)")
-    parser.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
-    from petswarm.lab.robot_command import add_profile
-
-    add_profile(parser, "the IR module's noise; the paper's Table 4 printed beside the bench's, with the ratio")
-    parser.add_argument(
-        "--no-wire",
-        dest="wire",
-        action="store_false",
-        help="skip the runs through real hub and robot processes (over the wire, token cycle)",
-    )
-    parser.add_argument(
-        "--wire-seconds",
-        type=bounded(float, 1, 600),
-        default=6.0,
-        help="seconds each over-the-wire swarm runs (default 6)",
-    )
-    parser.add_argument(
-        "--members", type=_members, default=(2, 10), help="swarm sizes of the token-cycle run, LOW-HIGH (default 2-10)"
-    )
-
-
-def _members(text: str) -> tuple[int, int]:
+def members_range(text: str) -> tuple[int, int]:
     try:
         low, high = (int(p) for p in text.split("-"))
     except ValueError:
@@ -339,7 +320,3 @@ def _members(text: str) -> tuple[int, int]:
     if not 2 <= low <= high <= 32:
         raise argparse.ArgumentTypeError("swarm sizes must satisfy 2 <= LOW <= HIGH <= 32")
     return low, high
-
-
-if __name__ == "__main__":
-    raise SystemExit(_main())

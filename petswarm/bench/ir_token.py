@@ -21,7 +21,7 @@ import numpy as np
 from petswarm import control
 from petswarm.bench.hub import HubRun, check_alive, start_hub
 from petswarm.lab.processes import Supervisor
-from radio_hub.interface import HubUnavailable
+from radio_hub.values import HubUnavailable
 
 WIRE_POINTS = [(d, a) for d in (0.4, 1.0, 1.6, 2.0) for a in (0.0, 60.0, 120.0, 180.0)]
 """(distance m, angle deg) of the receivers in the over-the-wire run: a subset of the paper's grid."""

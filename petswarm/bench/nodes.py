@@ -20,19 +20,8 @@ from typing import Any
 
 import zenoh
 
-from radio_hub.interface import (
-    Frame,
-    FrameType,
-    Keys,
-    RadioClient,
-    RadioIdentity,
-    RxFrame,
-    TxResult,
-    open_session,
-    put_up,
-    reliable_publisher,
-    wait_for_up_key,
-)
+from radio_hub.interface import Keys, RadioClient, open_session, put_up, reliable_publisher, wait_for_up_key
+from radio_hub.values import Frame, FrameType, RadioIdentity, RxFrame, TxResult
 
 PAN_ID = 0x1000
 EXT_BASE = 0x00124B00BE000000

@@ -35,7 +35,8 @@ from petswarm.lab.processes import Supervisor, run_supervised
 from petswarm.managers.exchange import StepTiming
 from petswarm.managers.formation import PROTOCOLS, FormationConfig
 from petswarm.profiles import robot_profile
-from radio_hub.interface import HubUnavailable, RadioError, query_hub
+from radio_hub.interface import query_hub
+from radio_hub.values import HubUnavailable, RadioError
 
 MAX_SLAVES = 14
 """Robots 2..15 stand within 6.7 m of the master on the default grid: inside the default -70 dBm region."""
@@ -116,7 +117,31 @@ class Swarm:
         self.counters = {name: {k: node.get(k, 0) for k in MAC_COUNTERS} for name, node in nodes.items()}
 
 
-def robot_argv(rid: int, endpoint: str, world: str, args: argparse.Namespace) -> list[str]:
+@dataclass
+class OrganizeOptions:
+    """What ``petswarm bench organize`` is asked to do (``bench_organize`` here on the wall clock,
+    ``petswarm.bench.organize_model.bench_organize`` on model time)."""
+
+    slaves: list[int] = field(default_factory=lambda: [1, 2, 3, 4, 5])
+    runs: int = 50
+    """Organizations per count and protocol."""
+    protocol: str = "both"
+    """``paper``, ``slotted`` or ``both``."""
+    mac_ack: str = "on"
+    clock: str = "model"
+    step_deadline: float | None = None
+    """Seconds each organizing step waits before retrying (None: the robot's)."""
+    step_retries: int | None = None
+    profile: str = "ideal"
+    seed: int = 1
+    link_key: str | None = None
+    """A network key file: 802.15.4 link security on."""
+    link_mic: int = 4
+    out: str = "bench-results"
+    json: bool = False
+
+
+def robot_argv(rid: int, endpoint: str, world: str, args: OrganizeOptions) -> list[str]:
     """``petswarm robot`` arguments: robot 1 is the master (connected to the user), the rest wait."""
     argv = ["robot", "--id", str(rid), "--hub", endpoint, "--world", world, "--seed", str(args.seed)]
     argv += ["--profile", args.profile, *link_argv(args)]
@@ -142,7 +167,7 @@ def wait_serving(sup: Supervisor, swarm: Swarm) -> None:
         raise BenchFailed(f"robots {sorted(pending)} did not answer within {STARTUP_TIMEOUT_S} s")
 
 
-def measure_count(sup: Supervisor, n: int, args: argparse.Namespace, out: Path, config: Path | None) -> dict[str, Any]:
+def measure_count(sup: Supervisor, n: int, args: OrganizeOptions, out: Path, config: Path | None) -> dict[str, Any]:
     """A fresh hub and n + 1 robots, ``runs`` organizations per protocol; the raw records and hub figures."""
     world = f"bench-org-{os.getpid()}-{args.seed}-n{n}"
     progress(f"{n} slave(s): starting a hub and {n + 1} robots")
@@ -163,7 +188,7 @@ def measure_count(sup: Supervisor, n: int, args: argparse.Namespace, out: Path, 
     return {"slaves": n, "world": world, "records": records, "hub": hub_figures(stats), "config": stats["config"]}
 
 
-def run_series(sup: Supervisor, swarm: Swarm, args: argparse.Namespace) -> list[dict[str, Any]]:
+def run_series(sup: Supervisor, swarm: Swarm, args: OrganizeOptions) -> list[dict[str, Any]]:
     """``runs`` rounds of organize + disperse, the protocols interleaved round by round."""
     protocols = protocols_of(args.protocol)
     records: list[dict[str, Any]] = []
@@ -326,7 +351,7 @@ def write_no_ack_config(out: Path) -> Path:
     return path
 
 
-def settings(args: argparse.Namespace, config: dict[str, Any], load_average: float) -> dict[str, Any]:
+def settings(args: OrganizeOptions, config: dict[str, Any], load_average: float) -> dict[str, Any]:
     """What the bench was asked for and the medium the hub reported."""
     step = StepTiming(robot_profile(args.profile).step_deadline_s or StepTiming().deadline_s)
     mac, rng, path_loss = config["mac"], config["range"], config["path_loss"]
@@ -360,7 +385,7 @@ def settings(args: argparse.Namespace, config: dict[str, Any], load_average: flo
     }
 
 
-def run_counts(sup: Supervisor, args: argparse.Namespace, out: Path) -> dict[str, Any]:
+def run_counts(sup: Supervisor, args: OrganizeOptions, out: Path) -> dict[str, Any]:
     """Every slave count in turn, then the summary."""
     load_average = os.getloadavg()[0]
     config = write_no_ack_config(out) if args.mac_ack == "off" else None
@@ -374,7 +399,7 @@ def run_counts(sup: Supervisor, args: argparse.Namespace, out: Path) -> dict[str
     }
 
 
-def bench_organize(args: argparse.Namespace) -> int:
+def bench_organize(args: OrganizeOptions) -> int:
     """``petswarm bench organize``: measure every slave count, print the table, write JSON and a plot."""
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -9,7 +9,6 @@ the same command gives the same table on any machine, loaded or idle. Times are 
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import os
 import time
@@ -18,6 +17,7 @@ from typing import Any
 
 from petswarm.bench import organize as bench
 from petswarm.bench.hub import progress
+from petswarm.bench.organize import OrganizeOptions
 from petswarm.bench.organize_report import report, summarise, write_results
 from petswarm.clock import ModelClockLoop
 from petswarm.lab.model_run import (
@@ -30,7 +30,8 @@ from petswarm.lab.model_run import (
     unwind,
 )
 from petswarm.lab.processes import Interrupts
-from radio_hub.interface import EnvironmentConfig, HubUnavailable, apply_profile, load_config
+from radio_hub.hosting import EnvironmentConfig, apply_profile, load_config
+from radio_hub.values import HubUnavailable
 
 ATTACH_S = 0.1
 """Model time between starting the robots and the first organization (every robot attaches at once)."""
@@ -81,7 +82,7 @@ def environment(config: Path | None, profile: str) -> EnvironmentConfig:
 
 
 def measure_count(
-    n: int, args: argparse.Namespace, config: Path | None, interrupts: Interrupts | None = None
+    n: int, args: OrganizeOptions, config: Path | None, interrupts: Interrupts | None = None
 ) -> dict[str, Any]:
     """n + 1 robots on a fresh environment in model time, ``runs`` organizations per protocol; ``interrupts``:
     the bench's stop signals, raised between two passes of the loop (never lost in a weakref callback)."""
@@ -100,7 +101,7 @@ def measure_count(
         loop.close()
 
 
-async def _measure(n: int, args: argparse.Namespace, config: Path | None) -> dict[str, Any]:
+async def _measure(n: int, args: OrganizeOptions, config: Path | None) -> dict[str, Any]:
     world = f"bench-org-model-{args.seed}-n{n}"
     progress(f"{n} slave(s): {n + 1} robots on model time")
     air = MemoryAir(environment(config, args.profile), args.seed)
@@ -183,7 +184,7 @@ def misplaced(robot: RunningRobot, rid: int) -> str:
     return bench.misplaced_as(robot.robot.status(), rid)
 
 
-def run_counts(args: argparse.Namespace, out: Path) -> dict[str, Any]:
+def run_counts(args: OrganizeOptions, out: Path) -> dict[str, Any]:
     """Every slave count in turn on model time, then the summary (as ``organize.run_counts`` over processes)."""
     started = time.monotonic()
     load_average = os.getloadavg()[0]
@@ -204,7 +205,7 @@ def run_counts(args: argparse.Namespace, out: Path) -> dict[str, Any]:
     }
 
 
-def bench_organize(args: argparse.Namespace) -> int:
+def bench_organize(args: OrganizeOptions) -> int:
     """``petswarm bench organize --clock model``: measure every slave count, print the table, write JSON and plot."""
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

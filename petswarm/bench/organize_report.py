@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from petswarm.bench import paper
-from petswarm.bench.output import emit, save
+from petswarm.lab.output import emit, save
 
 STEPS = ("scan", "query", "notice")
 BROADCAST = 0xFFFF

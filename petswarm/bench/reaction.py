@@ -10,18 +10,18 @@ trials are in; the CDFs of master and slave reaction times and of slave-minus-ma
 
 from __future__ import annotations
 
-import argparse
 import json
 import subprocess
 import sys
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from petswarm.bench import paper
-from petswarm.bench.output import emit, save
 from petswarm.lab.metrics import REACTION_OMEGA_RPS
-from radio_hub.interface import lazy_numpy
+from petswarm.lab.output import emit, save
+from radio_hub.values import lazy_numpy
 
 if TYPE_CHECKING:
     import numpy as np
@@ -31,30 +31,22 @@ else:
 SCENARIO = Path(__file__).resolve().parents[2] / "scenarios" / "reaction.toml"
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """The bench's options."""
-    from petswarm.lab.arguments import bounded, seed
+@dataclass
+class ReactionOptions:
+    """What ``petswarm bench reaction`` is asked to do."""
 
-    parser.add_argument(
-        "--runs", type=bounded(int, 1, 10000), default=50, help="trials (user rotations) to measure (default 50)"
-    )
-    parser.add_argument("--scenario", default=str(SCENARIO), help="scenario with a leading swarm and user rotations")
-    parser.add_argument("--seed", type=seed, default=1, help="seed of the first scenario run (default %(default)s)")
-    parser.add_argument("--out", default="bench-results", help="directory for JSON and plots (default %(default)s)")
-    parser.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
-    from petswarm.lab.robot_command import add_profile
-
-    add_profile(parser, "hub, robots and user; the paper's figures printed beside the bench's, with the ratio")
-    parser.add_argument(
-        "--clock",
-        choices=("wall", "model"),
-        default="model",
-        help="model (default, as bench organize): each run in model time (petswarm run --clock model), "
-        "deterministic per seed and much faster; wall: each run as processes over zenoh",
-    )
+    runs: int = 50
+    """Trials (user rotations) to measure."""
+    scenario: str = str(SCENARIO)
+    seed: int = 1
+    out: str = "bench-results"
+    json: bool = False
+    profile: str = "ideal"
+    clock: str = "model"
+    """``model`` (each run in model time) or ``wall`` (processes over zenoh)."""
 
 
-def bench_reaction(args: argparse.Namespace) -> int:
+def bench_reaction(args: ReactionOptions) -> int:
     """Run scenario runs until ``args.runs`` trials are measured; print, save JSON and the CDF plot."""
     trials: list[dict[str, Any]] = []
     failures: list[str] = []

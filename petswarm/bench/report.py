@@ -7,8 +7,8 @@ from typing import Any
 
 import numpy as np
 
-from petswarm.bench.output import emit, save
-from radio_hub.interface import airtime_us
+from petswarm.lab.output import emit, save
+from radio_hub.values import airtime_us
 
 
 def write_results(results: dict[str, Any], out: Path) -> None:

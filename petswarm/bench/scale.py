@@ -16,10 +16,11 @@ import statistics
 import subprocess
 import sys
 import tempfile
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from petswarm.bench.output import emit, save
+from petswarm.lab.output import emit, save
 
 
 def robot_counts(text: str) -> list[int]:
@@ -35,31 +36,23 @@ def robot_counts(text: str) -> list[int]:
     return counts
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """The bench's options."""
-    from petswarm.lab.arguments import bounded, seed
+@dataclass
+class ScaleOptions:
+    """What ``petswarm bench scale`` is asked to do."""
 
-    parser.add_argument(
-        "--robots", type=robot_counts, default=[10, 20, 50, 100], help="robot counts (default 10,20,50,100)"
-    )
-    parser.add_argument(
-        "--model-robots",
-        type=robot_counts,
-        default=[1000],
-        help="more counts run in model time only (default 1000; none: no more)",
-    )
-    parser.add_argument(
-        "--lockstep-max", type=bounded(int, 0, 5000), default=100, help="largest lockstep run (default %(default)s)"
-    )
-    parser.add_argument(
-        "--duration", type=bounded(float, 0.5, 3600), default=5.0, help="model seconds a run (default %(default)s)"
-    )
-    parser.add_argument("--seed", type=seed, default=3, help="seed of every run (default %(default)s)")
-    parser.add_argument("--out", default="bench-results", help="directory for JSON and plots (default %(default)s)")
-    parser.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
+    robots: list[int] = field(default_factory=lambda: [10, 20, 50, 100])
+    model_robots: list[int] = field(default_factory=lambda: [1000])
+    """More counts run in model time only."""
+    lockstep_max: int = 100
+    """Largest lockstep run."""
+    duration: float = 5.0
+    """Model seconds a run."""
+    seed: int = 3
+    out: str = "bench-results"
+    json: bool = False
 
 
-def bench_scale(args: argparse.Namespace) -> int:
+def bench_scale(args: ScaleOptions) -> int:
     """Run every count in model time and (up to ``--lockstep-max``) in lockstep; print, save JSON and plot."""
     rows = []
     counts = sorted(set(args.robots) | set(args.model_robots))
@@ -83,7 +76,7 @@ def bench_scale(args: argparse.Namespace) -> int:
     return 0 if all(r.get("digests_equal", True) for r in rows) else 1
 
 
-def _run(count: int, clock: str, args: argparse.Namespace, record: Path) -> dict[str, Any]:
+def _run(count: int, clock: str, args: ScaleOptions, record: Path) -> dict[str, Any]:
     argv = [sys.executable, "-m", "cli", "run", "--robots", str(count), "--duration", str(args.duration)]
     argv += ["--seed", str(args.seed), "--clock", clock, "--json", "--record", str(record)]
     done = subprocess.run(argv, capture_output=True, text=True, timeout=7200)

@@ -11,16 +11,16 @@ server count in part).
 
 from __future__ import annotations
 
-import argparse
 import resource
 import statistics
 import sys
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from petswarm.bench.output import emit, save
+from petswarm.lab.output import emit, save
 from petswarm.lab.processes import Supervisor, free_tcp_port
 
 WAYS = ("forked", "exec")
@@ -28,17 +28,19 @@ READY_WITHIN_S = 60.0
 """How long a round waits for every robot to say it waits for its hub."""
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """The bench's options."""
-    from petswarm.lab.arguments import bounded
+@dataclass
+class StartOptions:
+    """What ``petswarm bench start`` is asked to do."""
 
-    parser.add_argument("--robots", type=bounded(int, 1, 200), default=20, help="robots per start (default 20)")
-    parser.add_argument("--rounds", type=bounded(int, 1, 50), default=3, help="rounds of both ways (default 3)")
-    parser.add_argument("--out", default="bench-results", help="directory for JSON and plots (default %(default)s)")
-    parser.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
+    robots: int = 20
+    """Robots per start."""
+    rounds: int = 3
+    """Rounds of both ways."""
+    out: str = "bench-results"
+    json: bool = False
 
 
-def bench_start(args: argparse.Namespace) -> int:
+def bench_start(args: StartOptions) -> int:
     """Start the robots both ways, round after round; print, save JSON and a plot. 1 if a start failed."""
     samples: dict[str, list[dict[str, Any]]] = {way: [] for way in WAYS}
     with tempfile.TemporaryDirectory(prefix="petswarm-start-") as tmp:

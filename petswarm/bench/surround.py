@@ -30,9 +30,9 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from petswarm.bench.output import emit, save
 from petswarm.lab.metrics import driving_metrics, read_world
-from radio_hub.interface import lazy_numpy
+from petswarm.lab.output import emit, save
+from radio_hub.values import lazy_numpy
 
 if TYPE_CHECKING:
     import numpy as np

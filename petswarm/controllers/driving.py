@@ -48,11 +48,13 @@ from petswarm.controllers.driving_core import (
 from petswarm.controllers.formation_shapes import Mode
 from petswarm.controllers.motion import MotorCommand
 from petswarm.managers import messages as m
+from petswarm.managers.actions import Incoming
+from petswarm.managers.event_log import EventLog
 from petswarm.managers.formation import FormationError, NetworkFormation
 from petswarm.managers.relative_location import RelativeLocationManager
-from petswarm.managers.rf import Incoming, RfCommunicationManager
-from petswarm.managers.sequence import EventLog, SequenceManager, TransitionError
-from radio_hub.interface import HubUnavailable, OwnSensors, RadioError
+from petswarm.managers.rf import RfCommunicationManager
+from petswarm.managers.sequence import SequenceManager, TransitionError
+from radio_hub.values import HubUnavailable, OwnSensors, RadioError
 
 __all__ = ["Driver", "DrivingConfig", "EchoRanges", "sleep_until"]
 

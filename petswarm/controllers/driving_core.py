@@ -62,13 +62,14 @@ from petswarm.controllers.pet_controller import (
 from petswarm.controllers.side_check import ACTIVITY_LAG_S, UNSURE_SPEED_MPS, SideCheck
 from petswarm.controllers.slave_controller import RelativeFix, RelativeTracker, SlaveControllerConfig, slave_decision
 from petswarm.managers import messages as m
+from petswarm.managers.actions import Log
 from petswarm.managers.sequence import RobotState, SequenceManager, TransitionError
 from petswarm.wearables import user_link
 from petswarm.wearables.activity import Activity, Movement
 from petswarm.wearables.gestures import Gesture, combine
 from petswarm.wearables.lf_location import UserFix, locate
 from radio_hub.datasheet import LfConfig, wake_pattern
-from radio_hub.interface import BROADCAST, OwnSensors, lazy_numpy
+from radio_hub.values import BROADCAST, OwnSensors, lazy_numpy
 
 if TYPE_CHECKING:
     import numpy as np
@@ -225,14 +226,6 @@ class SetUser:
 
 
 @dataclass(frozen=True)
-class Log:
-    """One event for the robot's record."""
-
-    kind: str
-    detail: dict[str, Any]
-
-
-@dataclass(frozen=True)
 class Telemetry:
     """What the robot believes, for viewers and metrics (never other robots)."""
 
@@ -321,7 +314,7 @@ class DriverCore:
         self.drive_state_msg: m.DriveState | None = None
         self.drive_state_at = -math.inf
         self.tracker = RelativeTracker()
-        self._echoes = EchoRanges()
+        self._echoes = EchoRanges(strict=True)
         self.opening_rate: float | None = None
         """How fast the LF distance to the user grows (m/s, smoothed over fixes)."""
         self.turn_to: float | None = None
@@ -992,7 +985,12 @@ class EchoRanges:
     In plain floats: a ring is eight sensors, read on every control step, where numpy's per-call overhead
     is most of the cost (the same IEEE operations in the same order, so the same bits as the arrays gave)."""
 
-    def __init__(self) -> None:
+    def __init__(self, strict: bool = False) -> None:
+        self.strict = strict
+        """Range rates as the driving law reads them: unknown over a turn wider than a cone's half-width
+        (``RATE_TURN_RAD``), and inside the stop distance not counted below the noise (``RATE_NOISE_M``). The
+        surround laws keep the plain rates their figures were measured with (their robots stand closer than the
+        stop distance to their neighbours, where the noise rule tore the paper's swarm)."""
         self._history: deque[list[Any]] = deque(maxlen=6)
         """[t_us, sensors, ranges as floats (None until first read)] of the latest samples: a robot that only
         drives in formation keeps them without reading them (and so without importing numpy)."""
@@ -1032,7 +1030,7 @@ class EchoRanges:
             old = _ranges_of(first) if span >= 0.1 else now
             angles.append(ring_angles)
             latest.append(now)
-            known.append(span >= 0.1 and len(old) == len(now))
+            known.append(span >= 0.1 and len(old) == len(now) and (not ring.strict or _steady(first[1], sensors)))
             oldest.append(old if known[-1] else now)
             spans.append(span if known[-1] else 1.0)
             cos.append(ring_cos)
@@ -1041,7 +1039,10 @@ class EchoRanges:
         now_m, old_m, moving = np.array(latest), np.array(oldest), np.array(velocity, dtype=float)
         rate = (now_m - old_m) / np.array(spans)[:, None]
         along = moving[:, 0:1] * np.array(cos) + moving[:, 1:2] * np.array(sin)
-        receding = np.where(np.isnan(rate), 0.0, rate + along)
+        away = np.where(np.isnan(rate), 0.0, rate + along)
+        strict = np.array([ring.strict for ring in rings])[:, None]
+        counted = ~strict | (away > RATE_NOISE_M / np.array(spans)[:, None]) | (now_m > STOP_DISTANCE_M)
+        receding = np.where(counted, away, 0.0)
         return angles, now_m, receding, np.array(known)
 
     def holds(self, t_us: int) -> bool:
@@ -1072,7 +1073,7 @@ class EchoRanges:
         into 0.35 m/s) plus the robot's own speed along the beam."""
         first = self._history[0]
         dt = (sensors.t_us - first[0]) / 1e6
-        if dt < 0.1:
+        if dt < 0.1 or (self.strict and not _steady(first[1], sensors)):
             return ()
         oldest = _ranges_of(first)
         if len(oldest) != len(ranges):
@@ -1081,8 +1082,29 @@ class EchoRanges:
         receding = []
         for r, o, c, s in zip(ranges, oldest, cos, sin, strict=True):
             rate = (r - o) / dt
-            receding.append(0.0 if math.isnan(rate) else rate + (vx * c + vy * s))
+            away = 0.0 if math.isnan(rate) else rate + (vx * c + vy * s)
+            receding.append(away if not self.strict or away > RATE_NOISE_M / dt or r > STOP_DISTANCE_M else 0.0)
         return tuple(receding)
+
+
+RATE_NOISE_M = 0.04
+"""What two ranges of one still echo may differ by through noise alone: three sigma of the difference of two
+readings of an HC-SR04-like sensor (1 cm each, ``WorldConfig.ultrasonic_noise_m``: 1.4 cm). An echo counts as
+receding (the safety stage then lets a robot follow it) only faster than that over the rate's span (0.2 m/s over
+0.2 s): a robot 1 cm from a standing one read it receding at 0.1 m/s from noise and drove into it (seed 1 case
+193); a leader driving on is followed as before."""
+STOP_DISTANCE_M = PetControllerConfig().stop_distance_m
+"""Inside it only an echo's receding speed lets the safety stage move a robot toward it: there, and only there,
+a receding speed noise could fake is not counted."""
+RATE_TURN_RAD = math.radians(15.0)
+"""A ring that turned more than this (an ultrasonic cone's half-width) between two samples points each beam at
+another patch: the range's change then compares two echoes, not one echo's motion, and says nothing of how fast
+an obstacle moves away (a robot turning on the spot saw the user it left as a robot receding at its own speed)."""
+
+
+def _steady(before: OwnSensors, now: OwnSensors) -> bool:
+    """Whether the ring turned little enough between two samples for its range rates to mean motion."""
+    return abs(wrap(now.yaw_rad - before.yaw_rad)) <= RATE_TURN_RAD
 
 
 def _ranges_of(sample: list[Any]) -> list[float]:

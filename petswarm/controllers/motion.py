@@ -12,6 +12,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from petswarm.angles import wrap
+
 Pose = tuple[float, float, float]
 """``(x, y, yaw)``: a body's position and heading in some frame."""
 Vec = tuple[float, float]
@@ -79,11 +81,6 @@ def accelerate(previous: MotorCommand, wanted: MotorCommand, dt: float, limits: 
     scale = min(1.0, step / change) if change > 0 else 1.0
     dw = max(-limits.max_alpha * dt, min(limits.max_alpha * dt, target.omega - previous.omega))
     return MotorCommand(previous.vx + dvx * scale, previous.vy + dvy * scale, previous.omega + dw)
-
-
-def wrap(angle: float) -> float:
-    """An angle into [-pi, pi)."""
-    return (angle + math.pi) % (2 * math.pi) - math.pi
 
 
 def rotate(vec: Vec, angle: float) -> Vec:

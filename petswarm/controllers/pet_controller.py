@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from petswarm.controllers.motion import STOP, DriveLimits, MotorCommand, wrap
-from radio_hub.interface import lazy_numpy
+from radio_hub.values import lazy_numpy
 
 if TYPE_CHECKING:
     import numpy as np

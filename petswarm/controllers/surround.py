@@ -37,7 +37,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from radio_hub.datasheet import check_keys
-from radio_hub.interface import lazy_numpy
+from radio_hub.values import lazy_numpy
 
 if TYPE_CHECKING:
     import numpy as np

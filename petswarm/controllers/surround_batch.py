@@ -24,7 +24,7 @@ from petswarm.controllers.pet_controller import SafetyStage
 from petswarm.controllers.surround import SurroundController
 from petswarm.controllers.surround_pilot import SENSOR_PERIOD_S, SurroundPilot
 from petswarm.controllers.surround_sensing import BeaconTracker, sense_all
-from radio_hub.interface import BeaconSweep, OwnSensors, lazy_numpy
+from radio_hub.values import BeaconSweep, OwnSensors, lazy_numpy
 
 if TYPE_CHECKING:
     import numpy as np

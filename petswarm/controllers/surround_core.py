@@ -10,25 +10,17 @@ own-body sample step the pilot and command the motors (``Drive``), record when t
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
-from petswarm.controllers.driving_core import Drive, Log, Telemetry
+from petswarm.controllers.driving_core import Drive, Telemetry
 from petswarm.controllers.motion import MotorCommand
 from petswarm.controllers.surround_batch import step_pilots
 from petswarm.controllers.surround_pilot import SurroundDriverConfig, SurroundPilot
-from radio_hub.interface import BeaconSweep, OwnSensors
+from petswarm.managers.actions import Log, SetIrMode
+from radio_hub.values import BeaconSweep, OwnSensors
 
 TELEMETRY_EVERY = 12
 """Control steps between telemetry messages (about 2 Hz, as the swarm driver's)."""
 BEACON_RETRY_S = 0.5
 """A refused or unanswered request for beacon mode goes again this much later."""
-
-
-@dataclass(frozen=True)
-class SetIrMode:
-    """Ask the IR module for ``mode``; the outcome comes back with ``ir_mode_set`` or ``ir_mode_failed``."""
-
-    mode: str
 
 
 SurroundAction = SetIrMode | Drive | Log | Telemetry

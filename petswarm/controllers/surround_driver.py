@@ -22,9 +22,11 @@ from petswarm.controllers.driving_core import Drive, Log, Telemetry
 from petswarm.controllers.surround_core import TELEMETRY_EVERY, SetIrMode, SurroundAction, SurroundCore
 from petswarm.controllers.surround_pilot import SurroundDriverConfig, SurroundPilot
 from petswarm.controllers.surround_sensing import SweepJob, beacon_fixes_batch
+from petswarm.managers.event_log import EventLog
 from petswarm.managers.relative_location import IrModuleManager
-from petswarm.managers.sequence import EventLog
-from radio_hub.interface import BeaconSweep, HubUnavailable, IrConfig, OwnSensors, RadioClient, RadioError
+from radio_hub.datasheet import IrConfig
+from radio_hub.interface import RadioClient
+from radio_hub.values import BeaconSweep, HubUnavailable, OwnSensors, RadioError
 
 __all__ = ["TELEMETRY_EVERY", "SurroundDriver"]
 

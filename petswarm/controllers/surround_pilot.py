@@ -35,7 +35,7 @@ import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
-from petswarm.controllers.driving import EchoRanges
+from petswarm.controllers.driving_core import EchoRanges
 from petswarm.controllers.motion import DriveLimits
 from petswarm.controllers.pet_controller import PetControllerConfig, SafetyStage
 from petswarm.controllers.surround import SurroundConfig, SurroundController
@@ -51,7 +51,8 @@ from petswarm.controllers.surround_sensing import (
     explained_echoes,
     sense_lists,
 )
-from radio_hub.interface import BeaconSweep, IrConfig, OwnSensors, lazy_numpy
+from radio_hub.datasheet import IrConfig
+from radio_hub.values import BeaconSweep, OwnSensors, lazy_numpy
 
 if TYPE_CHECKING:
     import numpy as np

@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, NamedTuple
 
 from petswarm.managers.ir_estimator import estimate_many
 from radio_hub.datasheet import PERSON_BEACON_POWER, RECEIVERS, IrConfig
-from radio_hub.interface import lazy_numpy
+from radio_hub.values import lazy_numpy
 
 if TYPE_CHECKING:
     import numpy as np

@@ -8,6 +8,7 @@ import json
 import sys
 import time
 import tomllib
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -39,7 +40,28 @@ def parse_families(text: str | None) -> dict[str, float]:
     return weights
 
 
-def explore(args: argparse.Namespace) -> int:
+@dataclass
+class ExploreOptions:
+    """What ``petswarm explore`` is asked to do (its options, as a notebook gives them)."""
+
+    seed: int = 1
+    """The campaign's seed: case i draws from (seed, i) only."""
+    cases: int = 100
+    case: int | None = None
+    """Run case i alone."""
+    family: str | None = None
+    """Families and weights, e.g. ``organize,drive:2`` (None: all, the default weights)."""
+    workers: int = 1
+    scheduler: str | None = None
+    """A Dask distributed scheduler's address (instead of local workers)."""
+    replay: str | None = None
+    """Rerun a scenario file explore wrote, and check its properties."""
+    out: str | None = None
+    shrink: int = 5
+    """Shrink at most this many failures."""
+
+
+def explore(args: ExploreOptions) -> int:
     """The command; its exit status: 0 no failure, 1 a case failed, 2 bad arguments or file."""
     try:
         weights = parse_families(args.family)

@@ -553,6 +553,9 @@ STANDING_S = 2.0
 """The user counts as standing once he stood this long: longer than a robot braking from its top speed
 (1.2 m/s at 1.5 m/s^2 takes 0.8 s), so a leading robot's stop after his is not counted."""
 STANDING_MPS = 0.05
+STILL_YAW_RPS = 0.15
+"""Nor turning: the belt's recogniser calls a turn over below this (``ActivityConfig.rotation_stop_rps``). A leading
+robot answers a turning user with an arc (pet-bot-wearable.md, Controller), which may open the distance."""
 
 
 @prop("no_runaway", "safety", ("drive", "follow", "mixed"))
@@ -580,7 +583,8 @@ def no_runaway(record: Record) -> list[Violation]:
 
 
 def _user_and_distances(record: Record) -> list[tuple[float, float, dict[str, float]]]:
-    """The world log every 0.1 s: (t, since when the user stands, each robot's distance to him)."""
+    """The world log every 0.1 s: (t, since when the user stands still, neither walking nor turning, each robot's
+    distance to him)."""
     out: list[tuple[float, float, dict[str, float]]] = []
     last = None
     standing_since = math.inf
@@ -591,9 +595,12 @@ def _user_and_distances(record: Record) -> list[tuple[float, float, dict[str, fl
             continue
         user = bodies["user"]
         if last is not None:
-            speed = math.hypot(user["x"] - last[1], user["y"] - last[2]) / max(t - last[0], 1e-9)
-            standing_since = min(standing_since, last[0]) if speed < STANDING_MPS else math.inf
-        last = (t, user["x"], user["y"])
+            dt = max(t - last[0], 1e-9)
+            speed = math.hypot(user["x"] - last[1], user["y"] - last[2]) / dt
+            turning = abs(math.remainder(float(user.get("yaw", 0.0)) - last[3], math.tau)) / dt
+            still = speed < STANDING_MPS and turning < STILL_YAW_RPS
+            standing_since = min(standing_since, last[0]) if still else math.inf
+        last = (t, user["x"], user["y"], float(user.get("yaw", 0.0)))
         distances = {
             k: math.hypot(b["x"] - user["x"], b["y"] - user["y"]) for k, b in bodies.items() if k.startswith("robot")
         }

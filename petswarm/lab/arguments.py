@@ -78,6 +78,23 @@ def seed(text: str) -> int:
     return value
 
 
+ROSTER_MAX = 100_000
+"""Node ids a hub's ``--roster`` takes at most (as many as a lockstep hub's ``--expect``)."""
+
+
+def node_ids(text: str) -> tuple[str, ...]:
+    """Comma-separated node ids (``robot-1,robot-2,user-1``), each a node name, ``ROSTER_MAX`` at most."""
+    from radio_hub.interface import check_name
+
+    ids = tuple(dict.fromkeys(part.strip() for part in text.split(",") if part.strip()))
+    if len(ids) > ROSTER_MAX:
+        raise argparse.ArgumentTypeError(f"at most {ROSTER_MAX} node ids, got {len(ids)}")
+    try:
+        return tuple(check_name("node", node_id) for node_id in ids)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)[:200]) from None
+
+
 def link_key_file(text: str) -> str:
     """A file holding a 128-bit 802.15.4 network key (32 hex digits), made absolute for child processes."""
     from radio_hub.interface import read_key_file

@@ -20,24 +20,6 @@ from radio_hub.interface import OPERATOR
 DAYS = 30
 
 
-def add_arguments(sub: argparse._SubParsersAction, bounded: object) -> None:
-    """The ``certs`` subcommand."""
-    p = sub.add_parser(
-        "certs",
-        help="make a CA and TLS certificates for a hub and its nodes on several hosts (needs openssl)",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    p.add_argument("--out", required=True, help="directory for the PEM files (created 0700)")
-    p.add_argument(
-        "--hub-host",
-        required=True,
-        help="names or IP addresses clients dial the hub by, comma-separated (e.g. 10.0.0.1,hub.lab)",
-    )
-    p.add_argument("--robots", type=bounded(int, 0, 65533), default=4, help="robot-1..robot-N (default 4)")  # type: ignore[operator]
-    p.add_argument("--users", type=bounded(int, 0, 65533), default=1, help="user-1..user-N (default 1)")  # type: ignore[operator]
-
-
 def certs_command(args: argparse.Namespace) -> int:
     """Write ca.pem, and NAME.pem with NAME.key for the hub, every robot, every user and the operator."""
     if shutil.which("openssl") is None:

@@ -31,27 +31,27 @@ swarm asked for and the run had joined it). Both are required unless the file sa
 
 from __future__ import annotations
 
-import argparse
 import io
 import json
 import sys
 import time
 import tomllib
 from contextlib import redirect_stderr, redirect_stdout
-from dataclasses import fields
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from petswarm.bench.output import emit, save
 from petswarm.lab.arguments import CLOCKS
 from petswarm.lab.launch import run
+from petswarm.lab.output import emit, save
+from petswarm.lab.palette import OUTCOME_COLOURS
 from petswarm.lab.records import runs_dir
 from petswarm.lab.run import RunOptions
 from petswarm.scenario import parse_toml, read_bounded
 from radio_hub.datasheet import check_keys
-from radio_hub.interface import check_timed_fault
+from radio_hub.values import check_timed_fault
 
 RADIO_KEYS = ("sent", "delivered", "collided", "lost", "filtered", "mac_retries")
 """The hub's counters a run's row sums over its robots."""
@@ -91,7 +91,7 @@ def _check(data: dict[str, Any]) -> dict[str, Any]:
     _check_clock_and_profile(data.get("run", {}))
     config = data.get("run", {}).get("config")
     if config is not None:
-        from radio_hub.interface import config_problem
+        from radio_hub.hosting import config_problem
 
         problem = config_problem(config)
         if problem is not None:
@@ -109,11 +109,27 @@ def _check_clock_and_profile(run_table: dict[str, Any]) -> None:
         check_profile(run_table["profile"])
 
 
-def experiment_command(args: argparse.Namespace) -> int:
+@dataclass
+class ExperimentOptions:
+    """What ``petswarm experiment`` is asked to do (its options, as a notebook gives them)."""
+
+    file: str
+    """The TOML experiment file."""
+    out: str | None = None
+    """Directory for the records and results (None: runs/experiment-<time>, or under $PETSWARM_RUNS)."""
+    json: bool = False
+    clock: str | None = None
+    """Every run's clock, over the file's ``[run] clock`` (None: the file's, else wall)."""
+
+
+def experiment_command(args: ExperimentOptions) -> int:
     """Run every repetition with a progress bar; 0 when every run was OK."""
     try:
         spec = load(Path(args.file))
-    except (OSError, ValueError, tomllib.TOMLDecodeError) as err:
+    except OSError as err:  # as a person reads it: the file and what is wrong, not Python's errno
+        print(f"petswarm experiment: {args.file}: {(err.strerror or str(err)).lower()}", file=sys.stderr)
+        return 2
+    except (ValueError, tomllib.TOMLDecodeError) as err:
         print(f"petswarm experiment: {err}", file=sys.stderr)  # every error names the file already
         return 2
     if getattr(args, "clock", None):
@@ -141,9 +157,7 @@ def experiment_command(args: argparse.Namespace) -> int:
     return 0 if all(r["ok"] for r in rows) else 1
 
 
-def _results(
-    spec: dict[str, Any], args: argparse.Namespace, rows: list[dict[str, Any]], **extra: Any
-) -> dict[str, Any]:
+def _results(spec: dict[str, Any], args: ExperimentOptions, rows: list[dict[str, Any]], **extra: Any) -> dict[str, Any]:
     """results.json: the file's spec, a row per run and their aggregate (``interrupted``: a Ctrl-C or SIGTERM
     stopped the last run, whose row is in as it ended)."""
     return {
@@ -268,15 +282,21 @@ def _plot(results: dict[str, Any], path: Path) -> None:
     fig, (org, radio) = plt.subplots(1, 2, figsize=(12, 4.2))
     org.bar([str(r["seed"]) for r in runs], [r["organize_ms"] or 0 for r in runs], color="#4c72b0")
     org.set(xlabel="seed", ylabel="organizing time (ms)", title="organizing time per run")
-    for i, key in enumerate(("delivered", "collided", "lost")):
-        radio.bar([j + i * 0.27 for j in range(len(runs))], [r[key] for r in runs], 0.27, label=key)
-    radio.set_xticks([j + 0.27 for j in range(len(runs))], [str(r["seed"]) for r in runs])
-    radio.set(xlabel="seed", ylabel="receptions", title="radio per run")
-    radio.legend(fontsize=8)
+    draw_radio_per_run(radio, runs)
     fig.suptitle(results["name"] or results["file"])
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def draw_radio_per_run(ax: Any, runs: list[dict[str, Any]]) -> None:
+    """Delivered, collided and lost receptions per run, in the colours every view of a run gives them."""
+    for i, key in enumerate(("delivered", "collided", "lost")):
+        values = [r[key] for r in runs]
+        ax.bar([j + i * 0.27 for j in range(len(runs))], values, 0.27, label=key, color=OUTCOME_COLOURS[key])
+    ax.set_xticks([j + 0.27 for j in range(len(runs))], [str(r["seed"]) for r in runs])
+    ax.set(xlabel="seed", ylabel="receptions", title="radio per run")
+    ax.legend(fontsize=8)
 
 
 def progress_line(done: int, total: int, row: dict[str, Any]) -> str:

@@ -34,7 +34,7 @@ from typing import Any
 from petswarm.lab.palette import STATE_COLOURS
 from petswarm.managers.messages import MessageError
 from petswarm.managers.messages import decode as decode_message
-from radio_hub.interface import BROADCAST, Frame, FrameError, FrameType
+from radio_hub.values import BROADCAST, Frame, FrameError, FrameType
 
 EXTRA = "foxglove"
 """The optional dependencies (pyproject.toml) that export and live streaming need."""

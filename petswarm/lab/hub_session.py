@@ -6,7 +6,8 @@ import sys
 from collections.abc import Callable
 from typing import Any
 
-from radio_hub.interface import HubUnavailable, open_session
+from radio_hub.interface import open_session
+from radio_hub.values import HubUnavailable
 
 
 def with_hub(command: str, endpoint: str, body: Callable[[Any], int]) -> int:

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import sys
 
-from petswarm.lab.run import RunOptions, ping_and_organize, supervise
+from petswarm.lab.run import RunOptions, ping_and_organize, roster_argv, supervise
 
 
 def run(opts: RunOptions) -> int:
@@ -28,7 +28,7 @@ def run(opts: RunOptions) -> int:
             )
             return 2
     if opts.config is not None:  # checked on every clock before anything starts: unchecked, a traceback in model
-        from radio_hub.interface import config_problem  # time, a hub dead at start on the wall clock
+        from radio_hub.hosting import config_problem  # time, a hub dead at start on the wall clock
 
         problem = config_problem(opts.config)
         if problem is not None:
@@ -46,4 +46,4 @@ def run(opts: RunOptions) -> int:
         from petswarm.lab.run_scenario import run_scenario
 
         return run_scenario(opts, scenario)
-    return supervise(opts, "run", lambda _record: [], ping_and_organize)
+    return supervise(opts, "run", lambda _record: roster_argv(opts.robots), ping_and_organize)

@@ -11,7 +11,8 @@ from typing import Any
 import zenoh
 
 from petswarm.clock import LockstepLoop
-from radio_hub.interface import HubUnavailable, Keys, LockstepLink, open_session
+from radio_hub.interface import Keys, LockstepLink, open_session
+from radio_hub.values import HubUnavailable
 
 HUB_WAIT_S = 30.0
 """Wall seconds a lockstep node waits for its hub at start."""

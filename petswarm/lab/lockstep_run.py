@@ -17,7 +17,7 @@ from petswarm.lab.digest import record_digest
 from petswarm.lab.metrics import driving_metrics, read_world
 from petswarm.lab.model_run import CONTROL_IDENTITY, orchestrate, robot_argvs
 from petswarm.lab.records import RunRecord
-from petswarm.lab.run import RunContext, RunOptions, progress, supervise
+from petswarm.lab.run import RunContext, RunOptions, progress, roster_argv, supervise
 from petswarm.scenario import Scenario
 from radio_hub.interface import LockstepLink, RadioClient, query_hub
 
@@ -26,12 +26,15 @@ def run_lockstep(opts: RunOptions, scenario: Scenario | None) -> int:
     """The run in lockstep time; returns the exit code."""
     if scenario is not None:
         opts = opts.for_scenario(scenario)
-    nodes = opts.robots + 1 + (1 if scenario is not None and scenario.user is not None else 0)
+    has_user = scenario is not None and scenario.user is not None
+    nodes = opts.robots + 1 + (1 if has_user else 0)
     started = time.perf_counter()
     clock: dict[str, float] = {}
 
     def hub_extra(record: RunRecord) -> list[str]:
         extra = ["--clock", "lockstep", "--expect", str(nodes)]
+        users = [scenario.user.node_id] if scenario is not None and scenario.user is not None else []
+        extra += roster_argv(opts.robots, *users, CONTROL_IDENTITY.node_id)
         extra += [] if opts.dead_after_s is None else ["--dead-after", str(opts.dead_after_s)]
         if scenario is not None:
             extra += ["--scenario", str(scenario.path), "--world-log", str(record.path / "world.jsonl")]
@@ -47,7 +50,7 @@ def run_lockstep(opts: RunOptions, scenario: Scenario | None) -> int:
             ctx.sup.spawn("user", [*user, "--duration", str(scenario.duration_s), "--clock", "lockstep"])
         ctx.watch.check()
         ctx.watch.write_progress(force=True)  # the summary written as the run goes names every process from now on
-        progress(f"lockstep: model time starts when the {nodes} nodes (robots, user, this run) are there")
+        progress(f"lockstep: model time starts when the {nodes_line(opts.robots, has_user)} are there")
         loop = LockstepLoop()
         try:
             summary = loop.run_until_complete(_orchestrate(ctx, scenario))
@@ -77,6 +80,14 @@ def run_lockstep(opts: RunOptions, scenario: Scenario | None) -> int:
         summary["digest"] = record_digest(record.path)
 
     return supervise(opts, "lock", hub_extra, phase, after_stop)
+
+
+def nodes_line(robots: int, has_user: bool) -> str:
+    """The nodes a lockstep hub waits for, counted as they are: the robots, the user when there is one, and
+    this run's orchestrator."""
+    parts = [f"{robots} robot{'s' if robots != 1 else ''}", *(["the user"] if has_user else []), "this run"]
+    total = robots + 1 + (1 if has_user else 0)
+    return f"{total} nodes ({', '.join(parts)})"
 
 
 async def _orchestrate(ctx: RunContext, scenario: Scenario | None) -> dict[str, Any]:

@@ -25,7 +25,8 @@ from typing import Any
 from petswarm.lab.foxglove_channels import MissingExtra, RunChannels, require_sdk
 from petswarm.lab.records import read_events
 from petswarm.lab.watch_frames import parse_replay
-from radio_hub.interface import MODEL_EPOCH_S, read_pcap
+from radio_hub.hosting import read_pcap
+from radio_hub.values import MODEL_EPOCH_S
 
 PROFILE = "petswarm"
 """The MCAP header's profile: the channels are petswarm's (Foxglove schemas, and JSON ones of its own)."""

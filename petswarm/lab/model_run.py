@@ -32,6 +32,7 @@ from petswarm.control import RelayControl
 from petswarm.lab.checker import check_record
 from petswarm.lab.digest import record_digest
 from petswarm.lab.foxglove_live import RunStream, StreamUnavailable, start_stream
+from petswarm.lab.hub_tables import hub_environment
 from petswarm.lab.metrics import driving_metrics, read_world
 from petswarm.lab.processes import Interrupts
 from petswarm.lab.records import RunRecord
@@ -48,25 +49,21 @@ from petswarm.lab.run import (
     statuses,
     summarise,
 )
-from petswarm.managers.sequence import EventLog
+from petswarm.managers.event_log import EventLog
 from petswarm.robot import Robot, RobotConfig
 from petswarm.scenario import Scenario, is_action
 from petswarm.wearables.user import UserConfig, run_user
-from radio_hub.interface import (
+from radio_hub.hosting import (
     HANDED_OVER,
     MODEL_EPOCH_US,
     Coordinator,
     EnvironmentConfig,
-    HubUnavailable,
-    RadioClient,
-    RadioIdentity,
-    apply_profile,
-    environment_from_dict,
-    load_config,
 )
+from radio_hub.interface import RadioClient
+from radio_hub.values import HubUnavailable, RadioIdentity
 
 if TYPE_CHECKING:
-    from radio_hub.interface import Message
+    from radio_hub.values import Message
 
 ENDPOINT = "memory"
 """What a model run records as its hub endpoint: there is no socket."""
@@ -491,7 +488,12 @@ async def _run(
     opts: RunOptions, scenario: Scenario | None, world: str, record: RunRecord, stream: RunStream | None = None
 ) -> dict[str, Any]:
     world_log = record.path / "world.jsonl" if scenario is not None else None
-    air = MemoryAir(_environment(opts, scenario), opts.seed, pcap_path=record.path / "air.pcap", world_log=world_log)
+    air = MemoryAir(
+        hub_environment(opts.config, scenario, opts.profile),
+        opts.seed,
+        pcap_path=record.path / "air.pcap",
+        world_log=world_log,
+    )
     if stream is not None:  # the world states a hub would publish for viewers (the environment then makes them)
         air.coordinator.on_world = stream.offer
     try:
@@ -512,18 +514,6 @@ async def _run(
     finally:
         air.coordinator.close()
     return summary
-
-
-def _environment(opts: RunOptions, scenario: Scenario | None) -> EnvironmentConfig:
-    """The hub's tables: ``--config``, the scenario's world and the profile's values (as ``petswarm hub
-    --config --scenario --profile`` takes them)."""
-    config = load_config(opts.config) if opts.config else EnvironmentConfig()
-    if scenario is not None:
-        tables = environment_from_dict(scenario.hub_tables())
-        if opts.config:
-            tables.medium, tables.ir = config.medium, config.ir
-        config = tables
-    return config if opts.profile == "ideal" else apply_profile(config, opts.profile)
 
 
 def robot_argvs(

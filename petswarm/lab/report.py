@@ -10,20 +10,32 @@ surround run (robots in IR beacon mode round a user) also gets the swarm and its
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from petswarm.lab.metrics import describe_driving, driving_metrics, read_world, rotation_starts
-from petswarm.lab.palette import STATE_COLOURS
+from petswarm.lab.palette import OUTCOME_COLOURS, STATE_COLOURS
 from petswarm.lab.records import read_events
+from petswarm.lab.supervision import verdict
 from petswarm.lab.surround_plots import is_surround_run, plot_snapshots
 
 
-def report_command(args: argparse.Namespace) -> int:
+@dataclass
+class ReportOptions:
+    """What ``petswarm report`` is asked to do."""
+
+    run: str
+    """A run record directory."""
+    out: str | None = None
+    """Directory for the plots (None: the run directory)."""
+    json: bool = False
+
+
+def report_command(args: ReportOptions) -> int:
     """Print and plot one run record (``--json``: its figures and the plots' paths as JSON); 2 when the
     directory is not a run record."""
     run = Path(args.run)
@@ -95,8 +107,7 @@ def describe(manifest: dict[str, Any], summary: dict[str, Any] | None, events: d
             "written while it ran); the events below tell the rest"
         )
     else:
-        verdict = "OK" if summary.get("ok") else "PROBLEMS: " + "; ".join(summary.get("problems", []))
-        lines.append(verdict)
+        lines.append(verdict({"problems": [], **summary, "ok": bool(summary.get("ok"))}))
         for name, n in summary.get("nodes", {}).items():
             lines.append(
                 f"  {name:<10} sent {n['sent']:>5}  delivered {n['delivered']:>5}  collided {n['collided']:>5}"
@@ -168,7 +179,8 @@ def _plot_radio(ax: Any, summary: dict[str, Any] | None) -> None:
     keys = ("sent", "delivered", "collided", "lost", "mac_retries")
     width = 0.8 / len(keys)
     for i, key in enumerate(keys):
-        ax.bar([x + i * width for x in range(len(names))], [summary["nodes"][n][key] for n in names], width, label=key)
+        values = [summary["nodes"][n][key] for n in names]
+        ax.bar([x + i * width for x in range(len(names))], values, width, label=key, color=OUTCOME_COLOURS[key])
     ax.set_xticks([x + 0.4 - width / 2 for x in range(len(names))], names, rotation=30)
     ax.legend(fontsize=8)
     ax.set(title="radio per node (frames)")
@@ -186,15 +198,8 @@ USER_COLOUR = "#000000"
 def plot_trajectories(world: list[dict[str, Any]], path: Path) -> None:
     """Every body's path over the obstacles: the user in black, robots coloured, the master starred."""
     plt = _pyplot()
-    paths = _paths(world)
     fig, ax = plt.subplots(figsize=(9, 8))
-    _draw_obstacles(ax, next((t["obstacles"] for t in reversed(world) if t.get("obstacles")), []))
-    for (kind, node), ticks in sorted(paths.items(), key=lambda kv: (kv[0][0] != "user", len(kv[0][1]), kv[0][1])):
-        _draw_path(ax, kind, node, ticks, USER_COLOUR if kind == "user" else robot_colour(node))
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, loc="best")
-    ax.set(xlabel="x east (m)", ylabel="y north (m)", title="paths (o start, arrows heading, faint dots references)")
+    draw_trajectories(ax, world)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -223,6 +228,33 @@ def plot_formation_error(
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def draw_trajectories(ax: Any, world: list[dict[str, Any]]) -> None:
+    """The paths on ``ax``, with a legend that names every body and every marker drawn on a path."""
+    paths = _paths(world)
+    _draw_obstacles(ax, next((t["obstacles"] for t in reversed(world) if t.get("obstacles")), []))
+    for (kind, node), ticks in sorted(paths.items(), key=lambda kv: (kv[0][0] != "user", len(kv[0][1]), kv[0][1])):
+        _draw_path(ax, kind, node, ticks, USER_COLOUR if kind == "user" else robot_colour(node))
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.grid(alpha=0.3)
+    bodies, _ = ax.get_legend_handles_labels()
+    ax.legend(handles=[*bodies, *_marker_handles()], fontsize=8, loc="best")
+    ax.set(xlabel="x east (m)", ylabel="y north (m)", title="paths")
+
+
+def _marker_handles() -> list[Any]:
+    """Legend entries for the markers every path carries, in grey: each path draws them in its own colour."""
+    from matplotlib.lines import Line2D
+
+    grey = "#666666"
+    return [
+        Line2D([], [], ls="none", marker="o", color=grey, ms=6, label="start"),
+        Line2D([], [], ls="none", marker="s", color=grey, mec="black", ms=6, label="end"),
+        Line2D([], [], ls="none", marker="*", color=grey, mec="black", ms=12, label="end, as the master"),
+        Line2D([], [], ls="none", marker=r"$\rightarrow$", color=grey, ms=10, label="heading"),
+        Line2D([], [], ls="none", marker="o", color=grey, alpha=0.3, ms=4, label="slave's reference"),
+    ]
 
 
 def _paths(world: list[dict[str, Any]]) -> dict[tuple[str, str], list[tuple[float, dict[str, Any]]]]:

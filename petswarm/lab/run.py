@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import math
 import os
 import sys
 import time
@@ -20,20 +21,23 @@ from petswarm.lab.foxglove_live import StreamUnavailable, start_stream
 from petswarm.lab.metrics import describe_driving
 from petswarm.lab.processes import Interrupts, Supervisor, free_tcp_port
 from petswarm.lab.records import RunRecord
-from petswarm.lab.supervision import RunAborted, Supervision
+from petswarm.lab.supervision import RunAborted, Supervision, verdict
 from petswarm.lab.swarm import describe
 from petswarm.managers.decisions import WAITING_PAN as DEFAULT_PAN
-from radio_hub.interface import HubUnavailable, Keys, describe_fault, open_session, query_hub
+from radio_hub.interface import Keys, open_session, query_hub
+from radio_hub.values import HubUnavailable, describe_fault
 
 
 @dataclass(frozen=True)
 class RunOptions:
-    """What ``petswarm run`` was asked to do."""
+    """What ``petswarm run`` was asked to do; the defaults are the command line's (but for ``seed``, which the
+    command line draws when none is given: a run from here is a function of the seed it is given)."""
 
-    robots: int
-    seed: int
-    duration: float
-    ping_interval: float
+    robots: int = 5
+    seed: int = 0
+    duration: float = 5.0
+    ping_interval: float = math.nan
+    """Seconds between a robot's pings; left out (NaN), ``default_ping_interval(robots)``."""
     world: str | None = None
     config: str | None = None
     pcap: str | None = None
@@ -66,6 +70,10 @@ class RunOptions:
     (None: the hub's own default)."""
     foxglove: int | None = None
     """Port of a Foxglove WebSocket server that streams the run live (0: any free port; None: no server)."""
+
+    def __post_init__(self) -> None:
+        if math.isnan(self.ping_interval):  # frozen: set once, here, as the command line would have
+            object.__setattr__(self, "ping_interval", default_ping_interval(self.robots))
 
     def for_scenario(self, scenario: Any) -> RunOptions:
         """These options with the scenario's robot count and duration (what its record's manifest shows)."""
@@ -111,6 +119,12 @@ class RunContext:
     sup: Supervisor
     session: zenoh.Session
     watch: Supervision
+
+
+def roster_argv(robots: int, *others: str) -> list[str]:
+    """The hub's ``--roster`` for a run of ``robots`` robots and the other nodes it starts (a user, its orchestrator):
+    the hub keeps room for these ids whatever other sessions attach (docs/SECURITY.md)."""
+    return ["--roster", ",".join([*(f"robot-{rid}" for rid in range(1, robots + 1)), *others])]
 
 
 def supervise(
@@ -561,4 +575,4 @@ def _print(summary: dict[str, Any], as_json: bool) -> None:
     for death in summary.get("deaths", []):
         when = f"{death['cause']}, {death['elapsed_s']:g} s in"
         print(f"died during the run: {death['process']} ({when}); the run went on without it")
-    print("OK" if summary["ok"] else "PROBLEMS: " + "; ".join(summary["problems"]))
+    print(verdict(summary))

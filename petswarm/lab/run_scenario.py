@@ -27,6 +27,7 @@ from petswarm.lab.run import (
     _wait_for_robots,
     hub_chaos,
     progress,
+    roster_argv,
     supervise,
 )
 from petswarm.lab.supervision import Supervision
@@ -40,7 +41,9 @@ def run_scenario(opts: RunOptions, scenario: Scenario) -> int:
     progress(f"scenario {scenario.name}: {scenario.robot_count} robots, {scenario.duration_s:g} s")
 
     def hub_extra(record: RunRecord) -> list[str]:
-        return ["--scenario", str(scenario.path), "--world-log", str(record.path / "world.jsonl")]
+        users = [] if scenario.user is None else [scenario.user.node_id]
+        roster = roster_argv(scenario.robot_count, *users)
+        return ["--scenario", str(scenario.path), "--world-log", str(record.path / "world.jsonl"), *roster]
 
     def after_stop(summary: dict[str, Any], record: RunRecord) -> None:
         summary["driving"] = driving_metrics(read_world(record.path / "world.jsonl"))

@@ -120,3 +120,14 @@ class Supervision:
         if not ok:
             return 1
         return DEATHS_ONLY if self.deaths else 0
+
+
+def verdict(summary: dict[str, Any]) -> str:
+    """The run's last line, which agrees with its exit status: ``OK`` (0) only when every check held and no
+    process died; every check held but processes died (``DEATHS_ONLY``); or the problems (1)."""
+    if not summary["ok"]:
+        return "PROBLEMS: " + "; ".join(summary["problems"])
+    died = [d["process"] for d in summary.get("deaths", [])]
+    if died:
+        return f"CHECKS HELD, BUT {len(died)} DIED: {', '.join(died)} (exit status {DEATHS_ONLY})"
+    return "OK"

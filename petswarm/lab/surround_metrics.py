@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Any
 
-from radio_hub.interface import lazy_numpy
+from radio_hub.values import lazy_numpy
 
 if TYPE_CHECKING:
     import numpy as np

@@ -12,7 +12,8 @@ from typing import Any
 
 from petswarm import control
 from petswarm.lab.hub_session import with_hub
-from radio_hub.interface import HubUnavailable, Keys
+from radio_hub.interface import Keys
+from radio_hub.values import HubUnavailable
 
 _ORGANIZE_TIMEOUT_S = 60.0
 _ROBOT_WAIT_S = 5.0

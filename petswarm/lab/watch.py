@@ -28,7 +28,8 @@ from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request, Response
 
 from petswarm.lab.watch_frames import Replay, ReplayClock, check_frame, parse_replay, with_events_since
-from radio_hub.interface import HubUnavailable, Keys, open_session
+from radio_hub.interface import Keys, open_session
+from radio_hub.values import HubUnavailable
 
 PAGE = "watch_page.html"
 REPLAY_TICK_S = 1 / 30

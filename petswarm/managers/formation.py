@@ -19,8 +19,10 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from petswarm import clock
+from petswarm.grid import next_on_grid
 from petswarm.managers import messages as m
-from petswarm.managers.exchange import MessageProcessingManager
+from petswarm.managers.actions import Incoming, Log, Send
+from petswarm.managers.event_log import EventLog
 from petswarm.managers.formation_core import (
     ANSWER_ATTEMPTS,
     MAX_LISTED,
@@ -40,17 +42,16 @@ from petswarm.managers.formation_core import (
     HandedOver,
     Pause,
     Procedure,
-    Record,
-    Send,
     StartRoster,
     StopRoster,
     Swarm,
     SwarmChanged,
     check_count,
 )
-from petswarm.managers.rf import Incoming, RfCommunicationManager
-from petswarm.managers.sequence import EventLog, SequenceManager, StateChange
-from radio_hub.interface import BROADCAST, lazy_numpy
+from petswarm.managers.message_processing import MessageProcessingManager
+from petswarm.managers.rf import RfCommunicationManager
+from petswarm.managers.sequence import SequenceManager, StateChange
+from radio_hub.values import BROADCAST, lazy_numpy
 
 if TYPE_CHECKING:
     import numpy as np
@@ -235,7 +236,7 @@ class NetworkFormation:
         last = clock.now()
         self._stirred.clear()
         await self._stirred.wait()
-        await clock.sleep_until(clock.next_on_grid(last, WATCH_PERIOD_S, clock.now()))
+        await clock.sleep_until(next_on_grid(last, WATCH_PERIOD_S, clock.now()))
 
     # -- carrying actions out ----------------------------------------------------------------------
 
@@ -292,7 +293,7 @@ class NetworkFormation:
 
     def _apply(self, action: Action) -> None:
         """Carry out an action that never waits."""
-        if isinstance(action, Record):
+        if isinstance(action, Log):
             self.log.record(action.kind, **action.detail)
         elif isinstance(action, StateChange):
             self.log.record("state", **action.fields())

@@ -30,11 +30,11 @@ from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from petswarm.managers import messages as m
+from petswarm.managers.actions import Incoming, Log, Send
 from petswarm.managers.decisions import Rival, choose_pan, may_join, reply_delay_s, rival_master, select_members
 from petswarm.managers.exchange import Step, StepResult, StepTiming
-from petswarm.managers.rf import Incoming
 from petswarm.managers.sequence import DRIVING, RobotState, SequenceManager, StateChange
-from radio_hub.interface import BROADCAST, TxResult, lazy_numpy, max_payload
+from radio_hub.values import BROADCAST, TxResult, lazy_numpy, max_payload
 
 if TYPE_CHECKING:
     import numpy as np
@@ -119,19 +119,6 @@ class Swarm:
 
 
 @dataclass(frozen=True)
-class Send:
-    """Put ``message`` on the air to ``dst`` (its MAC report is not the core's business)."""
-
-    dst: int
-    message: m.SwarmMessage
-    dst_pan: int | None = None
-    ack: bool = True
-    where: str | None = None
-    """When set, a failure to send (the hub away) is recorded as an ``error`` event under this name and the
-    action counts as done; when None it is raised into the procedure or handler."""
-
-
-@dataclass(frozen=True)
 class Answer:
     """Send an answer to a master's request, or a master's non-participating notice; its MAC report goes back
     to the core (``answer_sent``), which sends it again when it failed."""
@@ -155,14 +142,6 @@ class ConfigurePan:
 
     pan_id: int
     where: str | None = None
-
-
-@dataclass(frozen=True)
-class Record:
-    """Record an event of ``kind`` with ``detail``."""
-
-    kind: str
-    detail: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -215,7 +194,7 @@ class Exchange:
 
 
 Action = (
-    Send | Answer | Pause | ConfigurePan | Record | StateChange | SwarmChanged | HandedOver | StartRoster | StopRoster
+    Send | Answer | Pause | ConfigurePan | Log | StateChange | SwarmChanged | HandedOver | StartRoster | StopRoster
 ) | (Dissolve | Exchange)
 
 
@@ -332,14 +311,14 @@ class FormationCore:
     def _settle(self, session: int, pan: int, members: tuple[int, ...], figures: dict[str, Any]) -> list[Action]:
         self.organizations.append(figures)
         if not members:
-            return [Record("organized", figures), self.sequence.restore(session=session, reason="no robot joined")]
+            return [Log("organized", figures), self.sequence.restore(session=session, reason="no robot joined")]
         self.swarm = Swarm(session, pan, self.me, 0, members)
         self._misses = {}
         change = self.sequence.enter(RobotState.MASTER_DRIVING, session=session, members=list(members))
-        return [change, Record("organized", figures), SwarmChanged.of(self.swarm), StartRoster()]
+        return [change, Log("organized", figures), SwarmChanged.of(self.swarm), StartRoster()]
 
     def _abandon(self, session: int) -> list[Action]:
-        actions: list[Action] = [Record("organize_failed", {"session": session})]
+        actions: list[Action] = [Log("organize_failed", {"session": session})]
         if self.sequence.state == RobotState.ORGANIZING:
             actions.append(self.sequence.restore(session=session, reason="organizing failed"))
         # the hub may be the reason organizing failed: a failure to switch back is recorded, not raised
@@ -450,7 +429,7 @@ class FormationCore:
         if self.swarm is not swarm:
             return False  # a rival master made this robot give the swarm up meanwhile
         if new not in result.responses:
-            yield Record("handover_failed", {"session": swarm.session, "to": new, "retries": result.retries})
+            yield Log("handover_failed", {"session": swarm.session, "to": new, "retries": result.retries})
             return False
         yield StopRoster()
         # the members that miss the broadcast learn the handover from the new master's rosters
@@ -470,7 +449,7 @@ class FormationCore:
         self._misses = {}
         self._deadline = now + self.config.master_silence_s
         handover = {"session": swarm.session, "frm": old_master, "to": chain[0], "number": swarm.number, **detail}
-        actions: list[Action] = [Record("handover", handover)]
+        actions: list[Action] = [Log("handover", handover)]
         if self.sequence.state == RobotState.MASTER_DRIVING:
             actions.append(
                 self.sequence.enter(RobotState.SLAVE_DRIVING, cause="handover", master=chain[0], number=swarm.number)
@@ -490,7 +469,7 @@ class FormationCore:
         # dispersal returns the new master to the driving mode the user has just chosen
         self.sequence.previous_driving = RobotState.LEADING if msg.mode == "leading" else RobotState.FOLLOWING
         handover = {"session": swarm.session, "frm": old_chain[0], "to": self.me, "number": 0}
-        return [change, Record("handover", handover), SwarmChanged.of(swarm), HandedOver(old_chain, msg), StartRoster()]
+        return [change, Log("handover", handover), SwarmChanged.of(swarm), HandedOver(old_chain, msg), StartRoster()]
 
     def disperse(self, protocol: str | None, now: float) -> Procedure[dict[str, Any]]:
         """End the swarm: every member back to waiting, this robot back to its driving state."""
@@ -525,7 +504,7 @@ class FormationCore:
             "unconfirmed": sorted(result.missing),
             "restored": restored.to.label,
         }
-        yield Record("dispersed", figures)
+        yield Log("dispersed", figures)
         return figures
 
     def _end_swarm(self, swarm: Swarm) -> tuple[StateChange, list[Action]]:
@@ -556,7 +535,7 @@ class FormationCore:
             return []
         swarm.members = tuple(a for a in swarm.members if a != addr)
         self._misses.pop(addr, None)
-        record = Record(why, {"session": swarm.session, "member": addr})
+        record = Log(why, {"session": swarm.session, "member": addr})
         if swarm.members:
             return [record, SwarmChanged.of(swarm)]
         # the last member is gone: the swarm is over, the master drives with its user again
@@ -699,7 +678,7 @@ class FormationCore:
             return False, []
         since = round(now - self._attempted_at, 3) if attempt else None
         detail = {"session": swarm.session, "rival": sender, "verdict": verdict.value, "since_handover_s": since}
-        actions: list[Action] = [Record("two_masters", detail)]
+        actions: list[Action] = [Log("two_masters", detail)]
         if verdict is Rival.KEEP:
             self._outranked.add((swarm.session, sender))
             return False, actions
@@ -763,10 +742,10 @@ class FormationCore:
         name, status = type(answer.message).__name__, result.status.value
         if answer.attempt == ANSWER_ATTEMPTS - 1:
             # no retry follows the last attempt: record the give-up, not a retry, and do not pause for nothing
-            return [Record("answer_failed", {"type": name, "status": status, "attempts": ANSWER_ATTEMPTS})]
+            return [Log("answer_failed", {"type": name, "status": status, "attempts": ANSWER_ATTEMPTS})]
         # the MAC gave up (a crowded channel: many answer one broadcast); an open step such as the
         # scan is not retried by the master for us, so try again a little later, at a random moment
-        retry = Record("answer_retry", {"type": name, "status": status, "attempt": answer.attempt})
+        retry = Log("answer_retry", {"type": name, "status": status, "attempt": answer.attempt})
         return [retry, Pause(float(self.rng.uniform(0.002, 0.02))), replace(answer, attempt=answer.attempt + 1)]
 
     def _user_now(self) -> int:

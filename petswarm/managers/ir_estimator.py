@@ -22,8 +22,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, NamedTuple
 
-from radio_hub.datasheet import RECEIVERS, IrConfig
-from radio_hub.interface import lazy_numpy, receiver_axes_rad
+from radio_hub.datasheet import RECEIVERS, IrConfig, receiver_axes_rad
+from radio_hub.values import lazy_numpy
 
 if TYPE_CHECKING:
     import numpy as np

@@ -20,12 +20,15 @@ from typing import TYPE_CHECKING, Any
 from petswarm import clock
 from petswarm.managers import messages as m
 from petswarm.managers import token_schedule as ts
-from petswarm.managers.exchange import MessageProcessingManager
+from petswarm.managers.actions import Incoming
+from petswarm.managers.event_log import EventLog
 from petswarm.managers.ir_estimator import IrEstimate
-from petswarm.managers.rf import Incoming, RfCommunicationManager
-from petswarm.managers.sequence import EventLog
+from petswarm.managers.message_processing import MessageProcessingManager
+from petswarm.managers.rf import RfCommunicationManager
 from petswarm.managers.token_schedule import ANSWER_SLOT_MS, TokenConfig, TokenSchedule, next_holder
-from radio_hub.interface import IrConfig, RadioClient, lazy_numpy
+from radio_hub.datasheet import IrConfig
+from radio_hub.interface import RadioClient
+from radio_hub.values import lazy_numpy
 
 if TYPE_CHECKING:
     import numpy as np

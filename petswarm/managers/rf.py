@@ -5,27 +5,13 @@ from __future__ import annotations
 import asyncio
 import dataclasses
 from collections import Counter
-from dataclasses import dataclass, field
 
 from petswarm import clock
+from petswarm.managers.actions import Incoming
 from petswarm.managers.messages import JoinNotice, MessageError, SwarmMessage, decode
 from petswarm.managers.serial_link import SerialLink
-from radio_hub.interface import BROADCAST, RadioClient, RxFrame, TxResult, swarm_key
-
-
-@dataclass(frozen=True)
-class Incoming:
-    """A decoded message with the frame that carried it."""
-
-    message: SwarmMessage
-    rx: RxFrame
-    received_at: float = field(default_factory=clock.now)
-    """Monotonic seconds when the robot got it."""
-
-    @property
-    def sender(self) -> int:
-        """Short address of the sender."""
-        return self.rx.frame.src
+from radio_hub.interface import RadioClient, swarm_key
+from radio_hub.values import BROADCAST, TxResult
 
 
 class RfCommunicationManager:
@@ -77,7 +63,7 @@ class RfCommunicationManager:
             if security is not None and isinstance(message, JoinNotice) and len(message.key) == 16:
                 # the join handshake: the notice came secured under the network key, so from a key holder
                 security.set_swarm_key(message.key, message.pan_id)
-            return Incoming(message, rx)
+            return Incoming(message, rx, clock.now())
 
 
 async def _until(when: float) -> None:

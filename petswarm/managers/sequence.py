@@ -3,19 +3,18 @@
 Pure code: it keeps the state, refuses transitions the design does not allow, and records each one as
 a structured event with wall and monotonic timestamps. ``enter`` and ``restore`` change the state without
 recording: they return the ``StateChange``, which a sans-IO core (``petswarm.managers.formation_core``) hands out as
-an action for its runtime to record; ``transition`` and ``restore_driving`` do both at once. ``EventLog`` is
-the one part that reads the clock: it is the runtime's sink, not part of any core.
+an action for its runtime to record; ``transition`` and ``restore_driving`` do both at once, into the runtime's
+``EventLog`` (``petswarm.managers.event_log``, the one part that reads the clock).
 """
 
 from __future__ import annotations
 
 import enum
-import json
-from collections import deque
 from dataclasses import dataclass, field
-from typing import IO, Any
+from typing import TYPE_CHECKING, Any
 
-from petswarm import clock
+if TYPE_CHECKING:
+    from petswarm.managers.event_log import EventLog
 
 
 class RobotState(enum.IntEnum):
@@ -64,32 +63,6 @@ _ALLOWED: dict[RobotState, frozenset[RobotState]] = {
 
 class TransitionError(RuntimeError):
     """A transition the state machine does not allow."""
-
-
-MEMORY_EVENTS = 20_000
-"""Events a robot keeps in memory for its control channel; the record file (if any) keeps them all."""
-
-
-@dataclass
-class EventLog:
-    """Structured events of one robot, in order; each also goes to ``sink`` (a JSON-lines file) at once."""
-
-    events: deque[dict[str, Any]] = field(default_factory=lambda: deque(maxlen=MEMORY_EVENTS))
-    sink: IO[str] | None = None
-
-    def record(self, kind: str, **detail: Any) -> dict[str, Any]:
-        """Append an event stamped with wall time and monotonic time (seconds; both model time in model time)."""
-        event = {"t": round(clock.wall_time(), 6), "mono": round(clock.now(), 6), "kind": kind, **detail}
-        self.events.append(event)
-        if self.sink is not None:
-            # flushed per event: a robot killed outright loses at most the event being written
-            try:
-                self.sink.write(json.dumps(event, default=str) + "\n")
-                self.sink.flush()
-            except OSError as err:  # a full disk must not stop the robot: keep running, stop recording
-                self.sink = None
-                self.events.append({**event, "kind": "record_lost", "error": str(err)})
-        return event
 
 
 @dataclass(frozen=True)

@@ -32,14 +32,14 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from petswarm.clock import next_on_grid
+from petswarm.grid import next_on_grid
 from petswarm.managers import messages as m
+from petswarm.managers.actions import Incoming, Log, Send, SetIrMode
 from petswarm.managers.decisions import reply_delay_s
 from petswarm.managers.exchange import SendRequest, Step, StepTiming, WaitUntil
 from petswarm.managers.ir_estimator import IrEstimate, estimate
-from petswarm.managers.rf import Incoming
 from radio_hub.datasheet import IrConfig
-from radio_hub.interface import BROADCAST, lazy_numpy
+from radio_hub.values import BROADCAST, lazy_numpy
 
 if TYPE_CHECKING:
     import numpy as np
@@ -91,30 +91,11 @@ def next_holder(chain: tuple[int, ...], me: int, alive: set[int]) -> int:
 
 
 @dataclass(frozen=True)
-class Send:
-    """Put ``message`` on the air to ``dst``; with a ``ref``, report ``sent(ref, now)`` (or ``failed``)."""
-
-    dst: int
-    message: m.SwarmMessage
-    ack: bool = True
-    ref: int | None = None
-
-
-@dataclass(frozen=True)
 class SendHeading:
     """Send this robot's heading (the AHRS yaw, read when sending) to ``dst``, in ``session``."""
 
     dst: int
     session: int
-
-
-@dataclass(frozen=True)
-class SetIrMode:
-    """Switch the IR module (``transmit``, ``receive``, ``idle``); with a ``ref``, report ``mode_set(ref, now)``
-    once the module has it (at once when it already was in ``mode``)."""
-
-    mode: str
-    ref: int | None = None
 
 
 @dataclass(frozen=True)
@@ -165,14 +146,6 @@ class Answers:
 
     answered: set[int]
     silent: set[int]
-
-
-@dataclass(frozen=True)
-class Log:
-    """Record an event."""
-
-    kind: str
-    detail: dict[str, Any]
 
 
 Action = (
@@ -538,6 +511,13 @@ class TokenSchedule:
             self.last_activity = now
             self._end_round(held)
             return [*actions, Log("ir_unheard", {"round": held.round})]
+        if not self.is_master and self.chain and self.chain[0] not in held.alive:
+            # our master did not hear us (a partition, or it died): it regenerates the token on its side once the
+            # air is silent for regen_timeout_s, and two modules would shine at once; end the round unshone and
+            # unpassed, so the members cut off with us fall silent too
+            self.last_activity = now
+            self._end_round(held)
+            return [*actions, Log("ir_master_unheard", {"round": held.round, "master": self.chain[0]})]
         held.phase = "switch_on"
         held.ref = self._await(lambda at: self._shining(held, at))
         return [*actions, SetIrMode("transmit", held.ref)]

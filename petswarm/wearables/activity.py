@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, Any
 
 from petswarm.wearables.imu import GYRO_PERIOD_S
 from radio_hub.datasheet import build_config
-from radio_hub.interface import lazy_numpy
+from radio_hub.values import lazy_numpy
 
 if TYPE_CHECKING:
     import numpy as np

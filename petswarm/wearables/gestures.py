@@ -30,7 +30,7 @@ from collections.abc import Iterable
 from enum import StrEnum
 from typing import TYPE_CHECKING
 
-from radio_hub.interface import lazy_numpy
+from radio_hub.values import lazy_numpy
 
 if TYPE_CHECKING:
     import numpy as np

@@ -23,23 +23,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from petswarm.managers.sequence import EventLog
+from petswarm.managers.event_log import EventLog
 from petswarm.profiles import wearable_profile
-from petswarm.scenario import UserPlan
 from petswarm.wearables import user_link
 from petswarm.wearables.activity import ActivityRecognizer
 from petswarm.wearables.imu import ACCEL_PERIOD_S, GYRO_PERIOD_S, BeltImu
 from petswarm.wearables.lf_location import rssi_to_distance
+from petswarm.wearables.plan import UserPlan
 from radio_hub.datasheet import LfConfig, wake_pattern, wakes
-from radio_hub.interface import (
-    BleMessage,
-    HubLink,
-    HubUnavailable,
-    LfBurstHeard,
-    RadioClient,
-    RadioError,
-    RadioIdentity,
-)
+from radio_hub.interface import HubLink, RadioClient
+from radio_hub.values import BleMessage, HubUnavailable, LfBurstHeard, RadioError, RadioIdentity
 
 PLACE_PERIOD_S = 0.02
 """The person's pose goes to the hub at the world's tick rate."""

@@ -16,7 +16,7 @@ import sys
 import threading
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from typing import Any
 
 import msgpack
@@ -25,9 +25,9 @@ import zenoh
 from radio_hub.guard import Faults
 from radio_hub.link import wire
 from radio_hub.link.keys import Keys
-from radio_hub.link.port import HubUnavailable
 from radio_hub.link.trust import TransportSecurity, access_control, tls_settings
 from radio_hub.link.up_keys import UpKeys, wait_for_up_key
+from radio_hub.link.values import HubUnavailable
 
 DOWN_PENDING_LIMIT = 2000
 """Messages from the hub a node's event loop may have waiting; more are dropped and counted (``dropped``):
@@ -299,6 +299,7 @@ def declare_hub_keys(
     chaos: bool = True,
     oversized: Callable[[], None] | None = None,
     faults: Faults | None = None,
+    roster: Collection[str] = (),
 ) -> tuple[UpKeys, list[Any]]:
     """What a hub shell serves on its router session, every callback a hand-off to ``put`` (its inbox): nodes'
     messages (``("up", key, bytes)``) on the up keys of the nodes that are there (the ``UpKeys``, returned on its
@@ -306,7 +307,8 @@ def declare_hub_keys(
     their liveliness (``("alive", key, kind)``), the queryables (``("stats", query)``...; the chaos queryable only
     with ``chaos``) and the hub's own liveliness token. A node's message longer than ``wire.MAX_UP_BYTES`` is
     dropped before it is copied out of zenoh (``oversized`` counts it). ``faults``: the hub's count of unexpected
-    exceptions, here those of the thread that keeps the up keys."""
+    exceptions, here those of the thread that keeps the up keys. ``roster``: the node ids whose up keys open outside
+    the cap (``UpKeys``)."""
 
     def up(sample: zenoh.Sample) -> None:
         if len(sample.payload) > wire.MAX_UP_BYTES:
@@ -315,7 +317,7 @@ def declare_hub_keys(
             return
         put(("up", str(sample.key_expr), sample.payload.to_bytes()))
 
-    up_keys = UpKeys(session, keys, up, put, faults=faults)
+    up_keys = UpKeys(session, keys, up, put, faults=faults, roster=roster)
     decls = [
         up_keys,
         session.declare_queryable(keys.stats, lambda q: put(("stats", q))),

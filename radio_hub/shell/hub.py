@@ -18,7 +18,10 @@ bounds"): the hub hears only ids with a liveliness token (``radio_hub.link.up_ke
 ``INBOX_PER_NODE`` messages per attached node and ``INBOX_STRANGERS`` from all other ids together (more are
 dropped and counted in ``stats()["inbox"]``); an attach whose liveliness token does not show within
 ``ATTACH_TOKEN_TIMEOUT_S`` is detached; at most ``MAX_UNPROVEN`` such attaches wait at once; any exception in
-a handler is counted in ``stats()["hub"]["faults"]`` and the loop goes on.
+a handler is counted in ``stats()["hub"]["faults"]`` and the loop goes on. A hub given its run's roster keeps room
+for those ids everywhere a flood of other ids could take it: their up keys, their first messages (a bucket per id,
+not the strangers'), their tokens' arrivals (a bucket per id) and the tokens remembered; and the job thread takes
+their items ahead of the others at each pass.
 
 With ``pcap_path`` the hub also writes every transmission that leaves the air, data frames and ACKs,
 to a pcap file (``radio_hub.air.pcap``), stamped with the wall-clock time at which it started on the air.
@@ -35,6 +38,7 @@ import sys
 import threading
 import time
 from collections import Counter, deque
+from collections.abc import Collection
 from pathlib import Path
 from typing import Any
 
@@ -50,7 +54,7 @@ from radio_hub.environment import (
     process_usage,
 )
 from radio_hub.link import wire
-from radio_hub.link.keys import WORLD_THREAD, Keys
+from radio_hub.link.keys import WORLD_THREAD, Keys, check_name
 from radio_hub.link.up_keys import UpKeys
 from radio_hub.link.zenoh_link import HubDownlink, declare_hub_keys, reply, session_config
 from radio_hub.physics.light import IrConfig
@@ -93,9 +97,16 @@ ATTACH_TOKEN_TIMEOUT_S = 5.0
 MAX_UNPROVEN = 64
 """Attached nodes without a liveliness token at once; a further attach without one is refused (counted)."""
 TOKENS_KEPT = 4096
-"""Liveliness tokens remembered; past it, tokens of ids that are not attached are forgotten first."""
+"""Liveliness tokens remembered; past it, tokens of ids that are not attached are forgotten first (never a roster
+id's)."""
+ROSTER_TOKENS_PER_ID = 8
+"""Tokens of one roster id remembered at once (a node and the restarts of it that overlap): outside
+``TOKENS_KEPT``, so that others' tokens cannot push a roster id's out, and bounded, as anyone may use the name."""
+ROSTER_ALIVE_WAITING = 64
+"""A roster id's token arrivals and departures waiting in the inbox (a bucket per id, outside ``INBOX_OTHER``)."""
 _EXPIRY_EVERY_US = 500_000
 _S_FIELD = msgpack.packb("s")
+_WAKE_ITEM = ("wake",)
 MAX_CHAOS_REQUEST_BYTES = 32 << 10
 """A chaos request's bytes at most: a fault with a partition of ``MAX_GROUP`` ids of 64 characters fits."""
 
@@ -113,17 +124,21 @@ class RadioHub:
         pcap_path: str | Path | None = None,
         environment: EnvironmentConfig | None = None,
         world_log: str | Path | None = None,
+        roster: Collection[str] = (),
     ) -> None:
-        """Raises OSError when ``pcap_path`` or ``world_log`` is given and cannot be opened for writing.
+        """Raises OSError when ``pcap_path`` or ``world_log`` is given and cannot be opened for writing, ValueError
+        when a roster id is not a node name.
 
         ``environment`` gives every table at once (``config`` and ``ir_config`` override its medium and IR);
-        ``world_log`` receives one JSON line per world tick (the ground truth a run's metrics come from).
+        ``world_log`` receives one JSON line per world tick (the ground truth a run's metrics come from);
+        ``roster``: the node ids the run starts, for which room is kept whatever other ids do (see the module).
         """
         env = environment or EnvironmentConfig()
         tables = EnvironmentConfig(config or env.medium, ir_config or env.ir, env.world, env.ble, env.lf, env.obstacles)
         self.endpoint = endpoint
         self.keys = Keys(world)
         self.seed = seed
+        self.roster = frozenset(check_name("node", node_id) for node_id in roster)
         self._downlink = HubDownlink(self.keys, is_member=lambda node_id: node_id in self.env.kinds, batching=True)
         self._t0_ns = time.perf_counter_ns()
         self.env = Environment(
@@ -141,6 +156,10 @@ class RadioHub:
         """Set when the job thread made the world thread's next work due sooner than it sleeps (a BLE send...)."""
         self._world_due = _NEVER
         """When the world thread means to wake (``_NEVER`` while it is working out when)."""
+        self._first: deque[tuple[Any, ...]] = deque()
+        """Inbox items of roster ids (their messages, token events and departures), taken before the inbox's
+        other items at each pass (a ``("wake",)`` in the inbox wakes the job thread for them): a backlog of other
+        nodes' traffic delays a roster id's attach by one batch at most."""
         self._held: deque[tuple[Any, ...]] = deque()
         """Inbox items taken that wait for the world lock, in arrival order (nothing more is taken meanwhile)."""
         self._session: zenoh.Session | None = None
@@ -157,6 +176,8 @@ class RadioHub:
         """(start of the current second, strangers admitted in it)."""
         self._tokens: dict[tuple[str, str], None] = {}
         """Liveliness tokens present, (node id, instance)."""
+        self._roster_tokens: Counter[str] = Counter()
+        """Of those, how many each roster id has (``ROSTER_TOKENS_PER_ID`` at most)."""
         self._tokenless: dict[str, int] = {}
         """Attached nodes without a token, and since when (model us)."""
         self.expired = 0
@@ -183,7 +204,7 @@ class RadioHub:
         session = zenoh.open(session_config("router", self.endpoint))
         self._session = session
         self._up_keys, self._decls = declare_hub_keys(
-            session, self.keys, self._admit, oversized=self._oversized, faults=self.env.faults
+            session, self.keys, self._admit, oversized=self._oversized, faults=self.env.faults, roster=self.roster
         )
         self._downlink.world_pub = session.declare_publisher(self.keys.world_state)
         self._decls.append(self._downlink.world_pub)
@@ -280,13 +301,24 @@ class RadioHub:
     def _take(self, item: tuple[Any, ...]) -> None:
         """``item`` and whatever arrived meanwhile, ``BATCH`` at most, before time advances (a flood never holds up
         the air); from an item that must wait for the world lock on, they are held (``_take_held``)."""
-        inbox = self._inbox
-        if not self._handle_safely(item):
+        inbox, first = self._inbox, self._first
+        self._take_first()
+        if self._held or not self._handle_safely(item):
             self._held.append(item)
         for _ in range(min(inbox.qsize(), BATCH - 1)):
+            if first:
+                self._take_first()
             item = inbox.get_nowait()
             if self._held or not self._handle_safely(item):
                 self._held.append(item)
+
+    def _take_first(self) -> None:
+        """The roster ids' items waiting (``_first``), in their order, held as the others are."""
+        first, held = self._first, self._held
+        while first:
+            item = first.popleft()
+            if held or not self._handle_safely(item):
+                held.append(item)
 
     def _take_held(self) -> None:
         """The held items, in order, as far as the world lock lets them in."""
@@ -297,11 +329,13 @@ class RadioHub:
     def _admit(self, item: tuple[Any, ...]) -> None:
         """Zenoh's threads: into the inbox if its bucket has room, else dropped and counted. A node's message
         goes in as ``("up", node id, bytes, bucket)``: its key is read here, once."""
-        size = 0
+        size, first = 0, False
         if item[0] == "up":
             node_id, size = self.keys.node_of(item[1]), len(item[2])
-            own = node_id in self.env.kinds and self._own_marker(node_id) in item[2]
+            # a roster id's first messages wait in its own bucket: no flood of strangers crowds out its attach
+            own = self._own_marker(node_id) in item[2] if node_id in self.env.kinds else node_id in self.roster
             bucket, limit = (node_id, INBOX_PER_NODE) if own else ("", INBOX_STRANGERS)
+            first = own and node_id in self.roster
             if not bucket and not self._stranger_admitted():
                 return
             item = ("up", node_id, item[2])
@@ -309,6 +343,10 @@ class RadioHub:
             # a departure is never dropped, whatever the load: a dropped one left its body in the world for good
             # (at most one per attached node per token, so this is bounded by the attached nodes)
             bucket, limit = "!", 1 << 62
+            first = self._roster_id_of(item[1]) is not None
+        elif item[0] == "alive" and (roster_id := self._roster_id_of(item[1])) is not None:
+            # a roster id's token must reach the job thread however many other tokens come and go
+            bucket, limit, first = f"?{roster_id}", ROSTER_ALIVE_WAITING, True
         else:
             bucket, limit = "?", INBOX_OTHER
         with self._waiting_lock:
@@ -317,7 +355,7 @@ class RadioHub:
                 waiting = self._waiting[bucket] = [0, 0]
             full = waiting[0] >= limit or waiting[1] + size > INBOX_BUCKET_BYTES
             if full:
-                self.inbox_dropped["other" if bucket == "?" else "stranger" if bucket == "" else "node"] += 1
+                self.inbox_dropped["other" if bucket[:1] == "?" else "stranger" if bucket == "" else "node"] += 1
                 if not waiting[0]:
                     del self._waiting[bucket]
             else:
@@ -327,7 +365,11 @@ class RadioHub:
             if item[0] in ("stats", "air", "world", "chaos"):
                 item[1].drop()  # the query ends unanswered
             return
-        self._inbox.put((*item, bucket))
+        if first:
+            self._first.append((*item, bucket))
+            self._inbox.put(_WAKE_ITEM)
+        else:
+            self._inbox.put((*item, bucket))
 
     def _own_marker(self, node_id: str) -> bytes:
         """The bytes every message of ``node_id``'s own session carries (its session key ``s`` in the envelope).
@@ -337,6 +379,13 @@ class RadioHub:
         refused by the environment (``foreign``)."""
         key = self.env.session_key_of(node_id)
         return _S_FIELD + msgpack.packb(key) if key else b""  # a key of 0 is left out of the envelope
+
+    def _roster_id_of(self, key: str) -> str | None:
+        """The node id of a liveliness key when it is a roster id's (zenoh's thread)."""
+        if not self.roster:
+            return None
+        node_id = self.keys.alive_of(key)[0]
+        return node_id if node_id in self.roster else None
 
     def _departure_of_attached(self, key: str) -> bool:
         """Whether a token that went is one of an attached node's (zenoh's thread: a read of the kinds only)."""
@@ -441,7 +490,11 @@ class RadioHub:
         elif kind == "alive":
             node_id, instance = self.keys.alive_of(item[1])
             if item[2] == zenoh.SampleKind.DELETE:
-                self._tokens.pop((node_id, instance), None)
+                present = self._tokens.pop((node_id, instance), False) is None
+                if present and node_id in self.roster:
+                    self._roster_tokens[node_id] -= 1
+                    if not self._roster_tokens[node_id]:
+                        del self._roster_tokens[node_id]
                 self.env.node_gone(node_id, instance, self.now_us())
             else:
                 self._token_seen(node_id, instance)
@@ -471,12 +524,21 @@ class RadioHub:
         return (node_id, instance) in self._tokens
 
     def _token_seen(self, node_id: str, instance: str) -> None:
-        tokens = self._tokens
-        if len(tokens) >= TOKENS_KEPT:
+        tokens, roster = self._tokens, self.roster
+        if (node_id, instance) in tokens:
+            return
+        if node_id in roster:  # outside TOKENS_KEPT: others' tokens cannot push it out
+            if self._roster_tokens[node_id] >= ROSTER_TOKENS_PER_ID:
+                self.tokens_dropped += 1
+                return
+            self._roster_tokens[node_id] += 1
+            tokens[(node_id, instance)] = None
+            return
+        if len(tokens) - self._roster_tokens.total() >= TOKENS_KEPT:
             kinds = self.env.kinds
-            for key in [k for k in tokens if k[0] not in kinds]:
+            for key in [k for k in tokens if k[0] not in kinds and k[0] not in roster]:
                 del tokens[key]
-        if len(tokens) >= TOKENS_KEPT:
+        if len(tokens) - self._roster_tokens.total() >= TOKENS_KEPT:
             self.tokens_dropped += 1
             return
         tokens[(node_id, instance)] = None
@@ -538,6 +600,8 @@ class RadioHub:
             "up_keys_open": self._up_keys.open_count if self._up_keys is not None else 0,
             "up_keys_refused": self._up_keys.refused if self._up_keys is not None else 0,
             "up_keys_waiting": self._up_keys.waiting_count if self._up_keys is not None else 0,
+            "up_keys_others_open": self._up_keys.others_open if self._up_keys is not None else 0,
+            "roster": len(self.roster),
         }
         stats["hub"]["stranger_answers_dropped"] = self._downlink.stranger_answers_dropped
         stats["hub"]["down_messages"] = self._downlink.messages

@@ -22,7 +22,8 @@ import pytest
 
 from petswarm import control
 from petswarm.lab.processes import free_tcp_port
-from radio_hub.interface import HubUnavailable, Keys, open_session, query_hub
+from radio_hub.interface import Keys, open_session, query_hub
+from radio_hub.values import HubUnavailable
 
 from ..waiting import wait_for
 from .engine import (

@@ -49,9 +49,10 @@ from petswarm.lab.model_run import (
     start_robot,
     start_user,
 )
-from petswarm.managers.sequence import EventLog
+from petswarm.managers.event_log import EventLog
 from petswarm.robot import DEFAULT_PAN, Robot, RobotConfig
-from petswarm.scenario import Scenario, UserPlan, load
+from petswarm.scenario import Scenario, load
+from petswarm.wearables.plan import UserPlan
 from petswarm.wearables.user import UserConfig
 from radio_hub.environment import EnvironmentConfig, environment_from_dict
 

@@ -48,9 +48,10 @@ def test_the_user_walking_into_a_wall_is_not_a_robot_touching_it(tmp_path: Path,
 
 @pytest.mark.timeout(120)
 def test_a_robot_the_user_pushes_into_another_is_not_a_robot_touching_it(tmp_path: Path) -> None:
+    # (since range rates discount what noise could fake, robot-1 may keep clear of robot-3 here: the judge's excuse
+    # of a pushed robot is unit-tested, test_no_contact_excuses_a_robot_the_user_pushes_into_another_...)
     result, world = _replay("seed-1-case-179-no_contact.toml", tmp_path / "run")
-    touching = _contacts(world)
-    assert ("robot-1", "robot-3") in touching and ("robot-1", "user") in touching
+    assert ("robot-1", "user") in _contacts(world)  # the user walks into robot-1
     for tick in world:  # robot-1 touches robot-3 only while the user presses it against it
         pairs = {tuple(p) for p in tick.get("contacts", [])}
         if ("robot-1", "robot-3") in pairs:
@@ -135,4 +136,26 @@ def test_robots_the_user_left_pressed_together_are_one_contact_until_they_part(t
     result, world = _replay("seed-1-case-193-no_contact.toml", tmp_path / "run")
     pressed = [tick["t_us"] for tick in world if ["robot-2", "robot-5"] in tick.get("contacts", [])]
     assert pressed and any(["robot-2", "user"] in tick.get("contacts", []) for tick in world)
+    assert result["ok"], result["failures"]
+
+
+@pytest.mark.timeout(120)
+def test_a_slave_turning_on_the_spot_does_not_drive_into_another(tmp_path: Path) -> None:
+    """Seed 1 case 581 (no_contact): two slaves closing on their slots, one turning as it drove: its beams swept
+    from one echo onto another as near, and the range rates it read took a robot for one moving away at its own
+    speed. Range rates over a turn wider than a cone's half-width are now unknown."""
+    result, world = _replay("seed-1-case-581-no_contact.toml", tmp_path / "run")
+    assert not {("robot-2", "robot-3")} & {tuple(p) for tick in world for p in tick.get("contacts", [])}
+    assert result["ok"], result["failures"]
+
+
+@pytest.mark.timeout(120)
+def test_members_cut_off_from_their_master_do_not_shine_beside_its_regenerated_token(tmp_path: Path) -> None:
+    """Seed 3 case 27 of drive,mixed,follow (checker_invariants): robots 2 and 4, cut off from their master by a
+    partition, passed the token between themselves while the master regenerated its own after 1.5 s of silence: two
+    modules shone at once for 23 ms. A member holder now shines only when its master answered its start sign."""
+    result, _ = _replay("seed-3-case-27-checker_invariants.toml", tmp_path / "run")
+    events = [json.loads(line) for line in (tmp_path / "run" / "events" / "robot-2.jsonl").read_text().splitlines()]
+    events += [json.loads(line) for line in (tmp_path / "run" / "events" / "robot-4.jsonl").read_text().splitlines()]
+    assert any(e["kind"] == "ir_master_unheard" for e in events)
     assert result["ok"], result["failures"]

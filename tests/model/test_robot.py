@@ -8,7 +8,7 @@ from typing import Any
 import pytest
 
 from petswarm.robot import DEFAULT_PAN
-from radio_hub.interface import BROADCAST, MediumConfig
+from radio_hub.values import BROADCAST, MediumConfig
 
 from .harness import LOSSLESS, ModelWorld, run_model_time
 

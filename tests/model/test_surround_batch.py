@@ -15,7 +15,7 @@ from petswarm.controllers.surround import SurroundConfig
 from petswarm.controllers.surround_batch import step_pilots
 from petswarm.controllers.surround_driver import SurroundTask
 from petswarm.controllers.surround_pilot import SurroundDriverConfig, SurroundPilot
-from radio_hub.interface import BeaconSweep, OwnSensors
+from radio_hub.values import BeaconSweep, OwnSensors
 from tests.model.harness import SCENARIOS, record_events, run_scenario
 
 

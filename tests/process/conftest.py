@@ -14,7 +14,8 @@ import zenoh
 
 from petswarm import control
 from petswarm.lab.processes import Supervisor, free_tcp_port
-from radio_hub.interface import HubUnavailable, Keys, open_session, query_hub
+from radio_hub.interface import Keys, open_session, query_hub
+from radio_hub.values import HubUnavailable
 
 LOSSLESS = {"range": {"success_ratio_rx": 1.0}, "path_loss": {"shadowing_sigma_db": 0.0}}
 PING_UNTIL_S = 15.0

@@ -18,9 +18,10 @@ from petswarm import control
 from petswarm.lab.metrics import read_world
 from petswarm.lab.processes import Supervisor, free_tcp_port
 from petswarm.lab.records import read_events
-from radio_hub.interface import HubUnavailable, Keys, open_session, query_hub
+from radio_hub.interface import Keys, open_session, query_hub
 from radio_hub.link import wire
 from radio_hub.link.zenoh_link import reliable_publisher
+from radio_hub.values import HubUnavailable
 
 from ..model.test_driving import FORMATION_MEDIAN_BOUND_M
 from ..waiting import wait_for

@@ -12,11 +12,11 @@ import pytest
 import zenoh
 
 from petswarm.clock import LockstepLoop
+from radio_hub.link import lockstep_link as lockstep
 from radio_hub.link import wire
 from radio_hub.link.keys import Keys
+from radio_hub.link.lockstep_link import LockstepLink
 from radio_hub.link.port import HubUnavailable
-from radio_hub.shell import lockstep
-from radio_hub.shell.lockstep import LockstepLink
 
 NODE = "robot-1"
 FALLBACK_S = 10.0

@@ -20,10 +20,11 @@ import zenoh
 
 from petswarm.lab.certs import make_certificates
 from petswarm.lab.processes import Supervisor, free_tcp_port
-from radio_hub.interface import HubUnavailable, Keys, open_session, query_hub
+from radio_hub.interface import Keys, open_session, query_hub
 from radio_hub.link import wire, zenoh_link
 from radio_hub.link.trust import OPERATOR, TransportSecurity
 from radio_hub.link.up_keys import wait_for_up_key
+from radio_hub.values import HubUnavailable
 from tests.process import test_cross_host as cross
 from tests.waiting import once_settled
 

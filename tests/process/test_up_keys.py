@@ -122,6 +122,36 @@ def test_an_id_refused_for_want_of_room_gets_its_key_when_one_closes(hub_and_nod
         t.undeclare()
 
 
+def test_a_roster_id_gets_its_key_whatever_the_other_ids_hold(monkeypatch) -> None:
+    """With room for two keys taken by other ids, a roster id's token still opens its key at once (it neither waits
+    nor counts toward the cap), and an id outside the roster waits as before."""
+    monkeypatch.setattr(up_keys_module, "UP_KEYS_MAX", 2)
+    keys = Keys("up-keys-roster")
+    with _hub_and_node_sessions() as (hub, node):
+        up_keys = UpKeys(hub, keys, lambda s: None, lambda item: None, grace_s=GRACE_S, roster=("robot-1",))
+        try:
+            holders = [node.liveliness().declare_token(keys.alive(f"rogue-{i}", "x")) for i in (1, 2, 3)]
+            _wait(lambda: up_keys.others_open == 2 and up_keys.waiting_count == 1)
+            token = node.liveliness().declare_token(keys.alive("robot-1", "i1"))
+            assert wait_for_up_key(node.declare_publisher(keys.up("robot-1")))
+            assert up_keys.open_count == 3 and up_keys.others_open == 2 and up_keys.waiting_count == 1
+            stranger = node.liveliness().declare_token(keys.alive("robot-2", "i1"))
+            _wait(lambda: up_keys.waiting_count == 2)
+            token.undeclare()  # a roster id's key closing frees no room for the others
+            _wait(lambda: up_keys.open_count == 2)
+            time.sleep(3 * GRACE_S)
+            assert up_keys.others_open == 2 and up_keys.waiting_count == 2
+            for t in (*holders, stranger):
+                t.undeclare()
+        finally:
+            up_keys.undeclare()
+
+
+def test_a_roster_id_must_be_a_node_name() -> None:
+    with _hub_and_node_sessions() as (hub, _node), pytest.raises(ValueError, match="must be 1-64"):
+        UpKeys(hub, Keys("up-keys-bad-roster"), lambda s: None, lambda item: None, roster=("robot/*",))
+
+
 def test_an_event_the_thread_cannot_handle_is_counted_and_later_tokens_still_open_keys() -> None:
     keys = Keys("up-keys-faults")
     told: list[Any] = []

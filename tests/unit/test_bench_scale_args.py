@@ -6,7 +6,8 @@ import argparse
 
 import pytest
 
-from petswarm.bench.scale import add_arguments, robot_counts
+from cli.main import build_parser
+from petswarm.bench.scale import robot_counts
 
 
 def test_robot_counts_are_sorted_and_unique_and_none_means_no_more() -> None:
@@ -18,7 +19,6 @@ def test_robot_counts_are_sorted_and_unique_and_none_means_no_more() -> None:
 
 
 def test_a_small_scale_bench_can_leave_out_the_thousand_robot_run() -> None:
-    parser = argparse.ArgumentParser()
-    add_arguments(parser)
-    assert parser.parse_args([]).model_robots == [1000]  # the default, now said in --help
-    assert parser.parse_args(["--robots", "5", "--model-robots", "none"]).model_robots == []
+    parser = build_parser()
+    assert parser.parse_args(["bench", "scale"]).model_robots == [1000]  # the default, now said in --help
+    assert parser.parse_args(["bench", "scale", "--robots", "5", "--model-robots", "none"]).model_robots == []

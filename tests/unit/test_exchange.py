@@ -4,19 +4,21 @@ import asyncio
 
 import pytest
 
-from petswarm.managers.exchange import MessageProcessingManager, SendRequest, Step, StepOver, StepTiming, WaitUntil
+from petswarm import clock
+from petswarm.managers.actions import Incoming
+from petswarm.managers.event_log import EventLog
+from petswarm.managers.exchange import SendRequest, Step, StepOver, StepTiming, WaitUntil
+from petswarm.managers.message_processing import MessageProcessingManager
 from petswarm.managers.messages import JoinAvailable, Joined
-from petswarm.managers.rf import Incoming
-from petswarm.managers.sequence import EventLog
 from radio_hub.air.mac import Frame, FrameType
-from radio_hub.interface import RxFrame
+from radio_hub.values import RxFrame
 
 TIMING = StepTiming(deadline_s=0.02, max_retries=3)
 
 
 def _incoming(src: int, message) -> Incoming:
     frame = Frame(FrameType.DATA, 0, 0x1000, 1, 0x1000, src, message.encode())
-    return Incoming(message, RxFrame(frame, -50.0, 200, 0, 0, 0))
+    return Incoming(message, RxFrame(frame, -50.0, 200, 0, 0, 0), clock.now())
 
 
 async def test_step_ends_as_soon_as_everyone_answered():

@@ -293,6 +293,18 @@ def test_no_runaway_fails_a_robot_that_drives_away_from_its_standing_user() -> N
     record = _record("follow", **{"robot-1": robot})
     record.world_lines = walking
     assert P.no_runaway(record) == []
+    # the user turns on the spot as the robot opens the gap (a leading robot's arc): not judged
+    record = _record("follow", **{"robot-1": robot})
+    record.world_lines = [
+        json.dumps(
+            {
+                **json.loads(line),
+                "bodies": [{**b, "yaw": 0.5 * k / 10} if b["id"] == "user" else b for b in json.loads(line)["bodies"]],
+            }
+        )
+        for k, line in enumerate(away)
+    ]
+    assert P.no_runaway(record) == []
     # waiting for a command, the robot may be carried off (not following or leading): not judged
     record = _record("follow", **{"robot-1": [_state(0.5, "waiting", "command-waiting")]})
     record.world_lines = away

@@ -11,11 +11,12 @@ import numpy as np
 from petswarm import clock
 from petswarm.clock import ModelClockLoop
 from petswarm.managers import messages as m
+from petswarm.managers.actions import Incoming
+from petswarm.managers.event_log import EventLog
 from petswarm.managers.formation import ANSWER_ATTEMPTS, FormationConfig, NetworkFormation
-from petswarm.managers.rf import Incoming
-from petswarm.managers.sequence import EventLog, RobotState, SequenceManager
+from petswarm.managers.sequence import RobotState, SequenceManager
 from radio_hub.air.mac import BROADCAST, Frame, FrameType
-from radio_hub.interface import RxFrame, TxResult, TxStatus
+from radio_hub.values import RxFrame, TxResult, TxStatus
 
 WAITING_PAN = 0x1000
 ME, MASTER, USER = 3, 9, 7
@@ -68,7 +69,7 @@ def _formation(rf: FakeRf, sequence: SequenceManager, log: EventLog, rng: Any = 
 
 def _incoming(message: m.SwarmMessage, rssi_dbm: float = -50.0) -> Incoming:
     frame = Frame(FrameType.DATA, 1, BROADCAST, BROADCAST, WAITING_PAN, MASTER, message.encode(), False)
-    return Incoming(message, RxFrame(frame, rssi_dbm, 200, 0, 1000, 0))
+    return Incoming(message, RxFrame(frame, rssi_dbm, 200, 0, 1000, 0), clock.now())
 
 
 async def test_a_former_master_that_became_a_candidate_names_no_user_in_its_scan_reply():

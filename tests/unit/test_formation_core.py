@@ -14,6 +14,8 @@ import numpy as np
 import pytest
 
 from petswarm.managers import messages as m
+from petswarm.managers.actions import Incoming, Log, Send
+from petswarm.managers.event_log import EventLog
 from petswarm.managers.exchange import SendRequest, StepOver, StepResult
 from petswarm.managers.formation_core import (
     ANSWER_ATTEMPTS,
@@ -30,17 +32,14 @@ from petswarm.managers.formation_core import (
     HandedOver,
     Pause,
     Procedure,
-    Record,
-    Send,
     StartRoster,
     StopRoster,
     Swarm,
     SwarmChanged,
 )
-from petswarm.managers.rf import Incoming
-from petswarm.managers.sequence import EventLog, RobotState, SequenceManager, StateChange
+from petswarm.managers.sequence import RobotState, SequenceManager, StateChange
 from radio_hub.air.mac import Frame, FrameType
-from radio_hub.interface import BROADCAST, RxFrame, TxResult, TxStatus
+from radio_hub.values import BROADCAST, RxFrame, TxResult, TxStatus
 
 WAITING_PAN = 0x1000
 SWARM_PAN = 0x2345
@@ -64,7 +63,7 @@ def _of(actions: list[Action], kind: type) -> list[Any]:
 
 
 def _records(actions: list[Action], kind: str) -> list[dict[str, Any]]:
-    return [a.detail for a in actions if isinstance(a, Record) and a.kind == kind]
+    return [a.detail for a in actions if isinstance(a, Log) and a.kind == kind]
 
 
 def _member(me: int = 3, master: int = 1, members: tuple[int, ...] = (3, 4)) -> FormationCore:
@@ -207,7 +206,7 @@ def test_an_answer_the_mac_fails_is_sent_again_after_a_random_pause_then_given_u
     assert core.answer_sent(again, TxResult(TxStatus.SUCCESS)) == []
     last = Answer(answer.dst, answer.message, answer.dst_pan, ANSWER_ATTEMPTS - 1)
     assert core.answer_sent(last, failed) == [
-        Record("answer_failed", {"type": "ScanReply", "status": "no_ack", "attempts": ANSWER_ATTEMPTS})
+        Log("answer_failed", {"type": "ScanReply", "status": "no_ack", "attempts": ANSWER_ATTEMPTS})
     ]
 
 
@@ -486,7 +485,7 @@ def test_organize_refused_in_the_wrong_state_and_abandoned_when_the_radio_fails(
         while True:
             abandon.append(procedure.send(Done(0.1)))
     assert abandon == [
-        Record("organize_failed", {"session": abandon[0].detail["session"]}),  # type: ignore[union-attr]
+        Log("organize_failed", {"session": abandon[0].detail["session"]}),  # type: ignore[union-attr]
         StateChange(
             RobotState.ORGANIZING,
             RobotState.FOLLOWING,
@@ -598,11 +597,11 @@ def test_a_member_silent_for_member_misses_rounds_is_dropped_and_the_last_one_en
     for _ in range(MEMBER_MISSES - 1):
         assert core.note_answers({2}, {3}) == []
     assert core.note_answers({2}, {3}) == [
-        Record("member_lost", {"session": 7, "member": 3}),
+        Log("member_lost", {"session": 7, "member": 3}),
         SwarmChanged(Swarm(7, SWARM_PAN, 1, 0, (2,))),
     ]
     left = core.receive(_incoming(2, m.Dispersed(7)), 2.0)  # the last member gave up on us
-    assert left == [Record("member_left", {"session": 7, "member": 2}), Dissolve(core.swarm, "every member is gone")]  # type: ignore[arg-type]
+    assert left == [Log("member_left", {"session": 7, "member": 2}), Dissolve(core.swarm, "every member is gone")]  # type: ignore[arg-type]
 
 
 def test_the_core_imports_no_clock_no_loop_and_no_zenoh():

@@ -12,8 +12,9 @@ from petswarm.managers.decisions import (
     rival_master,
     select_members,
 )
+from petswarm.managers.event_log import EventLog
 from petswarm.managers.messages import Refusal
-from petswarm.managers.sequence import EventLog, RobotState, SequenceManager, TransitionError
+from petswarm.managers.sequence import RobotState, SequenceManager, TransitionError
 
 
 @pytest.mark.parametrize(

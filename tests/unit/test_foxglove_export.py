@@ -18,7 +18,7 @@ from petswarm.lab.mcap_export import export_mcap, read_record
 from petswarm.managers.messages import Ping
 from radio_hub.air.mac import Frame, FrameType
 from radio_hub.air.pcap import PcapWriter
-from radio_hub.interface import MODEL_EPOCH_S
+from radio_hub.values import MODEL_EPOCH_S
 
 PAN = 0x1000
 

@@ -1,19 +1,83 @@
-"""The arrows of the layout (docs/DESIGN.md, "Packages"): cli -> petswarm -> radio_hub.interface/datasheet/determinism.
+"""The arrows of the layout (docs/DESIGN.md, "Packages"): cli -> petswarm -> radio_hub's public faces
+(interface, values, hosting, datasheet, determinism); pure models load no I/O.
 
-Read from the source (every import, also inside functions), so a forbidden import fails here even on a code
-path no other test runs.
+The arrows are read from the source (every import, also inside functions), so a forbidden import fails here
+even on a code path no other test runs. What a pure model loads is seen in a fresh interpreter, as a process
+that imports it would.
 """
 
 from __future__ import annotations
 
 import ast
+import json
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 PACKAGES = ("cli", "petswarm", "radio_hub")
-PUBLIC_FACES = ("radio_hub.interface", "radio_hub.datasheet", "radio_hub.determinism")
+PUBLIC_FACES = (
+    "radio_hub.interface",
+    "radio_hub.values",
+    "radio_hub.hosting",
+    "radio_hub.datasheet",
+    "radio_hub.determinism",
+)
+PURE_MODELS = (
+    # the robot's sans-IO cores and the vocabulary and models they share
+    "petswarm.managers.formation_core",
+    "petswarm.managers.token_schedule",
+    "petswarm.controllers.driving_core",
+    "petswarm.controllers.surround_core",
+    "petswarm.managers.actions",
+    "petswarm.managers.decisions",
+    "petswarm.managers.exchange",
+    "petswarm.managers.ir_estimator",
+    "petswarm.managers.messages",
+    "petswarm.managers.sequence",
+    "petswarm.managers.serial_link",
+    "petswarm.controllers.formation_shapes",
+    "petswarm.controllers.side_check",
+    "petswarm.controllers.motion",
+    "petswarm.controllers.pet_controller",
+    "petswarm.controllers.slave_controller",
+    "petswarm.controllers.surround",
+    "petswarm.controllers.surround_batch",
+    "petswarm.controllers.surround_commit",
+    "petswarm.controllers.surround_free",
+    "petswarm.controllers.surround_improved",
+    "petswarm.controllers.surround_memory",
+    "petswarm.controllers.surround_pilot",
+    "petswarm.controllers.surround_sensing",
+    "petswarm.wearables.activity",
+    "petswarm.wearables.gestures",
+    "petswarm.wearables.imu",
+    "petswarm.wearables.lf_location",
+    "petswarm.wearables.plan",
+    "petswarm.wearables.user_link",
+    "petswarm.angles",
+    "petswarm.draws",
+    "petswarm.grid",
+    "petswarm.scenario",
+    # the hub's pure face and its models of the air and the physics
+    "radio_hub.values",
+    "radio_hub.datasheet",
+    "radio_hub.air.chaos",
+    "radio_hub.air.error_model",
+    "radio_hub.air.mac",
+    "radio_hub.air.medium",
+    "radio_hub.air.propagation",
+    "radio_hub.air.security",
+    "radio_hub.physics.ble",
+    "radio_hub.physics.ir_air",
+    "radio_hub.physics.lf",
+    "radio_hub.physics.light",
+    "radio_hub.physics.world",
+)
+"""Modules that compute and never do I/O: importing one loads no transport, no event loop and no threads."""
+IO_MODULES = ("zenoh", "asyncio", "threading")
 
 
 def _module_name(path: Path) -> str:
@@ -95,9 +159,9 @@ def test_no_private_name_crosses_a_package(module: str) -> None:
 
 
 def test_no_two_modules_import_each_other() -> None:
-    """Within cli and petswarm, not even lazily inside a function: the runs' old import cycle (run <->
-    run_scenario, now launch -> run, run_scenario, model_run, lockstep_run) stays gone."""
-    ours = [m for m in MODULES if _top(m) in ("cli", "petswarm")]
+    """Not even lazily inside a function: the runs' old import cycle (run <-> run_scenario, now launch -> run,
+    run_scenario, model_run, lockstep_run) and the radio port's (port <-> zenoh_link) stay gone."""
+    ours = list(MODULES)
     reach = {m: {t for t, _ in _edges(m) if t in MODULES and t != m} for m in ours}
     pairs = sorted((a, b) for a in reach for b in reach[a] if a < b and a in reach.get(b, set()))
     assert not pairs, pairs
@@ -108,3 +172,58 @@ def test_every_subpackage_says_what_is_in_it(package: str) -> None:
     if package in PACKAGES:
         return
     assert ast.get_docstring(ast.parse(MODULES[package].read_text())), package
+
+
+def _loaded(module: str) -> list[str]:
+    """The I/O modules a fresh interpreter holds after importing ``module``."""
+    probe = f"import json, sys\nimport {module}\nprint(json.dumps([m for m in {IO_MODULES!r} if m in sys.modules]))"
+    done = subprocess.run(
+        [sys.executable, "-c", probe], capture_output=True, text=True, timeout=60, check=True, cwd=ROOT
+    )
+    return json.loads(done.stdout.splitlines()[-1])
+
+
+@pytest.mark.parametrize("module", PURE_MODELS)
+def test_a_pure_model_loads_neither_zenoh_nor_asyncio_nor_threads(module: str) -> None:
+    assert module in MODULES, module
+    assert _loaded(module) == [], f"importing {module} loads {_loaded(module)}"
+
+
+def test_the_purity_probe_sees_io_when_it_is_loaded() -> None:
+    """The check above could pass vacuously: a node's face does load zenoh, asyncio and threads."""
+    assert _loaded("radio_hub.interface") == list(IO_MODULES)
+
+
+def test_no_upward_arrow_between_petswarm_layers() -> None:
+    """The lab's runs never import a bench, nor wearables a scenario: the layers below never reach above."""
+    above = {"petswarm.lab": ("petswarm.bench", "petswarm.explore"), "petswarm.wearables": ("petswarm.scenario",)}
+    bad = [
+        (m, t)
+        for m in MODULES
+        for layer, forbidden in above.items()
+        if m.startswith(layer + ".")
+        for t, _ in _edges(m)
+        if any(t == f or t.startswith(f + ".") for f in forbidden)
+    ]
+    assert not bad, bad
+
+
+@pytest.mark.parametrize("face", [f for f in PUBLIC_FACES if f != "radio_hub.determinism"])
+def test_a_public_face_names_what_it_hands_out(face: str) -> None:
+    """A face imports its names, one by one, and lists them in ``__all__``: no module ``__getattr__`` that hands
+    on whatever a caller asks for, so what petswarm takes from the hub is what the faces spell out."""
+    tree = ast.parse(MODULES[face].read_text())
+    functions = {n.name for n in tree.body if isinstance(n, ast.FunctionDef)}
+    assert "__getattr__" not in functions, face
+    exported = next(
+        ast.literal_eval(n.value)
+        for n in tree.body
+        if isinstance(n, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "__all__" for t in n.targets)
+    )
+    imported = {
+        a.asname or a.name for _, n in [(0, x) for x in tree.body] if isinstance(n, ast.ImportFrom) for a in n.names
+    }
+    defined = {n.name for n in tree.body if isinstance(n, ast.FunctionDef | ast.ClassDef)} | {
+        t.id for n in tree.body if isinstance(n, ast.Assign) for t in n.targets if isinstance(t, ast.Name)
+    }
+    assert set(exported) <= imported | defined, sorted(set(exported) - imported - defined)

@@ -9,7 +9,8 @@ import time
 
 from radio_hub.environment import EnvironmentConfig
 from radio_hub.link import wire
-from radio_hub.shell.lockstep import _GRANT_TYPE, LockstepHub, _grant_of
+from radio_hub.link.lockstep_link import _GRANT_TYPE, _grant_of
+from radio_hub.shell.lockstep import LockstepHub
 
 SLOW_S = 0.05
 """``dead_after_s`` of the tests of a node taken as gone (they sleep past it); the others leave it at 60 s, so

@@ -14,6 +14,7 @@ import pytest
 from cli.main import main
 from petswarm import clock
 from petswarm.clock import MODEL_EPOCH_S, ModelClockLoop, ModelTimeStalled
+from petswarm.grid import next_on_grid
 from petswarm.lab.digest import record_digest
 
 
@@ -143,8 +144,8 @@ def test_the_next_instant_on_a_grid_is_the_one_a_periodic_timer_would_have_reach
         ticks.append(at)
     for after in (0.1, 0.12, ticks[40], ticks[40] + 1e-12, 9.0):
         expected = next(t for t in [0.1 + 0.05, *ticks] if t > after)
-        assert clock.next_on_grid(0.1, 0.05, after) == expected  # exactly: instants are compared exactly
-    assert clock.next_on_grid(0.1, 0.05, 0.0) == 0.1 + 0.05  # never before the grid's next instant
+        assert next_on_grid(0.1, 0.05, after) == expected  # exactly: instants are compared exactly
+    assert next_on_grid(0.1, 0.05, 0.0) == 0.1 + 0.05  # never before the grid's next instant
 
 
 def test_dead_after_is_refused_outside_lockstep_with_the_reason(capsys: pytest.CaptureFixture[str]) -> None:

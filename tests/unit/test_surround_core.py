@@ -14,7 +14,7 @@ from petswarm.controllers.driving_core import Drive, Log, Telemetry
 from petswarm.controllers.motion import MotorCommand
 from petswarm.controllers.surround_core import BEACON_RETRY_S, TELEMETRY_EVERY, SetIrMode, SurroundCore
 from petswarm.controllers.surround_pilot import SurroundDriverConfig
-from radio_hub.interface import BeaconSweep, OwnSensors
+from radio_hub.values import BeaconSweep, OwnSensors
 
 NO_BEACONS = BeaconSweep(0, {}, {})
 

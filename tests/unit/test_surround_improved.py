@@ -406,7 +406,7 @@ def test_the_safety_stage_takes_an_echo_off_a_tracked_neighbour_to_move_at_its_t
 
     from petswarm.controllers.pet_controller import SafetyStage
     from petswarm.controllers.surround_pilot import SAFETY_IMPROVED
-    from radio_hub.interface import OwnSensors
+    from radio_hub.values import OwnSensors
 
     angles = np.radians(np.arange(8) * 45.0)
     ranges = np.full(8, math.nan)

@@ -17,11 +17,11 @@ import pytest
 
 from petswarm.managers import messages as m
 from petswarm.managers import token_schedule as ts
-from petswarm.managers.rf import Incoming
+from petswarm.managers.actions import Incoming
 from petswarm.managers.token_schedule import ANSWER_SLOT_MS, WATCH_PERIOD_S, TokenConfig, TokenSchedule
 from radio_hub.air.mac import Frame, FrameType
-from radio_hub.interface import BROADCAST, RxFrame
 from radio_hub.physics.light import IrConfig, receiver_readings
+from radio_hub.values import BROADCAST, RxFrame
 
 SESSION = 9
 CONFIG = TokenConfig()
@@ -173,6 +173,32 @@ def test_a_holder_nobody_hears_never_shines() -> None:
     actions = master.handle_timer(0.05)
     assert _logs(actions, "ir_unheard") == [{"round": 1}] and not _of(ts.SetIrMode, actions)
     assert master.holding is None and master.last_activity == 0.05
+
+
+def test_a_member_holder_its_master_does_not_hear_never_shines() -> None:
+    """Seed 3 case 27 of drive,mixed,follow: robots 2 and 4 cut off from their master by a partition passed the token
+    between themselves while the master, hearing nothing for regen_timeout_s, regenerated its own: for 23 ms two
+    modules shone at once. A member holder shines only when its master answered its start sign."""
+
+    def hold(answering: tuple[int, ...]) -> list[ts.Action]:
+        member = _member(2, chain=(1, 2, 4))
+        [start] = _of(ts.Send, member.receive(1, m.Sync(SESSION, 2, 2), 1.0))
+        member.sent(start.ref, 1.0)
+        actions: list[ts.Action] = []
+        for k, sender in enumerate(answering):
+            actions += member.offer(_incoming(sender, m.IrStartAck(SESSION, 2)), 1.01 + 0.001 * k) or []
+        now = 1.0 + STEP_S
+        while not _of(ts.Answers, actions):
+            actions = member.handle_timer(now)
+            for send in _of(ts.Send, actions):
+                member.sent(send.ref, now)
+            now = member.next_timer() or now + STEP_S
+        return actions
+
+    cut_off = hold((4,))  # robot 4 answers, the master never does
+    assert _logs(cut_off, "ir_master_unheard") == [{"round": 2, "master": 1}] and not _of(ts.SetIrMode, cut_off)
+    heard = hold((1, 4))
+    assert [a.mode for a in _of(ts.SetIrMode, heard)] == ["transmit"]
 
 
 def test_the_robot_named_next_starts_anyway_when_the_sync_is_lost() -> None:
