@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from petswarm.explore.generate import _circle, _wall
+from petswarm.explore.generate import circle_obstacle, wall_obstacle
 
 TRAINING_SET = 1
 """The set seed of the training courses: the only courses a law was tuned on."""
@@ -240,7 +240,7 @@ def _feature(rng: np.random.Generator, kind: str) -> dict[str, Any]:
 
         def build(w: _Walker, approach: float) -> tuple[list[dict[str, Any]], float, float]:
             x, y = _ahead(w, approach + radius, side * (radius + clear))
-            return [_circle(x, y, radius)], approach + radius, 2 * radius
+            return [circle_obstacle(x, y, radius)], approach + radius, 2 * radius
 
         return {"radius_m": round(radius, 3), "clear_m": round(clear, 3), "build": build}
     if kind == "pair":
@@ -252,7 +252,11 @@ def _feature(rng: np.random.Generator, kind: str) -> dict[str, Any]:
             r = float(radii.max())
             left = _ahead(w, approach + r, shift + gap / 2 + float(radii[0]))
             right = _ahead(w, approach + r, shift - gap / 2 - float(radii[1]))
-            return [_circle(*left, float(radii[0])), _circle(*right, float(radii[1]))], approach + r, 2 * r
+            return (
+                [circle_obstacle(*left, float(radii[0])), circle_obstacle(*right, float(radii[1]))],
+                approach + r,
+                2 * r,
+            )
 
         return {"radii_m": [round(float(r), 3) for r in radii], "gap_m": round(gap, 3), "build": build}
     count = int(rng.integers(3, 5))
@@ -267,7 +271,10 @@ def _feature(rng: np.random.Generator, kind: str) -> dict[str, Any]:
             across.append(across[-1] + float(radii[k - 1] + gaps[k - 1] + radii[k]))
         middle = (across[through] + float(radii[through]) + across[through + 1] - float(radii[through + 1])) / 2
         r = float(radii.max())
-        out = [_circle(*_ahead(w, approach + r, middle - a), float(rk)) for a, rk in zip(across, radii, strict=True)]
+        out = [
+            circle_obstacle(*_ahead(w, approach + r, middle - a), float(rk))
+            for a, rk in zip(across, radii, strict=True)
+        ]
         return out, approach + r, 2 * r
 
     return {
@@ -289,7 +296,8 @@ def _corridor(w: _Walker, approach: float, width: float, length: float, bend: fl
     half = width / 2
     if not bend:
         return [
-            _wall(*_ahead(w, approach, side * half), *_ahead(w, approach + length, side * half)) for side in (1, -1)
+            wall_obstacle(*_ahead(w, approach, side * half), *_ahead(w, approach + length, side * half))
+            for side in (1, -1)
         ]
     first = at * length
     turn = math.radians(bend)
@@ -308,7 +316,7 @@ def _corridor(w: _Walker, approach: float, width: float, length: float, bend: fl
             end_centre[0] - side * half * math.sin(second),
             end_centre[1] + side * half * math.cos(second),
         )
-        out += [_wall(*start, *corner), _wall(*corner, *end)]
+        out += [wall_obstacle(*start, *corner), wall_obstacle(*corner, *end)]
     return out
 
 

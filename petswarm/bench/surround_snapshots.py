@@ -24,7 +24,7 @@ KIND_COLOURS = {"neighbour": "#4c72b0", "human": "#c44e52", "obstacle": "#222222
 def record_active(scenario: Scenario, seed: int) -> tuple[list[dict[str, Any]], dict[int, dict[str, list]], str]:
     """Run ``scenario`` under the safe law in model time: its world states, each step's active constraints per
     robot (model microseconds -> node id -> [(kind, x, y)] in the robot's frame), and its digest."""
-    from petswarm.bench.surround import scenario_run, with_law
+    from petswarm.bench.surround_runs import scenario_run, with_law
     from petswarm.controllers.surround_driver import SurroundTask
     from petswarm.controllers.surround_safe import SafeSurroundController
 
@@ -58,15 +58,15 @@ def plot_active(world: list[dict[str, Any]], active: dict[int, dict[str, list]],
     from matplotlib.lines import Line2D
     from matplotlib.patches import Circle
 
-    from petswarm.lab.surround_plots import _centre, _draw_obstacles, _span, snapshot_instants
+    from petswarm.lab.surround_plots import draw_obstacles, plot_span, snapshot_instants, swarm_centre
 
     instants = snapshot_instants(world)
     times = sorted(active)
     fig, axes = plt.subplots(1, len(instants), figsize=(3.4 * len(instants), 3.9), squeeze=False)
-    span = _span(world, instants)
+    span = plot_span(world, instants)
     for ax, index in zip(axes[0], instants, strict=True):
         state = world[index]
-        _draw_obstacles(ax, state.get("obstacles", []))
+        draw_obstacles(ax, state.get("obstacles", []))
         at = bisect.bisect_right(times, state["t_us"]) - 1
         step = active[times[at]] if at >= 0 else {}
         count = 0
@@ -80,7 +80,7 @@ def plot_active(world: list[dict[str, Any]], active: dict[int, dict[str, list]],
                     count += 1
             elif b["kind"] == "user":
                 ax.add_patch(Circle((b["x"], b["y"]), b["radius"], facecolor="#c44e52", edgecolor="k", lw=0.8))
-        cx, cy = _centre(state)
+        cx, cy = swarm_centre(state)
         ax.set_xlim(cx - span, cx + span)
         ax.set_ylim(cy - span, cy + span)
         ax.set_aspect("equal")

@@ -110,27 +110,32 @@ def _obstacles(rng: np.random.Generator, far: float = 3.0) -> list[dict[str, Any
         x0, y0 = float(side * rng.uniform(1.5, far + 2)), float(rng.uniform(1.0, far + 6))
         if kind == "wall":
             length = float(rng.uniform(1.0, 6.0))
-            out.append(_wall(x0, y0, x0 + float(rng.uniform(-1, 1)), y0 + length))
+            out.append(wall_obstacle(x0, y0, x0 + float(rng.uniform(-1, 1)), y0 + length))
         elif kind == "corridor":
             width, length = float(rng.uniform(1.2, 4.0)), float(rng.uniform(2.0, 10.0))
             y = float(rng.uniform(1.0, 3.0))
-            out += [_wall(-width / 2, y, -width / 2, y + length), _wall(width / 2, y, width / 2, y + length)]
+            out += [
+                wall_obstacle(-width / 2, y, -width / 2, y + length),
+                wall_obstacle(width / 2, y, width / 2, y + length),
+            ]
         elif kind == "cylinder":
-            out.append(_circle(x0, y0, float(rng.uniform(0.2, 1.2))))
+            out.append(circle_obstacle(x0, y0, float(rng.uniform(0.2, 1.2))))
         elif kind == "pair":
             r, gap = float(rng.uniform(0.2, 0.8)), float(rng.uniform(0.8, 3.0))
-            out += [_circle(-gap / 2 - r, y0, r), _circle(gap / 2 + r, y0, r)]
+            out += [circle_obstacle(-gap / 2 - r, y0, r), circle_obstacle(gap / 2 + r, y0, r)]
         else:
             r, step = float(rng.uniform(0.15, 0.5)), float(rng.uniform(1.0, 2.5))
-            out += [_circle(x0, y0 + k * step, r) for k in range(int(rng.integers(2, 5)))]
+            out += [circle_obstacle(x0, y0 + k * step, r) for k in range(int(rng.integers(2, 5)))]
     return out
 
 
-def _wall(x0: float, y0: float, x1: float, y1: float) -> dict[str, Any]:
+def wall_obstacle(x0: float, y0: float, x1: float, y1: float) -> dict[str, Any]:
+    """A scenario's wall from (x0, y0) to (x1, y1), to the millimetre."""
     return {"kind": "wall", "x0": round(x0, 3), "y0": round(y0, 3), "x1": round(x1, 3), "y1": round(y1, 3)}
 
 
-def _circle(x: float, y: float, r: float) -> dict[str, Any]:
+def circle_obstacle(x: float, y: float, r: float) -> dict[str, Any]:
+    """A scenario's cylinder of radius ``r`` at (x, y), to the millimetre."""
     return {"kind": "circle", "x": round(x, 3), "y": round(y, 3), "r": round(r, 3)}
 
 

@@ -48,10 +48,10 @@ def plot_snapshots(world: list[dict[str, Any]], path: Path, title: str = "") -> 
 
     instants = snapshot_instants(world)
     fig, axes = plt.subplots(1, len(instants), figsize=(3.2 * len(instants), 3.6), squeeze=False)
-    span = _span(world, instants)
+    span = plot_span(world, instants)
     for ax, index in zip(axes[0], instants, strict=True):
         state = world[index]
-        _draw_obstacles(ax, state.get("obstacles", []))
+        draw_obstacles(ax, state.get("obstacles", []))
         robots = [b for b in state["bodies"] if b["kind"] == "robot"]
         for b in robots:
             ax.add_patch(Circle((b["x"], b["y"]), b["radius"], facecolor="#4c72b0", edgecolor="k", lw=0.5))
@@ -63,7 +63,7 @@ def plot_snapshots(world: list[dict[str, Any]], path: Path, title: str = "") -> 
             cx = sum(b["x"] for b in robots) / len(robots)
             cy = sum(b["y"] for b in robots) / len(robots)
             ax.plot(cx, cy, "x", color="k", ms=8)
-            cx, cy = _centre(state)
+            cx, cy = swarm_centre(state)
             ax.set_xlim(cx - span, cx + span)
             ax.set_ylim(cy - span, cy + span)
         ax.set_aspect("equal")
@@ -107,7 +107,7 @@ def plot_extent(runs: dict[str, list[dict[str, Any]]], path: Path) -> Path:
     return path
 
 
-def _draw_obstacles(ax: Any, obstacles: list[dict[str, Any]]) -> None:
+def draw_obstacles(ax: Any, obstacles: list[dict[str, Any]]) -> None:
     from matplotlib.patches import Circle, Rectangle
 
     for o in obstacles:
@@ -120,17 +120,17 @@ def _draw_obstacles(ax: Any, obstacles: list[dict[str, Any]]) -> None:
             ax.plot([o["x0"], o["x1"]], [o["y0"], o["y1"]], color="k", lw=2)
 
 
-def _span(world: list[dict[str, Any]], instants: list[int]) -> float:
+def plot_span(world: list[dict[str, Any]], instants: list[int]) -> float:
     """Half the side of every panel: enough for the widest instant's swarm and human, at least 2 m."""
     half = 2.0
     for index in instants:
-        cx, cy = _centre(world[index])
+        cx, cy = swarm_centre(world[index])
         for b in world[index]["bodies"]:
             half = max(half, abs(b["x"] - cx) + 0.4, abs(b["y"] - cy) + 0.4)
     return half
 
 
-def _centre(state: dict[str, Any]) -> tuple[float, float]:
+def swarm_centre(state: dict[str, Any]) -> tuple[float, float]:
     """Where a panel centres: the human, or the robots' centre without him."""
     user = next((b for b in state["bodies"] if b["kind"] == "user"), None)
     if user is not None:

@@ -9,7 +9,8 @@ from pathlib import Path
 import pytest
 
 from cli.main import main
-from petswarm.bench.surround import model_time_run, summarise
+from petswarm.bench.surround import summarise
+from petswarm.bench.surround_runs import model_time_run
 from petswarm.scenario import load
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -76,7 +77,7 @@ def test_a_run_that_recorded_no_world_is_a_row_that_says_why_and_the_bench_exits
 def test_an_interrupted_process_run_stops_the_bench(tmp_path: Path, monkeypatch) -> None:
     """Ctrl-C or SIGTERM ends a lockstep run with exit code 130: the bench stops there, as in model time, rather
     than start the next of its many runs."""
-    import petswarm.bench.surround as bench
+    import petswarm.bench.surround_runs as bench
     import petswarm.lab.lockstep_run as lockstep_run
 
     monkeypatch.setattr(lockstep_run, "run_lockstep", lambda *_: bench.INTERRUPTED)
