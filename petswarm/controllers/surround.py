@@ -798,3 +798,20 @@ def _vector(name: str, value: np.ndarray) -> np.ndarray:
     if array.shape != (2,) or np.count_nonzero(np.isfinite(array)) != 2:
         raise ValueError(f"{name} must be a finite (2,) vector, not {value!r}")
     return array
+
+
+def nearest_per_sector(
+    points: Sequence[Sequence[float]], reach: float, sectors: int
+) -> dict[int, tuple[float, float, float]]:
+    """Of the points (x, y) within ``reach`` (and not at the origin), the nearest in each of ``sectors`` equal
+    sectors round the robot, by sector: (x, y, distance). A remembered echo is an arc of points a few degrees
+    apart; one a sector keeps the constraints few."""
+    nearest: dict[int, tuple[float, float, float]] = {}
+    for x, y in points:
+        d = math.sqrt(x * x + y * y)
+        if not (0 < d <= reach):
+            continue
+        sector = int((math.atan2(y, x) + math.pi) / (2 * math.pi) * sectors) % sectors
+        if sector not in nearest or d < nearest[sector][2]:
+            nearest[sector] = (x, y, d)
+    return nearest

@@ -43,7 +43,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from petswarm.controllers.surround import MIN_RANGE_M, SurroundConfig, SurroundController
+from petswarm.controllers.surround import MIN_RANGE_M, SurroundConfig, SurroundController, nearest_per_sector
 
 WALL_MARGIN_M = 0.04
 """The wall rule's gap kept in hand beyond touching: a remembered point is an arc's, up to its chord off the
@@ -168,14 +168,7 @@ class ImprovedSurroundController(SurroundController):
         echo is an arc of points a few degrees apart), which keeps the exact nearest-velocity search small."""
         c = self.config
         reach = c.robot_radius_m + c.avoidance_m
-        nearest: dict[int, tuple[float, float, float]] = {}
-        for x, y in walls:
-            d = math.sqrt(x * x + y * y)
-            if not (0 < d <= reach):
-                continue
-            sector = int((math.atan2(y, x) + math.pi) / (2 * math.pi) * WALL_SECTORS) % WALL_SECTORS
-            if sector not in nearest or d < nearest[sector][2]:
-                nearest[sector] = (x, y, d)
+        nearest = nearest_per_sector(walls, reach, WALL_SECTORS)
         rules = []
         clear = c.robot_radius_m + WALL_MARGIN_M
         cx, cy = command

@@ -36,7 +36,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from petswarm.controllers.surround import SurroundConfig, SurroundController
+from petswarm.controllers.surround import SurroundConfig, SurroundController, nearest_per_sector
 
 SECTORS = 16
 """Obstacle points make constraints only for the nearest point in each of these sectors (22.5 degrees) round the
@@ -153,14 +153,7 @@ class SafeSurroundController(SurroundController):
         """The barrier constraint of the nearest obstacle point in each ``SECTORS`` sector within reach."""
         c = self.config
         reach = c.robot_radius_m + c.avoidance_m
-        nearest: dict[int, tuple[float, float, float]] = {}
-        for x, y in points:
-            d = math.sqrt(x * x + y * y)
-            if not (0 < d <= reach):
-                continue
-            sector = int((math.atan2(y, x) + math.pi) / (2 * math.pi) * SECTORS) % SECTORS
-            if sector not in nearest or d < nearest[sector][2]:
-                nearest[sector] = (x, y, d)
+        nearest = nearest_per_sector(points, reach, SECTORS)
         out = []
         for sector in sorted(nearest):
             x, y, d = nearest[sector]
