@@ -14,24 +14,16 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from cli.bench import add_bench, bench
+from cli.common import CommandParser, add_link_security, add_profile
+from cli.common import add_hub as _add_hub
+from cli.common import add_node_clock as _add_node_clock
+from cli.common import add_tls as _add_tls
+from cli.common import add_world as _add_world
 from cli.explore import add_explore, explore
 from cli.options import options_of
+from cli.robot import add_robot_arguments, robot_options
 from cli.text import plain
-from petswarm.lab.arguments import (
-    CLOCKS,
-    CommandParser,
-    add_link_security,
-    bounded,
-    node_ids,
-    robot_id,
-    seed,
-    world_name,
-)
-from petswarm.lab.robot_command import add_hub as _add_hub
-from petswarm.lab.robot_command import add_node_clock as _add_node_clock
-from petswarm.lab.robot_command import add_profile, add_robot_arguments, robot_config
-from petswarm.lab.robot_command import add_tls as _add_tls
-from petswarm.lab.robot_command import add_world as _add_world
+from petswarm.lab.arguments import CLOCKS, bounded, node_ids, robot_id, seed, world_name
 
 if TYPE_CHECKING:
     from petswarm.robot import RobotConfig
@@ -591,9 +583,10 @@ def _user(args: argparse.Namespace) -> int:
 
 
 def _robot(args: argparse.Namespace) -> int:
+    from petswarm.lab.robot_command import robot_config
     from petswarm.lab.runtime import NotOurRobot, register, unregister
 
-    config = robot_config(args)
+    config = robot_config(robot_options(args))
     try:  # so that petswarm chaos kill|pause|resume can tell this process is ours (petswarm/lab/runtime.py)
         entry = register(config.world, config.robot_id) if config.robot_id else None
     except (OSError, NotOurRobot) as err:

@@ -13,13 +13,12 @@ Figures go to stdout (stderr with ``--json``), progress to stderr, ``<out>/bench
 ``<out>/bench_hub.png`` to disk. Each figure carries the machine's 1-minute load average over its phase (a
 loaded machine's figures are not a quiet one's), and ``--check`` makes the exit status say whether every
 target was met (``targets``): the bench is its own watchdog. The echo node and the load generators
-(``petswarm.bench.nodes``) are children started as ``python -m petswarm.bench.hub echo|load ...``; the output
+(``petswarm.bench.nodes``) are children started as ``python -m cli.bench_nodes echo|load ...``; the output
 is ``petswarm.bench.report``.
 """
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import contextlib
 import json
@@ -52,7 +51,8 @@ from petswarm.lab.processes import Supervisor, free_tcp_port, run_supervised
 from radio_hub.interface import WORLD_THREAD, Keys, open_session, query_hub
 from radio_hub.values import HubUnavailable, RadioError, airtime_us
 
-MODULE = "petswarm.bench.hub"
+MODULE = "cli.bench_nodes"
+"""The children's entry (``python -m MODULE echo|load ...``): their command line is parsed in ``cli/``."""
 WARMUP_ROUNDS = 20
 RTT_TARGET_RATIO = 1.5
 FPS_TARGET = 10000.0
@@ -575,30 +575,14 @@ def settings(args: HubBenchOptions, config: dict[str, Any], load_average: float)
 # == child entry =====================================================================================
 
 
-def child_main(argv: list[str] | None = None) -> int:
-    """``python -m petswarm.bench.hub echo|load ...``: the benchmark's child processes."""
-    parser = argparse.ArgumentParser(prog="python -m petswarm.bench.hub", description="children of petswarm bench hub")
-    sub = parser.add_subparsers(dest="role", required=True)
-    echo = sub.add_parser("echo", help="answer radio frames and plain zenoh requests")
-    load = sub.add_parser("load", help="attach load-test nodes on one session and keep the senders busy")
-    for p in (echo, load):
-        p.add_argument("--hub", required=True)
-        p.add_argument("--world", required=True)
-    for name in ("--first", "--last", "--nodes"):
-        load.add_argument(name, type=int, required=True)
-    args = parser.parse_args(argv)
-    if args.role == "echo":
-        main = echo_main(args.hub, args.world)
-    else:
-        main = load_main(args.hub, args.world, args.first, args.last, args.nodes)
+def run_child(role: str, hub: str, world: str, first: int = 0, last: int = 0, nodes: int = 0) -> int:
+    """One of the benchmark's child processes (``python -m cli.bench_nodes echo|load ...``): the echo node, or
+    the load generator of nodes ``first``..``last`` of ``nodes``; its exit code."""
+    main = echo_main(hub, world) if role == "echo" else load_main(hub, world, first, last, nodes)
     try:
         return asyncio.run(main)
     except (HubUnavailable, RadioError) as err:
-        print(f"bench {args.role}: {err}", file=sys.stderr)
+        print(f"bench {role}: {err}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130
-
-
-if __name__ == "__main__":
-    raise SystemExit(child_main())

@@ -1,6 +1,6 @@
 """The nodes of ``petswarm bench hub``: the echo node, the load generators and the pinger.
 
-The echo node and the load generators run as child processes (``python -m petswarm.bench.hub echo|load``);
+The echo node and the load generators run as child processes (``python -m cli.bench_nodes echo|load``);
 the pinger runs in the bench process itself. All are plain asyncio nodes on ``RadioClient``.
 """
 

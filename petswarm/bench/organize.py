@@ -30,8 +30,8 @@ from petswarm import control
 from petswarm.bench.hub import HubRun, check_alive, progress, start_hub, stopping, wait_attached
 from petswarm.bench.nodes import BenchFailed
 from petswarm.bench.organize_report import report, summarise, write_results
-from petswarm.lab.arguments import link_argv
 from petswarm.lab.processes import Supervisor, run_supervised
+from petswarm.lab.robot_command import RobotOptions
 from petswarm.managers.exchange import StepTiming
 from petswarm.managers.formation import PROTOCOLS, FormationConfig
 from petswarm.profiles import robot_profile
@@ -141,17 +141,20 @@ class OrganizeOptions:
     json: bool = False
 
 
-def robot_argv(rid: int, endpoint: str, world: str, args: OrganizeOptions) -> list[str]:
-    """``petswarm robot`` arguments: robot 1 is the master (connected to the user), the rest wait."""
-    argv = ["robot", "--id", str(rid), "--hub", endpoint, "--world", world, "--seed", str(args.seed)]
-    argv += ["--profile", args.profile, *link_argv(args)]
-    if rid == MASTER:
-        argv += ["--user", str(USER)]
-    if args.step_deadline is not None:
-        argv += ["--step-deadline", str(args.step_deadline)]
-    if args.step_retries is not None:
-        argv += ["--step-retries", str(args.step_retries)]
-    return argv
+def robot_options(rid: int, endpoint: str, world: str, args: OrganizeOptions) -> RobotOptions:
+    """The options of robot ``rid``: robot 1 is the master (connected to the user), the rest wait."""
+    return RobotOptions(
+        id=rid,
+        hub=endpoint,
+        world=world,
+        seed=args.seed,
+        profile=args.profile,
+        link_key=args.link_key,
+        link_mic=args.link_mic if args.link_key else RobotOptions.link_mic,
+        user=USER if rid == MASTER else 0,
+        step_deadline=args.step_deadline,
+        step_retries=RobotOptions.step_retries if args.step_retries is None else args.step_retries,
+    )
 
 
 def wait_serving(sup: Supervisor, swarm: Swarm) -> None:
@@ -177,7 +180,7 @@ def measure_count(sup: Supervisor, n: int, args: OrganizeOptions, out: Path, con
         try:
             swarm = Swarm(hub, n, names)
             for rid, name in zip(swarm.robot_ids, names[1:], strict=True):
-                sup.spawn(name, robot_argv(rid, hub.endpoint, hub.keys.world, args))
+                sup.spawn(name, robot_options(rid, hub.endpoint, hub.keys.world, args).argv())
             wait_attached(sup, hub, n + 1, names[1:])
             wait_serving(sup, swarm)
             records = run_series(sup, swarm, args)

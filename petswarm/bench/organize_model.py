@@ -25,11 +25,11 @@ from petswarm.lab.model_run import (
     MemoryAir,
     RunningRobot,
     cancel_leftovers,
-    robot_config_of,
     start_robot,
     unwind,
 )
 from petswarm.lab.processes import Interrupts
+from petswarm.lab.robot_command import robot_config
 from radio_hub.hosting import EnvironmentConfig, apply_profile, load_config
 from radio_hub.values import HubUnavailable
 
@@ -108,8 +108,7 @@ async def _measure(n: int, args: OrganizeOptions, config: Path | None) -> dict[s
     try:
         robots = {}
         for rid in range(bench.MASTER, n + 2):
-            argv = bench.robot_argv(rid, ENDPOINT, world, args)
-            robots[rid] = await start_robot(robot_config_of(argv), air)
+            robots[rid] = await start_robot(robot_config(bench.robot_options(rid, ENDPOINT, world, args)), air)
         swarm = ModelSwarm(air, n, robots)
         await asyncio.sleep(ATTACH_S)
         records = []

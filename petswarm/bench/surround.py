@@ -26,7 +26,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from petswarm.bench.surround_runs import CLOCKS, scenario_run, with_law
+from petswarm.bench.surround_runs import scenario_run, with_law
 from petswarm.lab.metrics import driving_metrics
 from petswarm.lab.output import emit, save
 from radio_hub.values import lazy_numpy
@@ -43,70 +43,6 @@ DEFAULT_SCENARIOS = [str(SCENARIOS / "surround-cylinder.toml"), str(SCENARIOS / 
 """A run's exit code when Ctrl-C or SIGTERM stopped it."""
 RECORD_EVERY = 5
 """World ticks (50 Hz) between the states the figures use (10 Hz)."""
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """The bench's options."""
-    from petswarm.lab.arguments import bounded, seed
-
-    parser.add_argument(
-        "scenarios", nargs="*", default=DEFAULT_SCENARIOS, help="surround scenario files (default: cylinder, corridor)"
-    )
-    parser.add_argument("--seeds", type=bounded(int, 1, 1000), default=3, help="runs per scenario (default 3)")
-    parser.add_argument("--seed", type=seed, default=1, help="seed of the first run (default %(default)s)")
-    parser.add_argument("--out", default="bench-results", help="directory for JSON and plots (default %(default)s)")
-    parser.add_argument(
-        "--paper",
-        action="store_true",
-        help="also the pure simulation of the paper's setups (exact sensing, no hub): r* from both lattices, "
-        "thin- and solid-walled corridor and cylinder, each also with noisy sensing",
-    )
-    parser.add_argument(
-        "--law",
-        choices=("paper", "improved", "safe", "both", "all"),
-        default="paper",
-        help="the law the robots run, whatever the scenario file says: the paper's, the improved one, the safe one "
-        "(docs/SURROUND.md), paper and improved in turn (both), or all three in turn (default %(default)s)",
-    )
-    parser.add_argument(
-        "--train",
-        type=bounded(int, 0, 10000),
-        default=0,
-        help="run this many generated training courses instead of scenario files (model time; default 0)",
-    )
-    parser.add_argument(
-        "--test",
-        type=bounded(int, 0, 10000),
-        default=0,
-        help="run this many generated test courses instead of scenario files (model time; default 0)",
-    )
-    parser.add_argument(
-        "--first-course",
-        type=bounded(int, 0, 1000000),
-        default=0,
-        help="index of the first course of each set (default 0)",
-    )
-    parser.add_argument(
-        "--clock",
-        choices=CLOCKS,
-        default="model",
-        help="model: every robot in this process on a virtual clock (fast); lockstep: each robot and the user as "
-        "its own process on the hub's model time, same figures and digest per seed (default %(default)s)",
-    )
-    parser.add_argument(
-        "--jobs",
-        type=bounded(int, 1, 64),
-        default=1,
-        help="model-time runs at once, each in its own worker process (default %(default)s; the machine's cores "
-        "is the most that helps). Every run is a function of its seed: the same figures and digests whatever this is",
-    )
-    parser.add_argument(
-        "--snapshots",
-        action="store_true",
-        help="also the safe law's snapshot plot of the first scenario's first seed, each robot's active safety "
-        "constraints drawn (bench_surround_safe_snapshots.png)",
-    )
-    parser.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
 
 
 def bench_surround(args: argparse.Namespace) -> int:

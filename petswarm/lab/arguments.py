@@ -1,9 +1,9 @@
-"""Argument types shared by the subcommands: each gives a clear message on bad input."""
+"""Argument types shared by the subcommands (their parsers live in ``cli/``): each gives a clear message on bad
+input."""
 
 from __future__ import annotations
 
 import argparse
-import difflib
 import json
 import math
 import os
@@ -15,21 +15,6 @@ if TYPE_CHECKING:
 
 CLOCKS = ("wall", "model", "lockstep")
 """The clocks a run takes (``petswarm run --clock``, an experiment's ``[run] clock``; docs/DESIGN.md "Time")."""
-
-
-class CommandParser(argparse.ArgumentParser):
-    """A parser whose subcommands refuse an argument they do not know themselves, with their own usage and the
-    nearest option: argparse hands it up to the top, which printed ``petswarm [-h] COMMAND ...`` for a typo
-    such as ``petswarm run --robtos 5``."""
-
-    def parse_known_args(self, args=None, namespace=None):  # type: ignore[no-untyped-def,override]
-        """As argparse's, but an argument left over is an error of this parser's."""
-        parsed, extra = super().parse_known_args(args, namespace)
-        if extra:
-            options = [o for o in self._option_string_actions if o.startswith("--")]
-            near = difflib.get_close_matches(extra[0].split("=")[0], options, n=1)
-            self.error(f"unrecognized arguments: {' '.join(extra)}" + (f" (did you mean {near[0]}?)" if near else ""))
-        return parsed, extra
 
 
 def int_auto(text: str) -> int:
@@ -104,26 +89,6 @@ def link_key_file(text: str) -> str:
     except (OSError, ValueError) as err:
         raise argparse.ArgumentTypeError(f"{text}: {getattr(err, 'strerror', None) or err}") from None
     return os.path.abspath(text)
-
-
-def add_link_security(p: argparse.ArgumentParser) -> None:
-    """``--link-key`` and ``--link-mic``: 802.15.4 link security (docs/SECURITY.md), off without a key."""
-    p.add_argument(
-        "--link-key",
-        type=link_key_file,
-        metavar="FILE",
-        help="802.15.4 link security (AES-CCM*, docs/SECURITY.md) with the network key in FILE (32 hex digits); "
-        "default: off",
-    )
-    p.add_argument(
-        "--link-mic", type=int, choices=(4, 8), default=4, help="bytes of the frames' MIC with --link-key (default 4)"
-    )
-
-
-def link_argv(args: argparse.Namespace) -> list[str]:
-    """The robot options that pass ``--link-key`` and ``--link-mic`` on (none without a key)."""
-    key = getattr(args, "link_key", None)
-    return ["--link-key", key, "--link-mic", str(args.link_mic)] if key else []
 
 
 def world_name(text: str) -> str:

@@ -9,13 +9,14 @@ the record's digest is the same.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from typing import Any
 
 from petswarm.clock import LockstepLoop
 from petswarm.control import RelayControl
 from petswarm.lab.digest import record_digest
 from petswarm.lab.metrics import driving_metrics, read_world
-from petswarm.lab.model_run import CONTROL_IDENTITY, orchestrate, robot_argvs
+from petswarm.lab.model_run import CONTROL_IDENTITY, orchestrate, run_robots
 from petswarm.lab.records import RunRecord
 from petswarm.lab.run import RunContext, RunOptions, progress, roster_argv, supervise
 from petswarm.scenario import Scenario
@@ -41,8 +42,8 @@ def run_lockstep(opts: RunOptions, scenario: Scenario | None) -> int:
         return extra
 
     def phase(ctx: RunContext) -> dict[str, Any]:
-        for rid, argv in robot_argvs(opts, scenario, ctx.world, ctx.record, ctx.endpoint).items():
-            ctx.sup.spawn(f"robot-{rid}", [*argv, "--clock", "lockstep"])
+        for rid, robot in run_robots(opts, scenario, ctx.world, ctx.record, ctx.endpoint).items():
+            ctx.sup.spawn(f"robot-{rid}", replace(robot, clock="lockstep").argv())
         if scenario is not None and scenario.user is not None:
             user = ["user", "--scenario", str(scenario.path), "--hub", ctx.endpoint, "--world", ctx.world]
             user += ["--seed", str(opts.seed), "--record", str(ctx.record.events_of(scenario.user.node_id))]

@@ -11,12 +11,10 @@ ACKs) is modelled in the environment as in the hub.
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import contextlib
 import contextvars
 import dataclasses
-import functools
 import json
 import math
 import sys
@@ -36,6 +34,7 @@ from petswarm.lab.hub_tables import hub_environment
 from petswarm.lab.metrics import driving_metrics, read_world
 from petswarm.lab.processes import Interrupts
 from petswarm.lab.records import RunRecord
+from petswarm.lab.robot_command import RobotOptions, robot_config
 from petswarm.lab.run import (
     HEARING_PROBLEMS,
     FaultTimeline,
@@ -44,7 +43,7 @@ from petswarm.lab.run import (
     _print,
     organize_and_disperse,
     organize_shortfall,
-    ping_robot_argv,
+    ping_robot_options,
     progress,
     statuses,
     summarise,
@@ -354,13 +353,6 @@ def start_user(config: UserConfig, air: MemoryAir, log: EventLog) -> asyncio.Tas
     return asyncio.get_running_loop().create_task(run_user(config, log, link=air.link()))
 
 
-def robot_config_of(argv: list[str]) -> RobotConfig:
-    """The robot a ``petswarm robot`` command line describes."""
-    from petswarm.lab.robot_command import robot_config
-
-    return robot_config(_parser().parse_args(argv))
-
-
 async def cancel_leftovers(loop: asyncio.AbstractEventLoop, within_s: float | None = None) -> None:
     """Cancel every task still pending and let them unwind, as ``asyncio.run`` does before it closes its loop
     (a closed loop with pending tasks warns "Task was destroyed but it is pending"); with ``within_s``, for at
@@ -498,9 +490,9 @@ async def _run(
         air.coordinator.on_world = stream.offer
     try:
         # every node starts at model time 0 and attaches in the same round, as lockstep processes do
-        argvs = robot_argvs(opts, scenario, world, record)
-        cast = Cast(air, argvs, record)
-        for rid in argvs:
+        robots = run_robots(opts, scenario, world, record)
+        cast = Cast(air, robots, record)
+        for rid in robots:
             cast.start(rid)
         user = _start_user(opts, scenario, world, record, air)
         radio = await RadioClient.connect(CONTROL_IDENTITY, world=world, link=air.link(), timeout=5.0)
@@ -516,16 +508,16 @@ async def _run(
     return summary
 
 
-def robot_argvs(
+def run_robots(
     opts: RunOptions, scenario: Scenario | None, world: str, record: RunRecord, endpoint: str = ENDPOINT
-) -> dict[int, list[str]]:
-    """The ``petswarm robot`` command lines of the run's robots, by id."""
-    from petswarm.lab.run_scenario import scenario_robot_argv
+) -> dict[int, RobotOptions]:
+    """The options of the run's robots, by id (a process run starts each with its ``argv()``)."""
+    from petswarm.lab.run_scenario import scenario_robot_options
 
     if scenario is None:
-        return {rid: ping_robot_argv(opts, rid, endpoint, world, record) for rid in range(1, opts.robots + 1)}
+        return {rid: ping_robot_options(opts, rid, endpoint, world, record) for rid in range(1, opts.robots + 1)}
     count = scenario.robot_count
-    return {rid: scenario_robot_argv(opts, scenario, rid, endpoint, world, record) for rid in range(1, count + 1)}
+    return {rid: scenario_robot_options(opts, scenario, rid, endpoint, world, record) for rid in range(1, count + 1)}
 
 
 class Cast:
@@ -533,8 +525,8 @@ class Cast:
     killed as by SIGKILL, restarted as a fresh process of the same id, the wearables' BLE link lost and back.
     Deaths and restarts go to the record's ``supervision.jsonl`` as a wall-clock run's supervisor writes them."""
 
-    def __init__(self, air: MemoryAir, argvs: dict[int, list[str]], record: RunRecord) -> None:
-        self.air, self.argvs, self.record = air, argvs, record
+    def __init__(self, air: MemoryAir, robots: dict[int, RobotOptions], record: RunRecord) -> None:
+        self.air, self.robots, self.record = air, robots, record
         self.running: dict[int, RunningRobot] = {}
         self.tasks: list[asyncio.Task[None]] = []
         self._dead: set[int] = set()
@@ -549,11 +541,12 @@ class Cast:
     def start(self, rid: int) -> None:
         """Robot ``rid``'s process starts (again: where its body stood when it died, as a robot restarted in place,
         not back at its start pose, into whatever drove there since)."""
-        argv = self.argvs[rid]
+        options = self.robots[rid]
         if rid in self._died_at:
             x, y, heading = self._died_at.pop(rid)
-            argv = [*argv, f"--pos={x!r},{y!r}", f"--heading={heading!r}"]  # the last of an option counts
-        self.tasks.append(asyncio.get_running_loop().create_task(_run_robot(argv, self.air, self.running)))
+            options = dataclasses.replace(options, pos=(x, y), heading=heading)
+        config = robot_config(options)
+        self.tasks.append(asyncio.get_running_loop().create_task(_run_robot(config, self.air, self.running)))
 
     async def act(self, action: dict[str, Any]) -> None:
         """Carry out one scenario action now."""
@@ -588,10 +581,9 @@ class Cast:
             out.write(json.dumps(entry) + "\n")
 
 
-async def _run_robot(argv: list[str], air: MemoryAir, running_by_id: dict[int, RunningRobot] | None = None) -> None:
-    """The robot a ``petswarm robot`` command line describes, attached through memory, until told to stop (or
-    killed: ``RunningRobot.kill``)."""
-    config = robot_config_of(argv)
+async def _run_robot(config: RobotConfig, air: MemoryAir, running_by_id: dict[int, RunningRobot] | None = None) -> None:
+    """The robot ``config`` describes, attached through memory, until told to stop (or killed:
+    ``RunningRobot.kill``)."""
     running = await start_robot(config, air)
     if running_by_id is not None:
         running_by_id[config.robot_id] = running
@@ -608,14 +600,6 @@ async def _run_robot(argv: list[str], air: MemoryAir, running_by_id: dict[int, R
         raise
     finally:
         running._end()  # as at the end of its process: whatever it left pending ends with it
-
-
-@functools.cache
-def _parser() -> argparse.ArgumentParser:
-    # building the CLI's parser costs milliseconds: once per run, not once per robot
-    from petswarm.lab.robot_command import robot_parser
-
-    return robot_parser()
 
 
 def _start_user(

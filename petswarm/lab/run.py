@@ -21,6 +21,7 @@ from petswarm.lab.foxglove_live import StreamUnavailable, start_stream
 from petswarm.lab.metrics import describe_driving
 from petswarm.lab.processes import Interrupts, Supervisor, free_tcp_port
 from petswarm.lab.records import RunRecord
+from petswarm.lab.robot_command import RobotOptions
 from petswarm.lab.supervision import RunAborted, Supervision, verdict
 from petswarm.lab.swarm import describe
 from petswarm.managers.decisions import WAITING_PAN as DEFAULT_PAN
@@ -206,7 +207,7 @@ def ping_and_organize(ctx: RunContext) -> dict[str, Any]:
     for note in notes:
         progress(f"warning: {note}")
     for rid in range(1, opts.robots + 1):
-        ctx.sup.spawn(f"robot-{rid}", ping_robot_argv(opts, rid, ctx.endpoint, ctx.world, ctx.record))
+        ctx.sup.spawn(f"robot-{rid}", ping_robot_options(opts, rid, ctx.endpoint, ctx.world, ctx.record).argv())
     _wait_for_robots(ctx.watch, session, keys, opts.robots, opts.startup_timeout)
     timeline = FaultTimeline(list(opts.faults))
     _exercise(ctx.watch, session, keys, opts.duration, timeline)
@@ -223,16 +224,22 @@ def ping_and_organize(ctx: RunContext) -> dict[str, Any]:
     return summary
 
 
-def ping_robot_argv(opts: RunOptions, rid: int, endpoint: str, world: str, record: RunRecord) -> list[str]:
-    """The ``petswarm robot`` command line of robot ``rid`` in the default run (robot 1 serves user 1 when
-    the run organizes a swarm)."""
-    argv = ["robot", "--id", str(rid), "--hub", endpoint, "--world", world]
-    argv += ["--record", str(record.events_of(f"robot-{rid}"))]
-    if rid == 1 and opts.organize:
-        argv += ["--user", "1", "--protocol", opts.protocol]
-    argv += ["--profile", opts.profile] if opts.profile != "ideal" else []
-    argv += ["--link-key", opts.link_key, "--link-mic", str(opts.link_mic)] if opts.link_key else []
-    return [*argv, "--ping-interval", str(opts.ping_interval), "--seed", str(opts.seed)]
+def ping_robot_options(opts: RunOptions, rid: int, endpoint: str, world: str, record: RunRecord) -> RobotOptions:
+    """The options of robot ``rid`` in the default run (robot 1 serves user 1 when the run organizes a swarm)."""
+    serves = rid == 1 and opts.organize
+    return RobotOptions(
+        id=rid,
+        hub=endpoint,
+        world=world,
+        record=str(record.events_of(f"robot-{rid}")),
+        user=1 if serves else 0,
+        protocol=opts.protocol if serves else "paper",
+        profile=opts.profile,
+        link_key=opts.link_key,
+        link_mic=opts.link_mic if opts.link_key else RobotOptions.link_mic,
+        ping_interval=opts.ping_interval,
+        seed=opts.seed,
+    )
 
 
 def organize_shortfall(opts: RunOptions) -> list[str]:

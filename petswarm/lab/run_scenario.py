@@ -10,7 +10,6 @@ collisions, swarm extent and connectivity) computed from the ground truth.
 
 from __future__ import annotations
 
-import json
 import time
 from typing import Any
 
@@ -18,6 +17,7 @@ import zenoh
 
 from petswarm.lab.metrics import driving_metrics, read_world
 from petswarm.lab.records import RunRecord
+from petswarm.lab.robot_command import RobotOptions
 from petswarm.lab.run import (
     HEARING_PROBLEMS,
     FaultTimeline,
@@ -55,7 +55,7 @@ def _drive(ctx: RunContext, scenario: Scenario) -> dict[str, Any]:
     """Robots where the scenario puts them, the user walking its path, the fault timeline; the summary."""
     opts, endpoint, world = ctx.opts, ctx.endpoint, ctx.world
     for rid in range(1, scenario.robot_count + 1):
-        ctx.sup.spawn(f"robot-{rid}", scenario_robot_argv(opts, scenario, rid, endpoint, world, ctx.record))
+        ctx.sup.spawn(f"robot-{rid}", scenario_robot_options(opts, scenario, rid, endpoint, world, ctx.record).argv())
     _wait_for_robots(ctx.watch, ctx.session, ctx.keys, scenario.robot_count, opts.startup_timeout)
     if scenario.user is not None:
         user_args = ["user", "--scenario", str(scenario.path), "--hub", endpoint, "--world", world]
@@ -71,29 +71,32 @@ def _drive(ctx: RunContext, scenario: Scenario) -> dict[str, Any]:
     return summary
 
 
-def scenario_robot_argv(
+def scenario_robot_options(
     opts: RunOptions, scenario: Scenario, rid: int, endpoint: str, world: str, record: RunRecord
-) -> list[str]:
-    """The ``petswarm robot`` command line of robot ``rid`` where the scenario puts it."""
+) -> RobotOptions:
+    """The options of robot ``rid`` where the scenario puts it."""
+    from petswarm.controllers.surround import SurroundConfig
+
     x, y, heading = scenario.robot_poses[rid - 1]
-    argv = ["robot", "--id", str(rid), "--hub", endpoint, "--world", world, f"--pos={x},{y}"]
-    argv += ["--heading", str(heading), "--seed", str(opts.seed), "--protocol", opts.protocol]
-    argv += _surround_args(scenario)
-    argv += ["--ping-interval", str(scenario.ping_interval)] if scenario.ping_interval else []
-    argv += ["--profile", opts.profile] if opts.profile != "ideal" else []
-    argv += ["--link-key", opts.link_key, "--link-mic", str(opts.link_mic)] if opts.link_key else []
-    return [*argv, "--record", str(record.events_of(f"robot-{rid}"))]
-
-
-def _surround_args(scenario: Scenario) -> list[str]:
-    """Robot flags for a surround scenario: the formation, the human's beacon id and the law's settings."""
-    if not scenario.surround_enabled:
-        return []
-    args = ["--formation", "surround"]
-    if scenario.user is not None:
-        args += ["--surround-human", scenario.user.node_id]
-    law = scenario.surround_law()
-    return [*args, "--surround-config", json.dumps(law)] if law else args
+    surround = scenario.surround_enabled
+    law = scenario.surround_law() if surround else {}
+    return RobotOptions(
+        id=rid,
+        hub=endpoint,
+        world=world,
+        pos=(x, y),
+        heading=heading,
+        seed=opts.seed,
+        protocol=opts.protocol,
+        formation="surround" if surround else "swarm",
+        surround_human=scenario.user.node_id if surround and scenario.user is not None else "user",
+        surround_config=SurroundConfig.from_dict(law) if law else None,
+        ping_interval=scenario.ping_interval or 0.0,
+        profile=opts.profile,
+        link_key=opts.link_key,
+        link_mic=opts.link_mic if opts.link_key else RobotOptions.link_mic,
+        record=str(record.events_of(f"robot-{rid}")),
+    )
 
 
 def _follow(watch: Supervision, session: zenoh.Session, keys: Keys, duration: float, timeline: FaultTimeline) -> None:

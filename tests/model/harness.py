@@ -21,8 +21,7 @@ loop, runs the coroutine with a ``ModelWorld``, then stops every robot and close
 
         run_model_time(body, config=LOSSLESS, seed=1)
 
-``ModelWorld`` offers what a test needs: start robots (``robot``, or ``robot_argv`` with a ``petswarm robot``
-command line) and a user walking a scenario's plan (``user``); control commands (``command``); chaos faults
+``ModelWorld`` offers what a test needs: start robots (``robot``) and a user walking a scenario's plan (``user``); control commands (``command``); chaos faults
 (``fault``, ``clear``, ``chaos``); model time (``now``, ``advance``, ``until``); a robot's end (``kill``: as
 SIGKILL, ``stop``: as SIGTERM); and what happened (``events``, ``status``, ``stats``). Whole scenario runs go
 through ``run_scenario`` (``petswarm.lab.model_run.execute``, the ``petswarm run SCENARIO --clock model`` path).
@@ -44,7 +43,6 @@ from petswarm.lab.model_run import (
     RunningRobot,
     cancel_leftovers,
     execute,
-    robot_config_of,
     scenario_options,
     start_robot,
     start_user,
@@ -94,10 +92,6 @@ class ModelWorld:
             rid, ENDPOINT, WORLD, pan_id=pan, position=position, heading_deg=heading_deg, user=user, **config
         )
         return await self._start(robot_config)
-
-    async def robot_argv(self, *argv: str) -> Robot:
-        """Start the robot a ``petswarm robot`` command line describes (``--hub``, ``--world`` are filled in)."""
-        return await self._start(robot_config_of(["robot", "--hub", ENDPOINT, "--world", WORLD, *argv]))
 
     async def _start(self, config: RobotConfig) -> Robot:
         if config.robot_id in self.running and not self.running[config.robot_id].gone:

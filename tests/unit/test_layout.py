@@ -226,3 +226,38 @@ def test_a_public_face_names_what_it_hands_out(face: str) -> None:
         t.id for n in tree.body if isinstance(n, ast.Assign) for t in n.targets if isinstance(t, ast.Name)
     }
     assert set(exported) <= imported | defined, sorted(set(exported) - imported - defined)
+
+
+PARSER_CALLS = ("add_argument", "add_argument_group", "add_mutually_exclusive_group", "add_parser", "add_subparsers")
+"""The calls that define a command line; with ``ArgumentParser(...)`` they live in ``cli/`` only."""
+
+
+def _parser_definitions(path: Path) -> list[str]:
+    """Where a file defines command-line options: ``line: call`` for each such call."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if not isinstance(node, ast.Call):
+            continue
+        func = node.func
+        name = func.attr if isinstance(func, ast.Attribute) else func.id if isinstance(func, ast.Name) else ""
+        if name in PARSER_CALLS or name == "ArgumentParser":
+            found.append(f"{node.lineno}: {name}")
+    return found
+
+
+@pytest.mark.parametrize("module", sorted(m for m in MODULES if _top(m) != "cli"))
+def test_every_command_line_option_is_defined_in_cli(module: str) -> None:
+    """The command line has one home: petswarm and radio_hub take typed options, never an argparse parser."""
+    found = _parser_definitions(MODULES[module])
+    assert not found, f"{module} defines command-line options outside cli/ (at {', '.join(found)})"
+
+
+def test_the_option_probe_sees_a_parser_definition(tmp_path: Path) -> None:
+    """The probe above finds each way of defining options (a guard against a probe that never fires)."""
+    probe = tmp_path / "probe.py"
+    probe.write_text(
+        "import argparse\np = argparse.ArgumentParser()\np.add_argument('--x')\ns = p.add_subparsers()\n"
+        "s.add_parser('y').add_argument_group('g')\n"
+    )
+    found = sorted(f.split(": ")[1] for f in _parser_definitions(probe))
+    assert found == ["ArgumentParser", "add_argument", "add_argument_group", "add_parser", "add_subparsers"]

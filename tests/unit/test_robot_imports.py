@@ -34,7 +34,8 @@ ROBOT_ENTRIES = {
     "robot process (wall clock)": "import cli.main; import petswarm.robot",
     "robot process (lockstep)": "import cli.main; import petswarm.robot; import petswarm.lab.lockstep_node",
     "robot command line read": (
-        "import cli.main\ncli.main.robot_config(cli.main.build_parser().parse_args(['robot', '--id', '3']))"
+        "import cli.main\nfrom petswarm.lab.robot_command import robot_config\n"
+        "robot_config(cli.main.robot_options(cli.main.build_parser().parse_args(['robot', '--id', '3'])))"
     ),
 }
 
@@ -86,7 +87,8 @@ PLAIN_ROBOT = (
     "argv = ['robot', '--id', '3']\n"
     "assert leave_out_openssl(argv)\n"
     "import cli.main, petswarm.robot, petswarm.lab.lockstep_node\n"
-    "config = cli.main.robot_config(cli.main.build_parser().parse_args(argv))\n"
+    "from petswarm.lab.robot_command import robot_config\n"
+    "config = robot_config(cli.main.robot_options(cli.main.build_parser().parse_args(argv)))\n"
     "from petswarm.controllers.driving_core import CONTROL_PERIOD_S, DriverCore\n"
     "from petswarm.managers.event_log import EventLog\n"
     "from petswarm.managers.sequence import SequenceManager\n"
