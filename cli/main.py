@@ -703,19 +703,22 @@ def _experiment(args: argparse.Namespace) -> int:
 
 
 def _watch(args: argparse.Namespace) -> int:
-    if args.foxglove is not None:
+    from petswarm.lab.watch import WatchOptions
+
+    options = options_of(WatchOptions, args)
+    if options.foxglove is not None:
         from petswarm.lab.foxglove_live import watch_command as watch_with_foxglove
 
-        return watch_with_foxglove(args)
+        return watch_with_foxglove(options)
     from petswarm.lab.watch import watch_command
 
-    return watch_command(args)
+    return watch_command(options)
 
 
 def _certs(args: argparse.Namespace) -> int:
-    from petswarm.lab.certs import certs_command
+    from petswarm.lab.certs import CertsOptions, certs_command
 
-    return certs_command(args)
+    return certs_command(options_of(CertsOptions, args))
 
 
 def _chaos(args: argparse.Namespace) -> int:
@@ -726,25 +729,9 @@ def _chaos(args: argparse.Namespace) -> int:
 
 
 def _export(args: argparse.Namespace) -> int:
-    from pathlib import Path
+    from petswarm.lab.mcap_export import ExportOptions, export_command
 
-    from petswarm.lab.mcap_export import MissingExtra, RecordError, export_mcap
-
-    try:
-        result = export_mcap(Path(args.run), Path(args.mcap), overwrite=args.force)
-    except (RecordError, MissingExtra) as err:
-        print(f"petswarm export: {err}", file=sys.stderr)
-        return 2
-    if args.json:
-        body = {"mcap": str(result.path), "size_bytes": result.size_bytes, "elapsed_s": round(result.elapsed_s, 3)}
-        print(json.dumps({**body, "counts": result.counts, "time_origin": result.time_origin}, indent=2))
-        return 0
-    total = sum(result.counts.values())
-    print(
-        f"{result.path}: {total} messages on {len(result.counts)} topics, {result.size_bytes / 1e6:.2f} MB "
-        f"in {result.elapsed_s:.2f} s ({result.time_origin})"
-    )
-    return 0
+    return export_command(options_of(ExportOptions, args))
 
 
 def _report(args: argparse.Namespace) -> int:
@@ -754,10 +741,9 @@ def _report(args: argparse.Namespace) -> int:
 
 
 def _swarm(args: argparse.Namespace) -> int:
+    from petswarm.lab.swarm import SwarmOptions, swarm_command
 
-    from petswarm.lab.swarm import swarm_command
-
-    return swarm_command(args)
+    return swarm_command(options_of(SwarmOptions, args))
 
 
 def _stats(args: argparse.Namespace) -> int:

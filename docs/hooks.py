@@ -2,16 +2,25 @@
 
 The command-line reference, the scenario keys and the wire protocol come from ``cli/reference.py``; the changelog
 is the repository's ``CHANGELOG.md``. None of them is written into ``docs/``: each build makes them anew.
+
+A page quotes a generated figure with a line ``<!-- figure: NAME -->``: the build puts there what
+``petswarm bench all --out docs/figures`` wrote for it (``docs/figures/NAME/figure.md``: the header naming the
+command, date, machine and load, the table, the plots), so no figure of the guide is copied by hand.
 """
 
 from __future__ import annotations
 
+import os
+import re
 from pathlib import Path
 from typing import Any
 
 from mkdocs.structure.files import File, Files
 
 ROOT = Path(__file__).resolve().parents[1]
+FIGURES = ROOT / "docs/figures"
+FIGURE_LINE = re.compile(r"^<!-- figure: ([a-z0-9-]+) -->$", re.M)
+"""A page's line that stands for a generated figure."""
 
 
 def on_files(files: Files, config: Any) -> Files:
@@ -48,3 +57,22 @@ def _figures_placeholder() -> str:
             "",
         ]
     )
+
+
+def on_page_markdown(markdown: str, page: Any, config: Any, files: Files) -> str:
+    """Each ``<!-- figure: NAME -->`` line becomes that figure as ``bench all`` wrote it, its plots linked from
+    the page's folder."""
+    page_dir = (ROOT / "docs" / page.file.src_path).parent
+    return FIGURE_LINE.sub(lambda m: figure_for(m.group(1), page_dir), markdown)
+
+
+def figure_for(name: str, page_dir: Path) -> str:
+    """The generated figure ``name`` for a page in ``page_dir``, or what to run when it is not generated yet."""
+    from petswarm.bench.all import figure_markdown, read_figures, select
+
+    select([name])  # ValueError for a figure bench all does not make: a typo fails the build
+    found = [o for o in read_figures(FIGURES) if o.name == name]
+    if not found:
+        return f"*Not generated in this tree yet: `petswarm bench all --out docs/figures --only {name}`.*\n"
+    prefix = os.path.relpath(FIGURES, page_dir).replace(os.sep, "/") + "/"
+    return "\n".join(figure_markdown(found[0], prefix))

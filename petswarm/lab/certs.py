@@ -7,12 +7,12 @@ checks the name in the endpoint against it. Keys are written 0600 in a 0700 dire
 
 from __future__ import annotations
 
-import argparse
 import ipaddress
 import shutil
 import subprocess
 import sys
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 
 from radio_hub.interface import OPERATOR
@@ -20,7 +20,21 @@ from radio_hub.interface import OPERATOR
 DAYS = 30
 
 
-def certs_command(args: argparse.Namespace) -> int:
+@dataclass
+class CertsOptions:
+    """What ``petswarm certs`` takes."""
+
+    out: str
+    """Directory for the PEM files (created 0700)."""
+    hub_host: str
+    """Names or IP addresses clients dial the hub by, comma-separated."""
+    robots: int = 4
+    """Certificates robot-1..robot-N."""
+    users: int = 1
+    """Certificates user-1..user-N."""
+
+
+def certs_command(args: CertsOptions) -> int:
     """Write ca.pem, and NAME.pem with NAME.key for the hub, every robot, every user and the operator."""
     if shutil.which("openssl") is None:
         print("petswarm certs: the openssl command is needed", file=sys.stderr)

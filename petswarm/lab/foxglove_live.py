@@ -14,7 +14,6 @@ Every message goes out at the run's model time, as in the MCAP file.
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import contextlib
 import json
@@ -24,9 +23,12 @@ import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from petswarm.lab.foxglove_channels import MissingExtra, RunChannels, require_sdk
+
+if TYPE_CHECKING:
+    from petswarm.lab.watch import WatchOptions
 
 POLL_S = 0.2
 """How often the record is looked at for new events and frames (wall seconds)."""
@@ -228,7 +230,7 @@ class RunStream:
         self.live.close()
 
 
-def watch_command(args: argparse.Namespace) -> int:
+def watch_command(args: WatchOptions) -> int:
     """``petswarm watch --foxglove``: the page of ``petswarm watch`` and a Foxglove server, both live from the hub
     (``--record``: the run's record, whose events and frames are streamed too); 2 on a bad request or port."""
     from petswarm.lab.watch import LiveFeed, serve_page

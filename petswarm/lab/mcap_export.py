@@ -17,6 +17,7 @@ without a world log (robots pinging where they stand) takes its earliest stamp a
 from __future__ import annotations
 
 import json
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -203,3 +204,37 @@ def _json_or_none(path: Path) -> dict[str, Any] | None:
 def _ns(us: int) -> int:
     """Microseconds of model time as the nanoseconds MCAP logs in (a stamp before time 0 is put at 0)."""
     return max(us, 0) * 1000
+
+
+@dataclass
+class ExportOptions:
+    """What ``petswarm export`` takes."""
+
+    run: str
+    """A run record directory."""
+    mcap: str
+    """The MCAP file to write."""
+    force: bool = False
+    """Replace the MCAP file when it exists."""
+    json: bool = False
+    """Print the messages per topic, size and time as JSON (else one line)."""
+
+
+def export_command(options: ExportOptions) -> int:
+    """Write the record as MCAP and say what was written; 2 when the record cannot be read or the extra is
+    missing."""
+    try:
+        result = export_mcap(Path(options.run), Path(options.mcap), overwrite=options.force)
+    except (RecordError, MissingExtra) as err:
+        print(f"petswarm export: {err}", file=sys.stderr)
+        return 2
+    if options.json:
+        body = {"mcap": str(result.path), "size_bytes": result.size_bytes, "elapsed_s": round(result.elapsed_s, 3)}
+        print(json.dumps({**body, "counts": result.counts, "time_origin": result.time_origin}, indent=2))
+        return 0
+    total = sum(result.counts.values())
+    print(
+        f"{result.path}: {total} messages on {len(result.counts)} topics, {result.size_bytes / 1e6:.2f} MB "
+        f"in {result.elapsed_s:.2f} s ({result.time_origin})"
+    )
+    return 0

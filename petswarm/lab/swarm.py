@@ -4,10 +4,10 @@ Every answer prints in words by default; ``--json`` prints the robot's answer as
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
+from dataclasses import dataclass
 from typing import Any
 
 from petswarm import control
@@ -19,18 +19,40 @@ _ORGANIZE_TIMEOUT_S = 60.0
 _ROBOT_WAIT_S = 5.0
 
 
-def swarm_command(args: argparse.Namespace) -> int:
+@dataclass
+class SwarmOptions:
+    """What ``petswarm swarm organize|disperse|status`` takes (``action``); each action uses its own fields."""
+
+    action: str
+    """``organize``, ``disperse`` or ``status``."""
+    master: int | None = None
+    """organize, disperse: the user-connected (master) robot."""
+    robot: int | None = None
+    """status: the robot asked."""
+    count: int | None = None
+    """organize: robots wanted besides the master."""
+    protocol: str | None = None
+    """organize: the protocol over the robot's own (None: the robot's)."""
+    user: int | None = None
+    """organize: connect the robot to this user first."""
+    hub: str = "tcp/127.0.0.1:7447"
+    world: str = "default"
+    json: bool = False
+    """Print the robot's answer as JSON (else in words)."""
+
+
+def swarm_command(args: SwarmOptions) -> int:
     """Send the request, print the robot's answer; exit 1 when the robot refused, 2 when unreachable."""
     return with_hub("swarm", args.hub, lambda session: _ask(session, Keys(args.world), args))
 
 
-def _ask(session: Any, keys: Keys, args: argparse.Namespace) -> int:
-    _wait_for_robot(session, keys, getattr(args, "master", None) or args.robot)
+def _ask(session: Any, keys: Keys, args: SwarmOptions) -> int:
+    _wait_for_robot(session, keys, args.master or args.robot)
     answer = _request(session, keys, args)
     if "error" in answer:
         reason = answer["error"].split(": ", 1)[-1]  # the robot's exception class means nothing to a user
         print(
-            f"petswarm swarm {args.action}: robot {getattr(args, 'master', None) or args.robot} refused: {reason}",
+            f"petswarm swarm {args.action}: robot {args.master or args.robot} refused: {reason}",
             file=sys.stderr,
         )
         return 1
@@ -51,7 +73,7 @@ def _wait_for_robot(session: Any, keys: Keys, robot: int) -> None:
             time.sleep(0.2)
 
 
-def _request(session: Any, keys: Keys, args: argparse.Namespace) -> dict[str, Any]:
+def _request(session: Any, keys: Keys, args: SwarmOptions) -> dict[str, Any]:
     if args.action == "status":
         return control.command(session, keys, args.robot, "status")
     if args.action == "disperse":

@@ -9,7 +9,6 @@ trust every field; a malformed one is counted and dropped.
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import contextlib
 import json
@@ -17,6 +16,7 @@ import signal
 import sys
 import time
 from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -38,7 +38,24 @@ HUB_RETRY_S = 1.0
 """How often a live watcher tries again to reach a hub that is not up yet."""
 
 
-def watch_command(args: argparse.Namespace) -> int:
+@dataclass
+class WatchOptions:
+    """What ``petswarm watch`` takes: a hub to watch live, or a record to replay; where to serve the page."""
+
+    hub: str = "tcp/127.0.0.1:7447"
+    world: str = "default"
+    replay: str | None = None
+    """A run record (its directory, or its world.jsonl) to replay instead of watching a hub."""
+    port: int = 8047
+    """Port of the page (0: any free one)."""
+    bind: str = "127.0.0.1"
+    foxglove: int | None = None
+    """Also serve the hub's world to Foxglove on this port (0: any free one); None: no Foxglove server."""
+    record: str | None = None
+    """With ``foxglove``: also stream this run record's events and frames as its processes write them."""
+
+
+def watch_command(args: WatchOptions) -> int:
     """Serve the page until Ctrl-C or SIGTERM; 2 when the replay cannot be read or the port is taken."""
     if args.replay:
         try:

@@ -3,17 +3,16 @@ organization short of its count while enough robots wait, even with the MAC's ac
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
-from petswarm.bench.organize import write_no_ack_config
+from petswarm.bench.organize import OrganizeOptions, write_no_ack_config
 from petswarm.bench.organize_model import measure_count
 from petswarm.bench.organize_report import ended_short
 
 
-def _args(**changes: object) -> argparse.Namespace:
+def _args(**changes: object) -> OrganizeOptions:
     args = dict(seed=3, runs=4, protocol="paper", step_deadline=None, step_retries=None, profile="ideal")
-    return argparse.Namespace(**{**args, **changes})
+    return OrganizeOptions(**{**args, **changes})  # type: ignore[arg-type]
 
 
 def test_the_model_time_bench_repeats_per_seed_and_ends_no_organization_short(tmp_path: Path) -> None:
