@@ -21,10 +21,11 @@ loop, runs the coroutine with a ``ModelWorld``, then stops every robot and close
 
         run_model_time(body, config=LOSSLESS, seed=1)
 
-``ModelWorld`` offers what a test needs: start robots (``robot``) and a user walking a scenario's plan (``user``); control commands (``command``); chaos faults
-(``fault``, ``clear``, ``chaos``); model time (``now``, ``advance``, ``until``); a robot's end (``kill``: as
-SIGKILL, ``stop``: as SIGTERM); and what happened (``events``, ``status``, ``stats``). Whole scenario runs go
-through ``run_scenario`` (``petswarm.lab.model_run.execute``, the ``petswarm run SCENARIO --clock model`` path).
+``ModelWorld`` offers what a test needs: start robots (``robot``) and a user walking a scenario's plan (``user``);
+control commands (``command``); chaos faults (``fault``, ``clear``, ``chaos``); model time (``now``, ``advance``,
+``until``); a robot's end (``kill``: as SIGKILL, ``stop``: as SIGTERM); and what happened (``events``, ``status``,
+``stats``). Whole scenario runs go through ``run_scenario`` (``petswarm.lab.model_run.execute``, the ``petswarm run
+SCENARIO --clock model`` path).
 """
 
 from __future__ import annotations

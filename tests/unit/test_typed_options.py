@@ -22,8 +22,8 @@ def _options() -> dict[tuple[str, ...], Any]:
     from petswarm.bench.scale import ScaleOptions
     from petswarm.bench.start import StartOptions
     from petswarm.explore.main import ExploreOptions
-    from petswarm.lab.experiment import ExperimentOptions
     from petswarm.lab.certs import CertsOptions
+    from petswarm.lab.experiment import ExperimentOptions
     from petswarm.lab.mcap_export import ExportOptions
     from petswarm.lab.report import ReportOptions
     from petswarm.lab.swarm import SwarmOptions
