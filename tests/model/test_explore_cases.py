@@ -167,7 +167,7 @@ def test_a_column_master_making_room_while_its_user_stands_is_not_a_runaway(tmp_
     standing user to make room for its slave between them, then was dispersed back to leading; the judge looked at
     the state only at the two ends of its window (leading, leading) and called the swarm's move a runaway. It now
     judges a robot only while it followed or led alone for the whole window."""
-    result, world = _replay("seed-2-case-271-no_runaway.toml", tmp_path / "run")
+    result, _ = _replay("seed-2-case-271-no_runaway.toml", tmp_path / "run")
     events = [json.loads(line) for line in (tmp_path / "run" / "events" / "robot-1.jsonl").read_text().splitlines()]
     swarm = [e["mono"] for e in events if e["kind"] == "state" and e.get("to") == "master-driving"]
     assert swarm  # the move the judge blamed happened while robot-1 drove the swarm
