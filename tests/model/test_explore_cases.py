@@ -186,3 +186,14 @@ def test_a_robot_that_lost_its_user_does_not_organize_a_swarm(tmp_path: Path) ->
     after = [e for e in events if e["kind"] == "state" and e["mono"] > refused[0]["mono"]]
     assert not any(e.get("to") == "master-driving" for e in after)
     assert result["ok"], result["failures"]
+
+
+@pytest.mark.timeout(120)
+def test_a_slave_speeding_up_behind_its_braking_master_keeps_clear_of_it(tmp_path: Path) -> None:
+    """Seed 1 case 117 (no_contact): in a 0.5 m column a slave sped up to 1.1 m/s to close its gap as the master
+    braked for the user; it read the master receding at its own latest speed (a range rate over 0.2 s plus the speed
+    it had just gained), kept going and touched it as the swarm dispersed. It now adds its own mean speed over the
+    rate's span."""
+    result, world = _replay("seed-1-case-117-no_contact.toml", tmp_path / "run")
+    assert not any(["robot-1", "robot-4"] in tick.get("contacts", []) for tick in world)
+    assert result["ok"], result["failures"]
