@@ -1035,7 +1035,7 @@ class EchoRanges:
             spans.append(span if known[-1] else 1.0)
             cos.append(ring_cos)
             sin.append(ring_sin)
-            velocity.append(sensors.odometry[:2])
+            velocity.append(_own_velocity(first[1], sensors, ring.strict))
         now_m, old_m, moving = np.array(latest), np.array(oldest), np.array(velocity, dtype=float)
         rate = (now_m - old_m) / np.array(spans)[:, None]
         along = moving[:, 0:1] * np.array(cos) + moving[:, 1:2] * np.array(sin)
@@ -1078,7 +1078,7 @@ class EchoRanges:
         oldest = _ranges_of(first)
         if len(oldest) != len(ranges):
             return ()
-        vx, vy, _ = sensors.odometry
+        vx, vy = _own_velocity(first[1], sensors, self.strict)
         receding = []
         for r, o, c, s in zip(ranges, oldest, cos, sin, strict=True):
             rate = (r - o) / dt
@@ -1100,6 +1100,18 @@ RATE_TURN_RAD = math.radians(15.0)
 """A ring that turned more than this (an ultrasonic cone's half-width) between two samples points each beam at
 another patch: the range's change then compares two echoes, not one echo's motion, and says nothing of how fast
 an obstacle moves away (a robot turning on the spot saw the user it left as a robot receding at its own speed)."""
+
+
+def _own_velocity(before: OwnSensors, now: OwnSensors, strict: bool) -> tuple[float, float]:
+    """The robot's own velocity (vx, vy) to add to a range rate taken from ``before`` to ``now``: the span's mean
+    (odometry's two ends; exact at a constant acceleration) for a strict ring, the latest for the others. A range
+    rate is an average over the span, so adding the latest speed of a robot that sped up credits the echo with the
+    speed gained: a slave accelerating to 1.1 m/s behind a braking master read it receding at 1.1 m/s, not 0.5
+    (seed 1 case 117)."""
+    vx, vy = float(now.odometry[0]), float(now.odometry[1])
+    if not strict:
+        return vx, vy
+    return 0.5 * (vx + float(before.odometry[0])), 0.5 * (vy + float(before.odometry[1]))
 
 
 def _steady(before: OwnSensors, now: OwnSensors) -> bool:

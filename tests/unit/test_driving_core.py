@@ -611,3 +611,24 @@ def test_an_echo_seen_while_the_ring_turns_is_not_taken_for_one_moving_away() ->
     for k in range(6):
         plain.observe(_ring_sample(0.04 * k, 90.0 + 3.5 * k, 0.4, 0.7))
     assert plain.floats(_ring_sample(0.24, 111.0, 0.4, 0.7))[2][0] == pytest.approx(0.7)
+
+
+def test_a_robot_speeding_up_behind_a_leader_reads_the_leader_s_speed_not_its_own_gain() -> None:
+    """Seed 1 case 117: a slave accelerating to 1.1 m/s behind its braking master added its latest speed to a range
+    rate averaged over 0.2 s, read the master receding at 1.1 m/s (it drove at 0.5) and ran into it. The rate is the
+    span's mean, so the strict ring adds its own speed's mean over that span: a leader at a steady 0.5 m/s is read
+    at 0.5 m/s whatever the follower's acceleration."""
+    from petswarm.controllers.driving_core import EchoRanges
+
+    def sample(t: float) -> OwnSensors:  # the follower at 0.5 m/s + 3 m/s^2, the leader 0.6 m ahead at 0.5 m/s
+        return _ring_sample(t, 90.0, 0.6 - 1.5 * t * t, 0.5 + 3.0 * t)
+
+    ring = EchoRanges(strict=True)
+    for k in range(6):
+        ring.observe(sample(0.04 * k))
+    _, _, receding = ring.floats(sample(0.24))
+    assert receding[0] == pytest.approx(0.5)
+    plain = EchoRanges()  # the surround laws' ring keeps the latest speed
+    for k in range(6):
+        plain.observe(sample(0.04 * k))
+    assert plain.floats(sample(0.24))[2][0] > 0.7
