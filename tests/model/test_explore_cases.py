@@ -197,3 +197,13 @@ def test_a_slave_speeding_up_behind_its_braking_master_keeps_clear_of_it(tmp_pat
     result, world = _replay("seed-1-case-117-no_contact.toml", tmp_path / "run")
     assert not any(["robot-1", "robot-4"] in tick.get("contacts", []) for tick in world)
     assert result["ok"], result["failures"]
+
+
+@pytest.mark.timeout(120)
+def test_a_robot_following_its_user_past_a_robot_stopping_ahead_keeps_clear_of_it(tmp_path: Path) -> None:
+    """Seed 2 case 84 (no_contact): dispersed, a slave ahead of its master stopped at the base's 2 m/s^2; the master,
+    following its user at 1.2 m/s, read the slave receding at its mean speed of 0.2 s before and ran into it. A
+    receding echo's speed is now read no higher than a braking robot's can still be."""
+    result, world = _replay("seed-2-case-84-no_contact.toml", tmp_path / "run")
+    assert not any(["robot-1", "robot-2"] in tick.get("contacts", []) for tick in world)
+    assert result["ok"], result["failures"]
