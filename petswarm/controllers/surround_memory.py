@@ -52,15 +52,11 @@ odometry's 3 % over a step or two, the arc's chord."""
 
 
 class EchoMemory:
-    """Remembered obstacle points (see the module's docstring), in plain floats: a pilot steps it every sample.
+    """Remembered obstacle points (see the module's docstring), in plain floats: a pilot steps it every sample."""
 
-    ``travel_m``: when given, a point lasts until the robot has driven this far since it was heard (by its odometry),
-    however long that takes, instead of ``MEMORY_S``: a robot standing beside a wall's end in a blind gap keeps it."""
-
-    def __init__(self, travel_m: float | None = None) -> None:
+    def __init__(self) -> None:
         self.points: list[tuple[float, float, float]] = []
-        """(x, y, age) in the robot's frame; the age in s, or in m driven with ``travel_m``."""
-        self.travel_m = travel_m
+        """(x, y, age in s) in the robot's frame."""
 
     def step(
         self,
@@ -77,14 +73,10 @@ class EchoMemory:
         return the remembered points (x, y) now."""
         shift_x, shift_y = velocity[0] * dt, velocity[1] * dt
         reach2 = REACH_M * REACH_M
-        if self.travel_m is None:
-            older, lasts = dt, MEMORY_S
-        else:
-            older, lasts = math.sqrt(shift_x * shift_x + shift_y * shift_y), self.travel_m
         moved = []
         for x, y, age in self.points:
-            x, y, age = x - shift_x, y - shift_y, age + older
-            if age <= lasts and x * x + y * y <= reach2:
+            x, y, age = x - shift_x, y - shift_y, age + dt
+            if age <= MEMORY_S and x * x + y * y <= reach2:
                 moved.append((x, y, age))
         heard = [robot_radius_m + r if math.isfinite(r) else math.inf for r in ranges]
         cos_carve, cos_replace = math.cos(CARVE_HALF_BEAM_RAD), math.cos(REPLACE_HALF_BEAM_RAD)

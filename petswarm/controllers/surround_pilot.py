@@ -41,7 +41,7 @@ from petswarm.controllers.pet_controller import PetControllerConfig, SafetyStage
 from petswarm.controllers.surround import SurroundConfig, SurroundController
 from petswarm.controllers.surround_improved import ImprovedSurroundController
 from petswarm.controllers.surround_memory import EchoMemory
-from petswarm.controllers.surround_safe import MEMORY_TRAVEL_M, SafeSurroundController
+from petswarm.controllers.surround_safe import SafeSurroundController
 from petswarm.controllers.surround_sensing import (
     BeaconTracker,
     SensingConfig,
@@ -119,7 +119,7 @@ class SurroundPilot:
         """True once the human's beacon was seen: the robot drives from then on."""
         self.counters = {"steps": 0, "stale_steps": 0, "human_seen": 0, "echoes_dropped": 0, "beacons": 0}
         self._echoes = EchoRanges()
-        self._memory = EchoMemory(MEMORY_TRAVEL_M if safe else None)
+        self._memory = EchoMemory()
         self._safety = SafetyStage(SAFETY_IMPROVED if improved or safe else SAFETY)
         self._sensing = config.sensing
         self._last_us: int | None = None
@@ -237,8 +237,7 @@ class SurroundPilot:
             others = [v for name, v in zip(names, moving, strict=True) if name != config.human_id]
             own = tracker.velocity_of(config.human_id)
             walls = self._remember(sensors, tracker.names, tracker.positions, velocity, dt)
-            axes = list(zip(*self._ring(sensors.angles_rad), strict=True))
-            vx, vy = controller.step_plain(neighbours, obstacles, human, velocity, dt, own, others, walls, axes)
+            vx, vy = controller.step_plain(neighbours, obstacles, human, velocity, dt, own, others, walls)
         else:
             vx, vy = controller.step_plain(neighbours, obstacles, human, velocity, dt)
         # the law's repulsion acts on IR estimates up to a sweep old; the ultrasonic ring is the last word

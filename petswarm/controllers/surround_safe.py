@@ -50,14 +50,6 @@ the top speed, more than any two robots' closing)."""
 EASE_STEPS = 10
 """Halvings of that range: the slack to 3 mm/s."""
 
-ODOMETRY_DRIFT = 0.03
-"""The share of the distance driven that the wheel odometry gets wrong (the hub's odometry noise, a few %)."""
-MEMORY_TRAVEL_M = 0.05 / ODOMETRY_DRIFT
-"""The safe law's echo memory keeps a point until the robot has driven this far (1.7 m): the stop margin m (5 cm)
-over the odometry's drift, the distance after which a remembered point may be off by more than the margin. Not a
-time: a robot standing beside a wall's end in a blind gap forgot it after 0.6 s and drove into it (training course
-5)."""
-
 Constraint = tuple[float, float, float]
 """(nx, ny, limit): the command u must keep nx ux + ny uy <= limit."""
 
@@ -85,14 +77,12 @@ class SafeSurroundController(SurroundController):
         human_velocity: Sequence[float] | None = None,
         neighbour_velocities: Sequence[Sequence[float]] | None = None,
         walls: Sequence[Sequence[float]] = (),
-        ring: Sequence[Sequence[float]] = (),
     ) -> tuple[float, float]:
         """The velocity command. ``neighbours`` (tracked centres) with ``neighbour_velocities`` (their tracks'; None:
         taken to stand still); ``obstacles``: echo points no beacon explains, and last the human's surface point when
         he is seen (as ``surround_sensing.sense_lists`` gives them); ``human`` his tracked centre and
         ``human_velocity`` his track's velocity (None: unknown); ``velocity`` the robot's own (odometry);
-        ``walls``: the echo memory's points (``surround_memory.EchoMemory``); ``ring``: the ultrasonic cones' axes as
-        unit vectors (robot frame): the command then moves along one of them (``_heard``); empty: any direction."""
+        ``walls``: the echo memory's points (``surround_memory.EchoMemory``)."""
         c = self.config
         distances, near, g, f_r = self._centring(neighbours, dt)
         f_o = self._repulsion(neighbours, distances, near, obstacles)
@@ -132,8 +122,6 @@ class SafeSurroundController(SurroundController):
             # eased all by one slack, the least that leaves a velocity (each neighbour runs the same filter and
             # gives way in turn)
             command = _eased(nominal, soft, hard)
-        if ring:
-            command = _heard(command, nominal, [*soft, *hard], ring)
         command = _clip(command[0], command[1], c.max_speed_mps)
         self.active = [
             at
@@ -181,56 +169,6 @@ class SafeSurroundController(SurroundController):
         if h <= 0:
             return h / late  # inside the margin: back out of it within the latency
         return math.sqrt(a * a * late * late + 2 * a * h) - a * late
-
-
-HEARD_HALF_RAD = math.radians(7.5)
-"""The command keeps within this of a cone's axis (half the cone's 15 degree half beam; see ``_heard``)."""
-
-
-def _heard(
-    command: tuple[float, float],
-    nominal: tuple[float, float],
-    rows: list[Constraint],
-    ring: Sequence[Sequence[float]],
-) -> tuple[float, float]:
-    """``command``, or, when it points outside every cone's inner half (``HEARD_HALF_RAD`` of its axis), the velocity
-    inside one such wedge nearest ``nominal`` that keeps every row (``command`` itself if no wedge keeps them all: a
-    robot backing out of its margins goes the way it must).
-
-    Why: the ring hears nothing in the 15 degree gap between two cones, and a robot driving into a gap meets a wall's
-    end there without ever hearing it (training course 5: straight into it at 0.55 m/s). Driving within 7.5 degrees
-    of a cone's axis, a point on its path (offset o from its centre line) stays inside that cone while
-    asin(o / d) < 7.5 degrees, so one within 6 cm of the line is heard from the echo memory's reach (0.45 m) on,
-    and one farther off crosses into the next cone by d = o / sin(22.5 degrees)."""
-    cx, cy = command
-    speed2 = cx * cx + cy * cy
-    if speed2 <= 1e-12:
-        return command
-    cos_half = math.cos(HEARD_HALF_RAD)
-    speed = math.sqrt(speed2)
-    scored = []
-    for ax, ay in ring:
-        if ax * cx + ay * cy >= cos_half * speed:
-            return command  # within a wedge already
-        nx_, ny_ = nominal
-        scored.append((-(ax * nx_ + ay * ny_), -(ax * cx + ay * cy) / speed, ax, ay))
-    # the wedges nearest the nominal's direction and the command's: two of each
-    scored.sort()
-    picks = {(ax, ay) for _, _, ax, ay in scored[:2]}
-    picks |= {(ax, ay) for _, _, ax, ay in sorted(scored, key=lambda row: row[1])[:2]}
-    sh, ch = math.sin(HEARD_HALF_RAD), cos_half
-    best, best_d = None, math.inf
-    for ax, ay in sorted(picks):
-        # the wedge's edges at axis -+ half: u counter-clockwise of the first, clockwise of the second
-        e1 = (ax * ch + ay * sh, ay * ch - ax * sh)
-        e2 = (ax * ch - ay * sh, ay * ch + ax * sh)
-        wedge = [*rows, (e1[1], -e1[0], 0.0), (-e2[1], e2[0], 0.0)]
-        u = _nearest(nominal, wedge)
-        if _excess(u, wedge) <= TIGHT:
-            d = (u[0] - nominal[0]) ** 2 + (u[1] - nominal[1]) ** 2
-            if d < best_d:
-                best, best_d = u, d
-    return command if best is None else best
 
 
 def _along_share(ux: float, uy: float, nx: float, ny: float) -> float:
