@@ -70,7 +70,8 @@ def _robot(name: str, x: float, y: float, yaw: float = 0.0, vx: float = 0.0) -> 
 
 def test_contact_events_name_each_touch_its_bearing_and_whether_the_ring_could_hear_it() -> None:
     """A robot meeting a wall's end dead ahead is heard (on a cone's axis); one meeting it 22.5 degrees off its heading
-    met it in a blind gap; a pair of robots touching is one event; ticks where the count did not rise give none."""
+    met it in a blind gap; a pair of robots touching is one event, not listed again while it goes on; ticks where the
+    count did not rise give none."""
     import math
 
     from petswarm.bench.surround_bench_courses import contact_events
@@ -79,6 +80,7 @@ def test_contact_events_name_each_touch_its_bearing_and_whether_the_ring_could_h
     quiet = {"t_us": 0, "collisions": 0, "bodies": [_robot("robot-1", 0.5, 0.0)], "obstacles": [wall]}
     ahead = {"t_us": 1_000_000, "collisions": 1, "bodies": [_robot("robot-1", 0.9, 0.0, vx=0.5)], "obstacles": [wall]}
     yaw = -math.radians(22.5)  # the wall's end 22.5 degrees to its left: midway between two cones
+    away = {**quiet, "t_us": 1_500_000, "collisions": 1}
     gap = {"t_us": 2_000_000, "collisions": 2, "bodies": [_robot("robot-1", 0.9, 0.0, yaw)], "obstacles": [wall]}
     still = {**gap, "t_us": 3_000_000}
     pair = {
@@ -87,12 +89,17 @@ def test_contact_events_name_each_touch_its_bearing_and_whether_the_ring_could_h
         "bodies": [_robot("robot-1", 0.0, 5.0), _robot("robot-2", 0.2, 5.0, math.pi / 2)],
         "obstacles": [wall],
     }
-    events = contact_events([quiet, ahead, gap, still, pair])
+    both = {**pair, "t_us": 5_000_000, "collisions": 4}
+    both["bodies"] = [*pair["bodies"], _robot("robot-3", 0.1, 5.17)]  # the pair still touches: only robot-3 is new
+    events = contact_events([quiet, ahead, away, gap, still, pair, both])
     assert [(e["t"], e["with"], e["blind_gap"]) for e in events] == [
         (1.0, "obstacle", False),
         (2.0, "obstacle", True),
         (4.0, "robot", False),
+        (5.0, "robot", False),
+        (5.0, "robot", False),
     ]
     assert events[0]["wall_end"] and events[0]["speed_mps"] == 0.5 and events[0]["bearing_deg"] == 0.0
     assert events[1]["bearing_deg"] == 22.5
     assert events[2]["robot"] == "robot-1"
+    assert [e["robot"] for e in events[3:]] == ["robot-1", "robot-2"]  # each of them met robot-3
