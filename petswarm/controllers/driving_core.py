@@ -1020,7 +1020,7 @@ class EchoRanges:
     ) -> tuple[list[list[float]], np.ndarray, np.ndarray, np.ndarray]:
         """``floats`` of many robots' rings (all of one size) at once, bit for bit as each alone: their angles,
         latest ranges (n, s), receding speeds (n, s) and whether each robot has them (n,)."""
-        angles, latest, oldest, spans, cos, sin, velocity, known = [], [], [], [], [], [], [], []
+        angles, latest, oldest, spans, cos, sin, velocity, known, lags = [], [], [], [], [], [], [], [], []
         for ring, sensors, given in zip(rings, samples, ranges, strict=True):
             ring.observe(sensors, given)
             now = _ranges_of(ring._history[-1])
@@ -1033,13 +1033,14 @@ class EchoRanges:
             known.append(span >= 0.1 and len(old) == len(now) and (not ring.strict or _steady(first[1], sensors)))
             oldest.append(old if known[-1] else now)
             spans.append(span if known[-1] else 1.0)
+            lags.append(_braking_lag(span, len(ring._history)) if ring.strict and known[-1] else 0.0)
             cos.append(ring_cos)
             sin.append(ring_sin)
-            velocity.append(sensors.odometry[:2])
+            velocity.append(_own_velocity(first[1], sensors, ring.strict))
         now_m, old_m, moving = np.array(latest), np.array(oldest), np.array(velocity, dtype=float)
         rate = (now_m - old_m) / np.array(spans)[:, None]
         along = moving[:, 0:1] * np.array(cos) + moving[:, 1:2] * np.array(sin)
-        away = np.where(np.isnan(rate), 0.0, rate + along)
+        away = np.where(np.isnan(rate), 0.0, rate + along - np.array(lags)[:, None])
         strict = np.array([ring.strict for ring in rings])[:, None]
         counted = ~strict | (away > RATE_NOISE_M / np.array(spans)[:, None]) | (now_m > STOP_DISTANCE_M)
         receding = np.where(counted, away, 0.0)
@@ -1078,11 +1079,12 @@ class EchoRanges:
         oldest = _ranges_of(first)
         if len(oldest) != len(ranges):
             return ()
-        vx, vy, _ = sensors.odometry
+        vx, vy = _own_velocity(first[1], sensors, self.strict)
+        lag = _braking_lag(dt, len(self._history)) if self.strict else 0.0
         receding = []
         for r, o, c, s in zip(ranges, oldest, cos, sin, strict=True):
             rate = (r - o) / dt
-            away = 0.0 if math.isnan(rate) else rate + (vx * c + vy * s)
+            away = 0.0 if math.isnan(rate) else rate + (vx * c + vy * s) - lag
             receding.append(away if not self.strict or away > RATE_NOISE_M / dt or r > STOP_DISTANCE_M else 0.0)
         return tuple(receding)
 
@@ -1100,6 +1102,32 @@ RATE_TURN_RAD = math.radians(15.0)
 """A ring that turned more than this (an ultrasonic cone's half-width) between two samples points each beam at
 another patch: the range's change then compares two echoes, not one echo's motion, and says nothing of how fast
 an obstacle moves away (a robot turning on the spot saw the user it left as a robot receding at its own speed)."""
+
+
+LEADER_BRAKE_MPS2 = 2.0
+"""The hardest a Pet-Bot ahead can brake: its base's ramp (the motor controller's 2 m/s^2), reached by a robot
+whose command drops to zero at once (dispersed, stopped by its watchdog)."""
+
+
+def _braking_lag(span_s: float, samples: int) -> float:
+    """What to take off a range rate's receding speed (m/s) so it bounds the echo's speed now from below: a rate over
+    ``span_s`` is the echo's mean speed then, at most ``LEADER_BRAKE_MPS2 * span_s / 2`` above its speed at the
+    latest reading whatever its braking, and the robot acts up to one ring period (``span_s / (samples - 1)``)
+    after that reading. (A follower that took the mean for the speed drove at a braking robot's speed of 0.2 s
+    before and ran into it: seed 2 case 84.)"""
+    return LEADER_BRAKE_MPS2 * (span_s / 2 + span_s / max(1, samples - 1))
+
+
+def _own_velocity(before: OwnSensors, now: OwnSensors, strict: bool) -> tuple[float, float]:
+    """The robot's own velocity (vx, vy) to add to a range rate taken from ``before`` to ``now``: the span's mean
+    (odometry's two ends; exact at a constant acceleration) for a strict ring, the latest for the others. A range
+    rate is an average over the span, so adding the latest speed of a robot that sped up credits the echo with the
+    speed gained: a slave accelerating to 1.1 m/s behind a braking master read it receding at 1.1 m/s, not 0.5
+    (seed 1 case 117)."""
+    vx, vy = float(now.odometry[0]), float(now.odometry[1])
+    if not strict:
+        return vx, vy
+    return 0.5 * (vx + float(before.odometry[0])), 0.5 * (vy + float(before.odometry[1]))
 
 
 def _steady(before: OwnSensors, now: OwnSensors) -> bool:

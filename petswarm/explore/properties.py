@@ -164,6 +164,14 @@ class Record:
                     state = {**event, "session": session}  # a handover's state change keeps the swarm's session
         return state
 
+    def states_during(self, node: str, t0: float, t1: float) -> set[str]:
+        """Every state ``node`` was in at some time from ``t0`` to ``t1``: the one it was in at ``t0`` and each it
+        entered before ``t1`` (a window's two ends alone miss a swarm organized and dispersed between them)."""
+        entered = {
+            e["to"] for e in self.events.get(node, []) if e["kind"] == "state" and t0 < e["mono"] <= t1 and "to" in e
+        }
+        return {self.state_at(node, t0).get("to", "waiting"), *entered}
+
     def left_at(self, node: str, own: dict[str, Any], since: float, t: float) -> float:
         """When ``node``, in state ``own`` at ``t`` (``state_at``), stopped being a slave of a swarm it joined at
         ``since``: its state change out of the swarm, or its death if it died meanwhile."""
@@ -576,7 +584,7 @@ def no_runaway(record: Record) -> list[Violation]:
             d0, d1 = before.get(node, math.inf), distances[node]
             if d1 <= TARGET_DISTANCE_M + RUNAWAY_M or d1 - d0 <= RUNAWAY_M or t0 - standing_since < STANDING_S:
                 continue
-            if {record.state_at(node, x).get("to") for x in (t0, t)} <= {"following", "leading"}:
+            if record.states_during(node, t0, t) <= {"following", "leading"}:
                 out.append(Violation(f"{node} drove away from its standing user: {d0:.2f} -> {d1:.2f} m", t, (node,)))
                 flagged = t
     return out

@@ -261,6 +261,10 @@ class FormationCore:
             raise FormationError(
                 f"robot is {self.sequence.state.label}: only a robot driving with its user can organize"
             )
+        if self.sequence.state == RobotState.EMERGENCY:
+            # it has no fix of its user: a swarm it led would drive without him, and his watch's disperse may
+            # never reach it once he walks out of BLE range
+            raise FormationError("robot has lost its user (emergency): it organizes once it finds him again")
         session = int(self.rng.integers(1, 0xFFFF))
         slot = self.config.slot(protocol)
         t0 = now

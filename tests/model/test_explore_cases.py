@@ -159,3 +159,51 @@ def test_members_cut_off_from_their_master_do_not_shine_beside_its_regenerated_t
     events += [json.loads(line) for line in (tmp_path / "run" / "events" / "robot-4.jsonl").read_text().splitlines()]
     assert any(e["kind"] == "ir_master_unheard" for e in events)
     assert result["ok"], result["failures"]
+
+
+@pytest.mark.timeout(120)
+def test_a_column_master_making_room_while_its_user_stands_is_not_a_runaway(tmp_path: Path) -> None:
+    """Seed 2 case 271 (no_runaway): asked for a column while leading, the master drove 0.9 m further from its
+    standing user to make room for its slave between them, then was dispersed back to leading; the judge looked at
+    the state only at the two ends of its window (leading, leading) and called the swarm's move a runaway. It now
+    judges a robot only while it followed or led alone for the whole window."""
+    result, _ = _replay("seed-2-case-271-no_runaway.toml", tmp_path / "run")
+    events = [json.loads(line) for line in (tmp_path / "run" / "events" / "robot-1.jsonl").read_text().splitlines()]
+    swarm = [e["mono"] for e in events if e["kind"] == "state" and e.get("to") == "master-driving"]
+    assert swarm  # the move the judge blamed happened while robot-1 drove the swarm
+    assert result["ok"], result["failures"]
+
+
+@pytest.mark.timeout(120)
+def test_a_robot_that_lost_its_user_does_not_organize_a_swarm(tmp_path: Path) -> None:
+    """Seed 3 case 150 (checker_invariants): in emergency (its user walked out of the LF's range), robot-1 took the
+    watch's organize and led a swarm with no fix of its user; he walked on out of BLE range, his disperse never
+    arrived and the swarm ended the run half-way. A robot in emergency now refuses to organize until it finds him."""
+    result, _ = _replay("seed-3-case-150-checker_invariants.toml", tmp_path / "run")
+    events = [json.loads(line) for line in (tmp_path / "run" / "events" / "robot-1.jsonl").read_text().splitlines()]
+    refused = [e for e in events if e["kind"] == "watch_organize_failed"]
+    assert refused and "lost its user" in refused[0]["error"]
+    after = [e for e in events if e["kind"] == "state" and e["mono"] > refused[0]["mono"]]
+    assert not any(e.get("to") == "master-driving" for e in after)
+    assert result["ok"], result["failures"]
+
+
+@pytest.mark.timeout(120)
+def test_a_slave_speeding_up_behind_its_braking_master_keeps_clear_of_it(tmp_path: Path) -> None:
+    """Seed 1 case 117 (no_contact): in a 0.5 m column a slave sped up to 1.1 m/s to close its gap as the master
+    braked for the user; it read the master receding at its own latest speed (a range rate over 0.2 s plus the speed
+    it had just gained), kept going and touched it as the swarm dispersed. It now adds its own mean speed over the
+    rate's span."""
+    result, world = _replay("seed-1-case-117-no_contact.toml", tmp_path / "run")
+    assert not any(["robot-1", "robot-4"] in tick.get("contacts", []) for tick in world)
+    assert result["ok"], result["failures"]
+
+
+@pytest.mark.timeout(120)
+def test_a_robot_following_its_user_past_a_robot_stopping_ahead_keeps_clear_of_it(tmp_path: Path) -> None:
+    """Seed 2 case 84 (no_contact): dispersed, a slave ahead of its master stopped at the base's 2 m/s^2; the master,
+    following its user at 1.2 m/s, read the slave receding at its mean speed of 0.2 s before and ran into it. A
+    receding echo's speed is now read no higher than a braking robot's can still be."""
+    result, world = _replay("seed-2-case-84-no_contact.toml", tmp_path / "run")
+    assert not any(["robot-1", "robot-2"] in tick.get("contacts", []) for tick in world)
+    assert result["ok"], result["failures"]

@@ -592,9 +592,10 @@ def test_an_echo_seen_while_the_ring_turns_is_not_taken_for_one_moving_away() ->
     for k in range(6):
         steady.observe(_ring_sample(0.04 * k, 90.0 + k, 0.4, 0.7))
     _, _, receding = steady.floats(_ring_sample(0.24, 96.0, 0.4, 0.7))
-    # the echo keeps its range as the robot drives at it: it moves away at 0.7 m/s, faster than noise could fake
-    assert receding[0] == pytest.approx(0.7)
-    for ahead_m, counted in ((0.1, 0.0), (0.4, 0.1)):
+    # the echo keeps its range as the robot drives at it: it moves away at 0.7 m/s, faster than noise could fake (less
+    # what it may have lost since, braking: 2 m/s^2 over half the 0.2 s span and one 0.04 s ring period)
+    assert receding[0] == pytest.approx(0.7 - 2.0 * (0.1 + 0.04))
+    for ahead_m, counted in ((0.1, 0.0), (0.4, 0.1 - 0.28)):
         slow = EchoRanges(strict=True)
         for k in range(6):
             slow.observe(_ring_sample(0.04 * k, 90.0 + k, ahead_m, 0.1))
@@ -611,3 +612,42 @@ def test_an_echo_seen_while_the_ring_turns_is_not_taken_for_one_moving_away() ->
     for k in range(6):
         plain.observe(_ring_sample(0.04 * k, 90.0 + 3.5 * k, 0.4, 0.7))
     assert plain.floats(_ring_sample(0.24, 111.0, 0.4, 0.7))[2][0] == pytest.approx(0.7)
+
+
+def test_a_robot_speeding_up_behind_a_leader_reads_the_leader_s_speed_not_its_own_gain() -> None:
+    """Seed 1 case 117: a slave accelerating to 1.1 m/s behind its braking master added its latest speed to a range
+    rate averaged over 0.2 s, read the master receding at 1.1 m/s (it drove at 0.5) and ran into it. The rate is the
+    span's mean, so the strict ring adds its own speed's mean over that span: a leader at a steady 0.5 m/s is read
+    at 0.5 m/s whatever the follower's acceleration."""
+    from petswarm.controllers.driving_core import EchoRanges
+
+    def sample(t: float) -> OwnSensors:  # the follower at 0.5 m/s + 3 m/s^2, the leader 0.6 m ahead at 0.5 m/s
+        return _ring_sample(t, 90.0, 0.6 - 1.5 * t * t, 0.5 + 3.0 * t)
+
+    ring = EchoRanges(strict=True)
+    for k in range(6):
+        ring.observe(sample(0.04 * k))
+    _, _, receding = ring.floats(sample(0.24))
+    assert receding[0] == pytest.approx(0.5 - 2.0 * (0.1 + 0.04))  # the leader's speed, less what braking may take
+    plain = EchoRanges()  # the surround laws' ring keeps the latest speed
+    for k in range(6):
+        plain.observe(sample(0.04 * k))
+    assert plain.floats(sample(0.24))[2][0] > 0.7
+
+
+def test_a_receding_echo_s_speed_is_read_no_higher_than_a_braking_leader_s_can_be_now() -> None:
+    """Seed 2 case 84: a robot following at 1.2 m/s read a robot ahead, stopping at 2 m/s^2, receding at its mean
+    speed over the 0.2 s rate span plus the readings' age: 0.3-0.4 m/s above its true speed, and ran into it. The
+    strict ring now reads no more than the leader's speed can still be, whatever its braking (at most the base's
+    2 m/s^2)."""
+    from petswarm.controllers.driving_core import EchoRanges
+
+    def sample(t: float) -> OwnSensors:  # the follower at a steady 1 m/s, the leader braking from 1 m/s at 2 m/s^2
+        return _ring_sample(t, 90.0, 0.5 - t * t, 1.0)
+
+    ring = EchoRanges(strict=True)
+    for k in range(6):
+        ring.observe(sample(0.04 * k))
+    _, _, receding = ring.floats(sample(0.24))
+    # the leader's speed one ring period after the latest reading (0.24 s), when the follower acts on it
+    assert receding[0] <= 1.0 - 2.0 * (0.24 + 0.04) + 1e-9

@@ -309,6 +309,17 @@ def test_no_runaway_fails_a_robot_that_drives_away_from_its_standing_user() -> N
     record = _record("follow", **{"robot-1": [_state(0.5, "waiting", "command-waiting")]})
     record.world_lines = away
     assert P.no_runaway(record) == []
+    # leading at both ends of the window, but driving a swarm (a column's master makes room) in between: not judged
+    swarm = [
+        _state(1.0, "command-waiting", "leading", cause="watch"),
+        _state(7.9, "leading", "organizing"),
+        _state(8.0, "organizing", "master-driving"),
+        _state(9.5, "master-driving", "leading"),
+    ]
+    record = _record("follow", **{"robot-1": swarm})
+    record.world_lines = away
+    [violation, *_] = P.no_runaway(record)
+    assert violation.when > 10.5  # judged again only once it has led alone for a whole window
 
 
 def test_a_master_killed_and_restarted_claims_the_members_of_its_new_swarm() -> None:

@@ -476,6 +476,8 @@ def test_organize_with_nobody_around_waits_out_every_scan_deadline_and_goes_back
 def test_organize_refused_in_the_wrong_state_and_abandoned_when_the_radio_fails():
     with pytest.raises(FormationError):
         next(_core(1).organize(2, "paper", 0.0))  # waiting: no user to organize for
+    with pytest.raises(FormationError, match="lost its user"):
+        next(_core(1, RobotState.EMERGENCY, user=9).organize(2, "paper", 0.0))  # no fix of him: would lead blind
     core = _core(1, RobotState.FOLLOWING, user=9)
     procedure = core.organize(2, "paper", 0.0)
     next(procedure)  # the transition to organizing
