@@ -96,47 +96,43 @@ TOUCHING_M = 0.002
 
 
 def contact_events(world: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Each contact of a run as the world saw it, to tell why it happened: at each tick the world's contact count
-    rose, every robot touching something then that it did not touch the tick before, with the time (s), the robot,
-    what it touched (``robot``, ``user`` or ``obstacle``, and for a wall whether at its end), the robot's speed (m/s),
-    the bearing of the touching point in the robot's frame (degrees) and whether that bearing lies in a blind gap of
-    its ultrasonic ring."""
+    """Each contact of a run as the world saw it, to tell why it happened. At each tick the world's contact count
+    rose by k, the k touches nearest (deepest) then, as ``surround_metrics.contacts`` puts them down: the time (s),
+    the robot, what it touched (``robot``, ``user`` or ``obstacle``, and for a wall whether at its end), the robot's
+    speed (m/s), the bearing of the touching point in the robot's frame (degrees) and whether that bearing lies in a
+    blind gap of its ultrasonic ring."""
     out: list[dict[str, Any]] = []
     before = 0
-    previous: dict[str, Any] | None = None
     for state in world:
         count = int(state.get("collisions", 0))
         if count > before:
-            touching = {(e["robot"], e["what"]) for e in _touching_now(previous)} if previous is not None else set()
-            for event in _touching_now(state):
-                if (event["robot"], event.pop("what")) not in touching:
-                    out.append(event)
-        before, previous = count, state
+            touches = sorted(_touching_now(state), key=lambda event: event["gap_m"])
+            out += touches[: count - before]
+        before = count
     return out
 
 
 def _touching_now(state: dict[str, Any]) -> list[dict[str, Any]]:
-    """The robots touching a body or an obstacle in ``state`` (each robot-robot pair once); ``what`` names the body
-    or obstacle touched, to tell a contact that goes on from a new one."""
+    """The robots touching a body or an obstacle in ``state`` (each robot-robot pair once), with the gap (m)."""
     bodies = state["bodies"]
     events = []
     for k, robot in enumerate(bodies):
         if robot["kind"] != "robot":
             continue
         x, y, radius = robot["x"], robot["y"], robot["radius"]
-        touched: list[tuple[str, float, float, bool]] = []
+        touched: list[tuple[str, float, float, float, bool]] = []
         for j, other in enumerate(bodies):
             if j == k or (other["kind"] == "robot" and j < k):
                 continue
             gap = math.hypot(other["x"] - x, other["y"] - y) - radius - other["radius"]
             if gap < TOUCHING_M:
-                what = ("robot" if other["kind"] == "robot" else "user", other["id"])
-                touched.append((what, other["x"], other["y"], False))
-        for n, o in enumerate(state.get("obstacles", [])):
+                touched.append(("robot" if other["kind"] == "robot" else "user", gap, other["x"], other["y"], False))
+        for o in state.get("obstacles", []):
             px, py, end = _nearest_point(o, x, y)
-            if math.hypot(px - x, py - y) - radius < TOUCHING_M:
-                touched.append((("obstacle", str(n)), px, py, end))
-        for (kind, which), px, py, end in touched:
+            gap = math.hypot(px - x, py - y) - radius
+            if gap < TOUCHING_M:
+                touched.append(("obstacle", gap, px, py, end))
+        for kind, gap, px, py, end in touched:
             bearing = math.degrees(math.atan2(py - y, px - x) - robot["yaw"])
             off_axis = abs((bearing + CONE_SPACING_DEG / 2) % CONE_SPACING_DEG - CONE_SPACING_DEG / 2)
             events.append(
@@ -148,7 +144,7 @@ def _touching_now(state: dict[str, Any]) -> list[dict[str, Any]]:
                     "speed_mps": round(math.hypot(robot["vx"], robot["vy"]), 3),
                     "bearing_deg": round((bearing + 180.0) % 360.0 - 180.0, 1),
                     "blind_gap": off_axis > HALF_BEAM_DEG,
-                    "what": (kind, which),
+                    "gap_m": round(gap, 4),
                 }
             )
     return events
