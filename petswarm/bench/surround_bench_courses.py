@@ -59,6 +59,7 @@ def run_course(set_name: str, i: int, law: str) -> dict[str, Any]:
     finally:
         shutil.rmtree(workdir, ignore_errors=True)
     figures = surround_metrics(world) if world else {}
+    events = contact_events(world)
     figures.pop("series", None)
     r_star = data["course"]["r_star_m"]
     off = abs(figures["r_end_m"] - r_star) / r_star if "r_end_m" in figures else math.inf
@@ -80,8 +81,86 @@ def run_course(set_name: str, i: int, law: str) -> dict[str, Any]:
         "r_star_m": r_star,
         "r_end_off": figures["r_end_off"],
     }
+    run["contact_events"] = events
     run["bounds"] = bounds(figures)
     return run
+
+
+CONE_SPACING_DEG = 45.0
+"""The ultrasonic ring's cones are this far apart round the robot, the first on its heading (the Pet-Bot's ring)."""
+HALF_BEAM_DEG = 15.0
+"""Each cone's half beam (``surround_memory.HALF_BEAM_RAD``): a bearing farther than this from every cone's axis lies
+in a blind gap."""
+TOUCHING_M = 0.002
+"""Bodies this close at the tick a contact was counted are the ones touching (``surround_metrics.TOUCH_M``)."""
+
+
+def contact_events(world: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Each contact of a run as the world saw it, to tell why it happened. At each tick the world's contact count
+    rose by k, the k touches nearest (deepest) then, as ``surround_metrics.contacts`` puts them down: the time (s),
+    the robot, what it touched (``robot``, ``user`` or ``obstacle``, and for a wall whether at its end), the robot's
+    speed (m/s), the bearing of the touching point in the robot's frame (degrees) and whether that bearing lies in a
+    blind gap of its ultrasonic ring."""
+    out: list[dict[str, Any]] = []
+    before = 0
+    for state in world:
+        count = int(state.get("collisions", 0))
+        if count > before:
+            touches = sorted(_touching_now(state), key=lambda event: event["gap_m"])
+            out += touches[: count - before]
+        before = count
+    return out
+
+
+def _touching_now(state: dict[str, Any]) -> list[dict[str, Any]]:
+    """The robots touching a body or an obstacle in ``state`` (each robot-robot pair once), with the gap (m)."""
+    bodies = state["bodies"]
+    events = []
+    for k, robot in enumerate(bodies):
+        if robot["kind"] != "robot":
+            continue
+        x, y, radius = robot["x"], robot["y"], robot["radius"]
+        touched: list[tuple[str, float, float, float, bool]] = []
+        for j, other in enumerate(bodies):
+            if j == k or (other["kind"] == "robot" and j < k):
+                continue
+            gap = math.hypot(other["x"] - x, other["y"] - y) - radius - other["radius"]
+            if gap < TOUCHING_M:
+                touched.append(("robot" if other["kind"] == "robot" else "user", gap, other["x"], other["y"], False))
+        for o in state.get("obstacles", []):
+            px, py, end = _nearest_point(o, x, y)
+            gap = math.hypot(px - x, py - y) - radius
+            if gap < TOUCHING_M:
+                touched.append(("obstacle", gap, px, py, end))
+        for kind, gap, px, py, end in touched:
+            bearing = math.degrees(math.atan2(py - y, px - x) - robot["yaw"])
+            off_axis = abs((bearing + CONE_SPACING_DEG / 2) % CONE_SPACING_DEG - CONE_SPACING_DEG / 2)
+            events.append(
+                {
+                    "t": round(state["t_us"] / 1e6, 2),
+                    "robot": robot["id"],
+                    "with": kind,
+                    "wall_end": end,
+                    "speed_mps": round(math.hypot(robot["vx"], robot["vy"]), 3),
+                    "bearing_deg": round((bearing + 180.0) % 360.0 - 180.0, 1),
+                    "blind_gap": off_axis > HALF_BEAM_DEG,
+                    "gap_m": round(gap, 4),
+                }
+            )
+    return events
+
+
+def _nearest_point(o: dict[str, Any], x: float, y: float) -> tuple[float, float, bool]:
+    """The obstacle's point nearest (x, y), and whether it is a wall's end."""
+    if o["kind"] == "circle":
+        d = max(math.hypot(x - o["x"], y - o["y"]), 1e-12)
+        return o["x"] + (x - o["x"]) * o["r"] / d, o["y"] + (y - o["y"]) * o["r"] / d, False
+    if o["kind"] == "rect":
+        return min(max(x, o["x0"]), o["x1"]), min(max(y, o["y0"]), o["y1"]), False
+    ax, ay, ex, ey = o["x0"], o["y0"], o["x1"] - o["x0"], o["y1"] - o["y0"]
+    length2 = ex * ex + ey * ey
+    u = 0.0 if length2 <= 0 else min(1.0, max(0.0, ((x - ax) * ex + (y - ay) * ey) / length2))
+    return ax + u * ex, ay + u * ey, u in (0.0, 1.0)
 
 
 def bounds(figures: dict[str, Any]) -> dict[str, bool]:

@@ -62,3 +62,43 @@ def test_a_training_course_runs_in_model_time_judged_on_its_own_r_star(tmp_path:
     assert results["summary"]["paper"]["train"]["courses"] == 1
     assert (tmp_path / "bench_surround_courses.png").stat().st_size > 5_000
     assert len((tmp_path / "bench_surround_courses_runs.jsonl").read_text().splitlines()) == 1
+
+
+def _robot(name: str, x: float, y: float, yaw: float = 0.0, vx: float = 0.0) -> dict:
+    return {"id": name, "kind": "robot", "x": x, "y": y, "yaw": yaw, "vx": vx, "vy": 0.0, "radius": 0.1}
+
+
+def test_contact_events_name_each_touch_its_bearing_and_whether_the_ring_could_hear_it() -> None:
+    """A robot meeting a wall's end dead ahead is heard (on a cone's axis); one meeting it 22.5 degrees off its heading
+    met it in a blind gap; a pair of robots touching is one event; a tick where the count rose by one gives the
+    deepest touch only (as the contact counts put it down); ticks where the count did not rise give none."""
+    import math
+
+    from petswarm.bench.surround_bench_courses import contact_events
+
+    wall = {"kind": "wall", "x0": 1.0, "y0": 0.0, "x1": 3.0, "y1": 0.0}
+    quiet = {"t_us": 0, "collisions": 0, "bodies": [_robot("robot-1", 0.5, 0.0)], "obstacles": [wall]}
+    ahead = {"t_us": 1_000_000, "collisions": 1, "bodies": [_robot("robot-1", 0.9, 0.0, vx=0.5)], "obstacles": [wall]}
+    yaw = -math.radians(22.5)  # the wall's end 22.5 degrees to its left: midway between two cones
+    away = {**quiet, "t_us": 1_500_000, "collisions": 1}
+    gap = {"t_us": 2_000_000, "collisions": 2, "bodies": [_robot("robot-1", 0.9, 0.0, yaw)], "obstacles": [wall]}
+    still = {**gap, "t_us": 3_000_000}
+    pair = {
+        "t_us": 4_000_000,
+        "collisions": 3,
+        "bodies": [_robot("robot-1", 0.0, 5.0), _robot("robot-2", 0.2, 5.0, math.pi / 2)],
+        "obstacles": [wall],
+    }
+    both = {**pair, "t_us": 5_000_000, "collisions": 4}
+    both["bodies"] = [*pair["bodies"], _robot("robot-3", 0.1, 5.17)]  # robot-3 overlaps both; the pair just touches
+    events = contact_events([quiet, ahead, away, gap, still, pair, both])
+    assert [(e["t"], e["with"], e["blind_gap"]) for e in events] == [
+        (1.0, "obstacle", False),
+        (2.0, "obstacle", True),
+        (4.0, "robot", False),
+        (5.0, "robot", False),
+    ]
+    assert events[0]["wall_end"] and events[0]["speed_mps"] == 0.5 and events[0]["bearing_deg"] == 0.0
+    assert events[1]["bearing_deg"] == 22.5
+    assert events[2]["robot"] == "robot-1"
+    assert events[3]["robot"] == "robot-1" and events[3]["gap_m"] < 0  # the count rose by one: the deeper touch
