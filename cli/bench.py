@@ -97,11 +97,7 @@ def bench(args: argparse.Namespace) -> int:
         from cli.bench_all import run
 
         return run(args)
-    if args.bench == "surround":  # its options are not typed yet: the bench takes the parsed command line
-        from petswarm.bench.surround import bench_surround
-
-        return bench_surround(args)
-    from petswarm.bench import hub, ir, organize, reaction, run_bench, scale, start
+    from petswarm.bench import hub, ir, organize, reaction, run_bench, scale, start, surround
 
     typed = {
         "hub": hub.HubBenchOptions,
@@ -110,6 +106,7 @@ def bench(args: argparse.Namespace) -> int:
         "reaction": reaction.ReactionOptions,
         "scale": scale.ScaleOptions,
         "start": start.StartOptions,
+        "surround": surround.SurroundOptions,
     }
     return run_bench(options_of(typed[args.bench], args))
 

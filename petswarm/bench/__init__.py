@@ -13,7 +13,7 @@ from typing import Any
 def run_bench(options: Any) -> int:
     """Run the bench whose typed options ``options`` are (``hub.HubBenchOptions``, ``organize.OrganizeOptions``,
     ``ir.IrOptions``, ``reaction.ReactionOptions``, ``scale.ScaleOptions``, ``start.StartOptions``,
-    ``all.AllOptions``); its exit
+    ``surround.SurroundOptions``, ``all.AllOptions``); its exit
     status. Each bench is imported when run: they bring zenoh, numpy and matplotlib, which parsing does not need."""
     name = type(options).__name__
     if name == "IrOptions":
@@ -44,6 +44,10 @@ def run_bench(options: Any) -> int:
         from petswarm.bench.all import bench_all
 
         return bench_all(options)
+    if name == "SurroundOptions":
+        from petswarm.bench.surround import bench_surround
+
+        return bench_surround(options)
     if name == "HubBenchOptions":
         from petswarm.bench.hub import bench_hub
 

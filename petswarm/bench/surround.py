@@ -20,9 +20,9 @@ which ``--jobs`` spreads over worker processes.
 
 from __future__ import annotations
 
-import argparse
 import math
 import sys
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -45,7 +45,35 @@ RECORD_EVERY = 5
 """World ticks (50 Hz) between the states the figures use (10 Hz)."""
 
 
-def bench_surround(args: argparse.Namespace) -> int:
+@dataclass(frozen=True)
+class SurroundOptions:
+    """What ``petswarm bench surround`` is asked to do (its command line's options, typed)."""
+
+    scenarios: list[str] = field(default_factory=lambda: list(DEFAULT_SCENARIOS))
+    """Surround scenario files (run unless generated courses are asked for)."""
+    seeds: int = 3
+    """Runs per scenario and law."""
+    seed: int = 1
+    """Seed of the first run."""
+    out: str = "bench-results"
+    paper: bool = False
+    """Also the pure simulation of the paper's setups (exact sensing, no hub)."""
+    law: str = "paper"
+    """``paper``, ``improved``, ``safe``, ``both`` (paper and improved) or ``all``."""
+    train: int = 0
+    """Generated training courses to run instead of scenario files."""
+    test: int = 0
+    """Generated test courses to run instead of scenario files."""
+    first_course: int = 0
+    clock: str = "model"
+    jobs: int = 1
+    """Model-time runs at once, each in its own worker process."""
+    snapshots: bool = False
+    """Also the safe law's snapshot plot of the first scenario's first seed."""
+    json: bool = False
+
+
+def bench_surround(args: SurroundOptions) -> int:
     """Run every scenario for ``--seeds`` seeds on ``--clock``; print, save JSON and the plot. Exit code 1 when a
     run was not ok (its row says why), 2 for a bad scenario file."""
     # imported here, not at load: building the CLI's parser imports this module in every process,
@@ -105,7 +133,7 @@ def _laws(choice: str) -> list[str]:
     return {"both": ["paper", "improved"], "all": ["paper", "improved", "safe"]}.get(choice, [choice])
 
 
-def bench_courses(args: argparse.Namespace) -> int:
+def bench_courses(args: SurroundOptions) -> int:
     """Each law on ``--train`` training and ``--test`` test courses (``surround_bench_courses``): JSON, table and
     plot (``bench_surround_courses``). Exit code 0: every run finished (the bounds are figures, not a verdict)."""
     from petswarm.bench import surround_bench_courses as courses
@@ -183,7 +211,7 @@ def bounds_summary(results: dict[str, Any]) -> dict[str, dict[str, Any]]:
 
 def summary_lines(summary: dict[str, dict[str, Any]]) -> list[str]:
     """The bounds summary as lines: issue 17's four bounds, each met on how many of the runs."""
-    lines = ["issue 17's bounds (no contact, connected >= 0.99, walking median <= 0.5 m, r within 10 % of r*):"]
+    lines = ["the surround bounds (no contact, connected >= 0.99, walking median <= 0.5 m, r within 10 % of r*):"]
     for key, row in summary.items():
         met, n, c = row["met"], row["runs"], row["contacts"]
         median = "-" if row["median_m"] is None else "{:.2f}-{:.2f} m".format(*row["median_m"])

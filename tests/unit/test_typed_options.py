@@ -21,6 +21,7 @@ def _options() -> dict[tuple[str, ...], Any]:
     from petswarm.bench.reaction import ReactionOptions
     from petswarm.bench.scale import ScaleOptions
     from petswarm.bench.start import StartOptions
+    from petswarm.bench.surround import SurroundOptions
     from petswarm.explore.main import ExploreOptions
     from petswarm.lab.certs import CertsOptions
     from petswarm.lab.experiment import ExperimentOptions
@@ -36,6 +37,7 @@ def _options() -> dict[tuple[str, ...], Any]:
         ("bench", "reaction"): ReactionOptions,
         ("bench", "scale"): ScaleOptions,
         ("bench", "start"): StartOptions,
+        ("bench", "surround"): SurroundOptions,
         ("explore",): ExploreOptions,
         ("experiment", "x.toml"): ExperimentOptions,
         ("report", "runs/x"): ReportOptions,
